@@ -1,0 +1,1 @@
+//! msgp-core: placeholder until the first slice lands.
