@@ -1,1 +1,30 @@
-//! msgp-core: placeholder until the first slice lands.
+//! # msgp-core
+//!
+//! Multi-step Gaussian processes (MSGP; Doerr et al., CoRL 2017): sparse GP-NARX dynamics models
+//! whose parameters are fitted to the likelihood of whole observed trajectories under
+//! free-running moment-matching predictions.
+//!
+//! Module map:
+//! - [`scalar`]: the one scalar abstraction (f64 or forward-mode duals);
+//! - [`linalg`]: robust Cholesky with a recorded jitter policy;
+//! - [`kernel`], [`gp`]: SE-ARD kernel and the pseudo-input sparse GP;
+//! - [`moments`]: exact moment matching under Gaussian inputs;
+//! - [`narx`], [`rollout`], [`policy`]: the autoregressive window and open/closed-loop rollouts;
+//! - [`loss`]: the trajectory likelihood and complexity term;
+//! - [`grad`]: exact gradients.
+
+pub mod data;
+pub mod error;
+pub mod gp;
+pub mod grad;
+pub mod kernel;
+pub mod linalg;
+pub mod loss;
+pub mod moments;
+pub mod narx;
+pub mod policy;
+pub mod rollout;
+pub mod scalar;
+pub mod trajectory;
+
+pub use error::{MsgpError, Result};

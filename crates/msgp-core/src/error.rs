@@ -1,0 +1,51 @@
+//! The one error type of msgp-core.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong in msgp-core. User input never panics; it ends here.
+#[derive(Debug, thiserror::Error)]
+pub enum MsgpError {
+    /// A matrix that must be symmetric positive definite was not, even after the largest
+    /// jitter the [`JitterPolicy`](crate::linalg::JitterPolicy) allows.
+    #[error(
+        "{what} is not positive definite (pivot {pivot} = {value:e}) even with jitter {jitter:e}"
+    )]
+    NotPositiveDefinite {
+        /// Which matrix (e.g. "K + σx² I of output 0").
+        what: String,
+        /// Row of the failing pivot.
+        pivot: usize,
+        /// The failing pivot value.
+        value: f64,
+        /// Largest jitter tried.
+        jitter: f64,
+    },
+    /// Shapes that do not fit together.
+    #[error("shape mismatch: {0}")]
+    Shape(String),
+    /// A setting outside its valid range.
+    #[error("invalid setting `{name}`: {reason}")]
+    InvalidSetting {
+        /// The setting.
+        name: &'static str,
+        /// Why it is invalid.
+        reason: String,
+    },
+    /// Data that cannot be used (too short, non-finite, ...).
+    #[error("bad data: {0}")]
+    Data(String),
+    /// A non-finite value appeared during a computation.
+    #[error("non-finite value in {0}")]
+    NonFinite(String),
+    /// A data file could not be read or parsed.
+    #[error("{path}: {message}")]
+    File {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong, with line and column where known.
+        message: String,
+    },
+}
+
+/// Result alias for msgp-core.
+pub type Result<T> = std::result::Result<T, MsgpError>;

@@ -1,0 +1,84 @@
+//! Gradients by forward-mode vector dual numbers.
+//!
+//! The generic function is evaluated on [`DualSVec64<N>`](num_dual::DualSVec64) scalars, each
+//! carrying `N = LANES` directional derivatives; the parameters are split into chunks of `LANES`
+//! directions, and chunks are spread over threads. Costs about `P / LANES` dual evaluations,
+//! so it is the reference mechanism every fast path is tested against, not the fit's workhorse.
+
+use num_dual::DualSVec64;
+
+use crate::error::Result;
+
+/// Number of directions carried by one dual evaluation.
+pub const LANES: usize = 8;
+
+/// The dual scalar used for gradients.
+pub type Dual = DualSVec64<LANES>;
+
+/// Value and gradient of `f` at `x` with respect to the coordinates listed in `active`
+/// (entries of the gradient outside `active` are 0). `threads = 0` uses all cores.
+pub fn gradient<F>(x: &[f64], active: &[usize], threads: usize, f: F) -> Result<(f64, Vec<f64>)>
+where
+    F: Fn(&[Dual]) -> Result<Dual> + Sync,
+{
+    let chunks: Vec<&[usize]> = active.chunks(LANES).collect();
+    let threads = if threads == 0 {
+        std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1)
+    } else {
+        threads
+    }
+    .clamp(1, chunks.len().max(1));
+
+    let eval_chunk = |chunk: &[usize]| -> Result<(f64, Vec<(usize, f64)>)> {
+        let mut xd: Vec<Dual> = x.iter().map(|&v| Dual::from_re(v)).collect();
+        for (lane, &i) in chunk.iter().enumerate() {
+            xd[i] = Dual::from_re(x[i]).derivative(lane);
+        }
+        let y = f(&xd)?;
+        let mut out = Vec::with_capacity(chunk.len());
+        for (lane, &i) in chunk.iter().enumerate() {
+            let d = y.eps.0.as_ref().map_or(0.0, |e| e[lane]);
+            out.push((i, d));
+        }
+        Ok((y.re, out))
+    };
+
+    if chunks.is_empty() {
+        let y = f(&x.iter().map(|&v| Dual::from_re(v)).collect::<Vec<_>>())?;
+        return Ok((y.re, vec![0.0; x.len()]));
+    }
+
+    let results: Vec<Result<(f64, Vec<(usize, f64)>)>> = if threads == 1 {
+        chunks.iter().map(|ch| eval_chunk(ch)).collect()
+    } else {
+        let per = chunks.len().div_ceil(threads);
+        std::thread::scope(|s| {
+            let handles: Vec<_> = chunks
+                .chunks(per)
+                .map(|group| s.spawn(|| group.iter().map(|ch| eval_chunk(ch)).collect::<Vec<_>>()))
+                .collect();
+            handles
+                .into_iter()
+                .flat_map(|h| match h.join() {
+                    Ok(v) => v,
+                    Err(_) => vec![Err(crate::error::MsgpError::NonFinite(
+                        "a gradient worker thread panicked".into(),
+                    ))],
+                })
+                .collect()
+        })
+    };
+
+    let mut grad = vec![0.0; x.len()];
+    let mut value = f64::NAN;
+    for r in results {
+        let (v, parts) = r?;
+        value = v;
+        for (i, d) in parts {
+            grad[i] = d;
+        }
+    }
+    Ok((value, grad))
+}

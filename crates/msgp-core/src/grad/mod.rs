@@ -1,0 +1,5 @@
+//! Exact gradients of the MSGP loss.
+//!
+//! [`dual`] is the reference mechanism: forward-mode vector duals through the generic numerics.
+
+pub mod dual;
