@@ -2,4 +2,5 @@
 //!
 //! [`dual`] is the reference mechanism: forward-mode vector duals through the generic numerics.
 
+pub mod adjoint;
 pub mod dual;

@@ -1,0 +1,659 @@
+//! Reverse-mode (adjoint) gradient of the MSGP loss, derived by hand, for f64.
+//!
+//! Forward-mode duals cost about `P / LANES` loss evaluations; this sweep costs a small constant
+//! number (a forward rollout that records the window state per step, then a backward pass that
+//! recomputes each moment-matching step and pulls adjoints through it), whatever the number of
+//! parameters. It is tested against the dual gradients (`tests/adjoint_vs_dual.rs`), which are
+//! in turn tested against finite differences.
+//!
+//! Notation follows [`crate::moments`]: for output `a`, `s = Λ_a^{-½}` (as a vector),
+//! `Ŝ = I + diag(s) Σ diag(s)`, `Ŵ = Ŝ⁻¹ diag(s) νᵀ`, `q_i = σ_f² |Ŝ|^{-½} exp(−½ ν̃_iᵀŴ_i)`;
+//! for a pair `(a, b)`, `p = Λ_a⁻¹ + Λ_b⁻¹`, `S̃ = I + diag(√p) Σ diag(√p)`, `N = I − S̃⁻¹`,
+//! `Ã = diag(Λ_a⁻¹/√p) νᵀ`, `B̃ = diag(Λ_b⁻¹/√p) νᵀ` and
+//! `Q_ij = exp(lk^a_i + lk^b_j − ½ log|S̃| + ½ (Ã_i + B̃_j)ᵀ N (Ã_i + B̃_j))`.
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::error::{MsgpError, Result};
+use crate::gp::{GpConfig, GpParams, GpShape, ParamGroup, PreparedGp};
+use crate::kernel::kernel_matrix;
+use crate::linalg::{JitterLog, cholesky, symmetrize};
+use crate::loss::{Complexity, LossValue, complexity_term, gaussian_nll};
+use crate::narx::NarxSpec;
+use crate::trajectory::{Episode, Excitation, Trajectory};
+
+/// Adjoint accumulators for the quantities the rollout reads from the prepared GP.
+struct GpAdjoint {
+    xbar: DMatrix<f64>,      // m × D (pseudo-inputs, direct)
+    beta: Vec<DVector<f64>>, // per output
+    kinv: Vec<DMatrix<f64>>, // per output
+    inv_l2: DMatrix<f64>,    // E × D
+    sf2: Vec<f64>,
+    sx2: Vec<f64>,
+    sy2: Vec<f64>,
+}
+
+impl GpAdjoint {
+    fn zeros(m: usize, d: usize, e: usize) -> Self {
+        Self {
+            xbar: DMatrix::zeros(m, d),
+            beta: vec![DVector::zeros(m); e],
+            kinv: vec![DMatrix::zeros(m, m); e],
+            inv_l2: DMatrix::zeros(e, d),
+            sf2: vec![0.0; e],
+            sx2: vec![0.0; e],
+            sy2: vec![0.0; e],
+        }
+    }
+}
+
+struct OutCache {
+    s: Vec<f64>,
+    shat_inv: DMatrix<f64>,
+    nut: DMatrix<f64>, // D × m
+    w: DMatrix<f64>,   // D × m
+    q: DVector<f64>,
+    bq: DVector<f64>,
+    acc: DVector<f64>,
+    lk: DVector<f64>,
+}
+
+struct PairCache {
+    a: usize,
+    b: usize,
+    sp: Vec<f64>,
+    st_inv: DMatrix<f64>,
+    n: DMatrix<f64>,
+    at: DMatrix<f64>, // D × m
+    bt: DMatrix<f64>, // D × m
+    y: DMatrix<f64>,  // N B̃
+    q: DMatrix<f64>,  // m × m
+}
+
+struct MmCache {
+    nu: DMatrix<f64>, // m × D
+    outs: Vec<OutCache>,
+    pairs: Vec<PairCache>,
+    mean: DVector<f64>,
+    cov: DMatrix<f64>,
+    io_cov: DMatrix<f64>,
+}
+
+fn scaled_plus_identity(sigma: &DMatrix<f64>, p: &[f64]) -> DMatrix<f64> {
+    let d = sigma.nrows();
+    DMatrix::from_fn(d, d, |i, j| {
+        p[i] * sigma[(i, j)] * p[j] + if i == j { 1.0 } else { 0.0 }
+    })
+}
+
+fn mm_forward(
+    gp: &PreparedGp<f64>,
+    mu: &DVector<f64>,
+    sigma: &DMatrix<f64>,
+    log: &mut JitterLog,
+) -> Result<MmCache> {
+    let x = &gp.pseudo_inputs;
+    let (m, d) = (x.nrows(), x.ncols());
+    let e = gp.output_dim();
+    let nu = DMatrix::from_fn(m, d, |i, k| x[(i, k)] - mu[k]);
+    let mut outs = Vec::with_capacity(e);
+    let mut mean = DVector::zeros(e);
+    let mut io_cov = DMatrix::zeros(d, e);
+    for (a, o) in gp.outputs.iter().enumerate() {
+        let s: Vec<f64> = o.inv_l2.iter().map(|v| v.sqrt()).collect();
+        let ch = cholesky(
+            &scaled_plus_identity(sigma, &s),
+            &gp.jitter,
+            "I + Λ^{-½} Σ Λ^{-½}",
+        )?;
+        log.record(ch.jitter);
+        let logdet = ch.log_det();
+        let nut = DMatrix::from_fn(d, m, |k, i| nu[(i, k)] * s[k]);
+        let w = ch.solve(&nut);
+        let lsf2 = o.sf2.ln();
+        let mut q = DVector::zeros(m);
+        let mut lk = DVector::zeros(m);
+        for i in 0..m {
+            let mut quad = 0.0;
+            let mut plain = 0.0;
+            for k in 0..d {
+                quad += nut[(k, i)] * w[(k, i)];
+                plain += nut[(k, i)] * nut[(k, i)];
+            }
+            lk[i] = lsf2 - 0.5 * plain;
+            q[i] = (lsf2 - 0.5 * (quad + logdet)).exp();
+        }
+        let bq = o.beta.component_mul(&q);
+        let mut acc = &w * &bq;
+        for k in 0..d {
+            acc[k] *= s[k];
+        }
+        mean[a] = bq.sum();
+        io_cov.set_column(a, &(sigma * &acc));
+        outs.push(OutCache {
+            s,
+            shat_inv: ch.inverse(),
+            nut,
+            w,
+            q,
+            bq,
+            acc,
+            lk,
+        });
+    }
+    let mut cov = DMatrix::zeros(e, e);
+    let mut pairs = Vec::new();
+    for a in 0..e {
+        for b in a..e {
+            let (oa, ob) = (&gp.outputs[a], &gp.outputs[b]);
+            let sp: Vec<f64> = (0..d)
+                .map(|k| (oa.inv_l2[k] + ob.inv_l2[k]).sqrt())
+                .collect();
+            let ch = cholesky(
+                &scaled_plus_identity(sigma, &sp),
+                &gp.jitter,
+                "I + P^{½} Σ P^{½}",
+            )?;
+            log.record(ch.jitter);
+            let logdet_r = ch.log_det();
+            let st_inv = ch.inverse();
+            let n = DMatrix::identity(d, d) - &st_inv;
+            let at = DMatrix::from_fn(d, m, |k, i| oa.inv_l2[k] * nu[(i, k)] / sp[k]);
+            let bt = DMatrix::from_fn(d, m, |k, i| ob.inv_l2[k] * nu[(i, k)] / sp[k]);
+            let y = &n * &bt;
+            let na = &n * &at;
+            let g = at.transpose() * &y;
+            let ua = DVector::from_fn(m, |i, _| {
+                outs[a].lk[i] + 0.5 * at.column(i).dot(&na.column(i))
+            });
+            let ub = DVector::from_fn(m, |j, _| {
+                outs[b].lk[j] + 0.5 * bt.column(j).dot(&y.column(j)) - 0.5 * logdet_r
+            });
+            let q = DMatrix::from_fn(m, m, |i, j| (ua[i] + ub[j] + g[(i, j)]).exp());
+            let mut v = oa.beta.dot(&(&q * &ob.beta)) - mean[a] * mean[b];
+            if a == b {
+                v += oa.sf2 - oa.kinv.component_mul(&q).sum();
+            }
+            cov[(a, b)] = v;
+            cov[(b, a)] = v;
+            pairs.push(PairCache {
+                a,
+                b,
+                sp,
+                st_inv,
+                n,
+                at,
+                bt,
+                y,
+                q,
+            });
+        }
+    }
+    Ok(MmCache {
+        nu,
+        outs,
+        pairs,
+        mean,
+        cov,
+        io_cov,
+    })
+}
+
+/// Adds `Σ̄` and `s̄`/`p̄` contributions of `Ŝ = I + diag(s) Σ diag(s)` given `Ŝ̄`.
+fn pull_scaled(
+    sbar_hat: &DMatrix<f64>,
+    sigma: &DMatrix<f64>,
+    s: &[f64],
+    sigma_bar: &mut DMatrix<f64>,
+    s_bar: &mut [f64],
+) {
+    let d = s.len();
+    for i in 0..d {
+        for j in 0..d {
+            sigma_bar[(i, j)] += s[i] * sbar_hat[(i, j)] * s[j];
+            s_bar[i] += (sbar_hat[(i, j)] + sbar_hat[(j, i)]) * sigma[(i, j)] * s[j];
+        }
+    }
+}
+
+/// Pulls adjoints of (mean, cov, io_cov) back to (μ, Σ) and the GP quantities.
+fn mm_backward(
+    gp: &PreparedGp<f64>,
+    sigma: &DMatrix<f64>,
+    c: &MmCache,
+    mbar_in: &DVector<f64>,
+    sbar: &DMatrix<f64>,
+    cbar: &DMatrix<f64>,
+    adj: &mut GpAdjoint,
+) -> (DVector<f64>, DMatrix<f64>) {
+    let (m, d) = c.nu.shape();
+    let e = gp.output_dim();
+    let mut mbar = mbar_in.clone();
+    let mut nubar = DMatrix::<f64>::zeros(m, d);
+    let mut sigma_bar = DMatrix::<f64>::zeros(d, d);
+    let mut lkbar = vec![DVector::<f64>::zeros(m); e];
+
+    for pc in &c.pairs {
+        let (a, b) = (pc.a, pc.b);
+        let vbar = if a == b {
+            sbar[(a, a)]
+        } else {
+            sbar[(a, b)] + sbar[(b, a)]
+        };
+        if vbar == 0.0 {
+            continue;
+        }
+        let (oa, ob) = (&gp.outputs[a], &gp.outputs[b]);
+        // S_ab = β_aᵀ Q β_b − M_a M_b (+ σ_f² − tr(K̃⁻¹ Q))
+        let qb = &pc.q * &ob.beta;
+        let qta = pc.q.tr_mul(&oa.beta);
+        adj.beta[a] += &qb * vbar;
+        adj.beta[b] += &qta * vbar;
+        mbar[a] -= vbar * c.mean[b];
+        mbar[b] -= vbar * c.mean[a];
+        let mut qbar = &oa.beta * ob.beta.transpose() * vbar;
+        if a == b {
+            adj.sf2[a] += vbar;
+            qbar -= &oa.kinv * vbar;
+            adj.kinv[a] -= &pc.q * vbar;
+        }
+        let ebar = qbar.component_mul(&pc.q);
+        let uabar = DVector::from_fn(m, |i, _| ebar.row(i).sum());
+        let ubbar = DVector::from_fn(m, |j, _| ebar.column(j).sum());
+        // G = Ãᵀ Y, Y = N B̃
+        let mut atbar = &pc.y * ebar.transpose();
+        let ybar = &pc.at * &ebar;
+        let mut nbar = &ybar * pc.bt.transpose();
+        let mut btbar = &pc.n * &ybar;
+        // ua_i = lk^a_i + ½ Ã_iᵀ N Ã_i ; ub_j = lk^b_j + ½ B̃_jᵀ N B̃_j − ½ log|S̃|
+        let na = &pc.n * &pc.at;
+        for i in 0..m {
+            for k in 0..d {
+                atbar[(k, i)] += uabar[i] * na[(k, i)];
+                btbar[(k, i)] += ubbar[i] * pc.y[(k, i)];
+            }
+        }
+        let at_s = DMatrix::from_fn(d, m, |k, i| pc.at[(k, i)] * uabar[i]);
+        let bt_s = DMatrix::from_fn(d, m, |k, i| pc.bt[(k, i)] * ubbar[i]);
+        nbar += (&at_s * pc.at.transpose() + &bt_s * pc.bt.transpose()) * 0.5;
+        lkbar[a] += &uabar;
+        lkbar[b] += &ubbar;
+        let logdet_bar = -0.5 * ubbar.sum();
+        // N = I − S̃⁻¹ ; log|S̃|
+        let stbar = &pc.st_inv * &nbar * &pc.st_inv + &pc.st_inv * logdet_bar;
+        let mut spbar = vec![0.0; d];
+        pull_scaled(&stbar, sigma, &pc.sp, &mut sigma_bar, &mut spbar);
+        for k in 0..d {
+            let (ila, ilb, sp) = (oa.inv_l2[k], ob.inv_l2[k], pc.sp[k]);
+            for i in 0..m {
+                let nu = c.nu[(i, k)];
+                nubar[(i, k)] += atbar[(k, i)] * ila / sp + btbar[(k, i)] * ilb / sp;
+                adj.inv_l2[(a, k)] += atbar[(k, i)] * nu / sp;
+                adj.inv_l2[(b, k)] += btbar[(k, i)] * nu / sp;
+                spbar[k] -= (atbar[(k, i)] * pc.at[(k, i)] + btbar[(k, i)] * pc.bt[(k, i)]) / sp;
+            }
+            let pbar = spbar[k] / (2.0 * sp);
+            adj.inv_l2[(a, k)] += pbar;
+            adj.inv_l2[(b, k)] += pbar;
+        }
+    }
+
+    for (a, oc) in c.outs.iter().enumerate() {
+        let o = &gp.outputs[a];
+        let cb = cbar.column(a).into_owned();
+        // io_cov[:, a] = Σ acc
+        sigma_bar += &cb * oc.acc.transpose();
+        let accbar = sigma * &cb;
+        let mut sbar_v = vec![0.0; d];
+        let mut bqbar = DVector::from_element(m, mbar[a]);
+        let mut wbar = DMatrix::<f64>::zeros(d, m);
+        for k in 0..d {
+            let f = accbar[k] * oc.s[k];
+            let mut sw = 0.0;
+            for i in 0..m {
+                bqbar[i] += f * oc.w[(k, i)];
+                sw += oc.bq[i] * oc.w[(k, i)];
+                wbar[(k, i)] += f * oc.bq[i];
+            }
+            sbar_v[k] += accbar[k] * sw;
+        }
+        adj.beta[a] += bqbar.component_mul(&oc.q);
+        let qbar = bqbar.component_mul(&o.beta);
+        let qq = qbar.component_mul(&oc.q);
+        adj.sf2[a] += qq.sum() / o.sf2 + lkbar[a].sum() / o.sf2;
+        let logdet_bar = -0.5 * qq.sum();
+        let mut nutbar = DMatrix::<f64>::zeros(d, m);
+        for i in 0..m {
+            let quadbar = -0.5 * qq[i];
+            for k in 0..d {
+                nutbar[(k, i)] += quadbar * oc.w[(k, i)] - lkbar[a][i] * oc.nut[(k, i)];
+                wbar[(k, i)] += quadbar * oc.nut[(k, i)];
+            }
+        }
+        let z = &oc.shat_inv * &wbar;
+        nutbar += &z;
+        let shatbar = -(&z * oc.w.transpose()) + &oc.shat_inv * logdet_bar;
+        pull_scaled(&shatbar, sigma, &oc.s, &mut sigma_bar, &mut sbar_v);
+        for k in 0..d {
+            for i in 0..m {
+                nubar[(i, k)] += nutbar[(k, i)] * oc.s[k];
+                sbar_v[k] += nutbar[(k, i)] * c.nu[(i, k)];
+            }
+            adj.inv_l2[(a, k)] += sbar_v[k] / (2.0 * oc.s[k]);
+        }
+    }
+    adj.xbar += &nubar;
+    let mubar = DVector::from_fn(d, |k, _| -nubar.column(k).sum());
+    (mubar, sigma_bar)
+}
+
+/// What the forward rollout records per step.
+struct StepRecord {
+    mu: DVector<f64>,
+    sigma: DMatrix<f64>,
+    mean: DVector<f64>,
+    ycov: DMatrix<f64>,
+    resid: DVector<f64>,
+}
+
+fn episode_adjoint(
+    gp: &PreparedGp<f64>,
+    spec: &NarxSpec,
+    traj: &Trajectory,
+    gain: Option<&DMatrix<f64>>,
+    offset: Option<&DVector<f64>>,
+    adj: &mut GpAdjoint,
+    log: &mut JitterLog,
+) -> Result<(f64, usize)> {
+    let d = spec.input_dim();
+    let (dy, du) = (spec.dy, spec.du);
+    let t0 = spec.warmup();
+    let horizon = traj.len();
+    let n_aug = d + dy + du;
+    let mut sel = vec![0usize; d];
+    for j in 0..dy {
+        sel[spec.y_index(0, j)] = d + j;
+    }
+    for k in 1..spec.ly {
+        for j in 0..dy {
+            sel[spec.y_index(k, j)] = spec.y_index(k - 1, j);
+        }
+    }
+    if spec.lu > 0 {
+        for j in 0..du {
+            sel[spec.u_index(0, j)] = d + dy + j;
+        }
+        for k in 1..spec.lu {
+            for j in 0..du {
+                sel[spec.u_index(k, j)] = spec.u_index(k - 1, j);
+            }
+        }
+    }
+    let mut mu = DVector::<f64>::zeros(d);
+    let mut sigma = DMatrix::<f64>::zeros(d, d);
+    for k in 0..spec.ly {
+        for j in 0..dy {
+            let i = spec.y_index(k, j);
+            mu[i] = traj.y[(t0 - 1 - k, j)];
+            sigma[(i, i)] = gp.outputs[j].sy2;
+        }
+    }
+    for k in 0..spec.lu {
+        for j in 0..du {
+            mu[spec.u_index(k, j)] = traj.u[(t0 - 1 - k, j)];
+        }
+    }
+
+    // forward
+    let mut recs: Vec<StepRecord> = Vec::with_capacity(horizon - t0);
+    let mut nll = 0.0;
+    let mut nll_log = JitterLog::default();
+    for t in t0..horizon {
+        let mm = mm_forward(gp, &mu, &sigma, log)?;
+        let mut xcov = mm.cov.clone();
+        for j in 0..dy {
+            xcov[(j, j)] += gp.outputs[j].sx2;
+        }
+        let mut ycov = xcov.clone();
+        for j in 0..dy {
+            ycov[(j, j)] += gp.outputs[j].sy2;
+        }
+        let yrow: Vec<f64> = (0..dy).map(|j| traj.y[(t, j)]).collect();
+        nll += gaussian_nll(&yrow, &mm.mean, &ycov, &gp.jitter, &mut nll_log)?;
+        if !nll.is_finite() {
+            return Err(MsgpError::NonFinite(format!(
+                "trajectory likelihood at step {t}"
+            )));
+        }
+        let resid = DVector::from_fn(dy, |j, _| yrow[j] - mm.mean[j]);
+        let rec = StepRecord {
+            mu: mu.clone(),
+            sigma: sigma.clone(),
+            mean: mm.mean.clone(),
+            ycov: ycov.clone(),
+            resid,
+        };
+        if t + 1 < horizon {
+            let mut amu = DVector::<f64>::zeros(n_aug);
+            let mut acov = DMatrix::<f64>::zeros(n_aug, n_aug);
+            amu.rows_mut(0, d).copy_from(&mu);
+            amu.rows_mut(d, dy).copy_from(&mm.mean);
+            acov.view_mut((0, 0), (d, d)).copy_from(&sigma);
+            acov.view_mut((0, d), (d, dy)).copy_from(&mm.io_cov);
+            acov.view_mut((d, 0), (dy, d))
+                .copy_from(&mm.io_cov.transpose());
+            acov.view_mut((d, d), (dy, dy)).copy_from(&xcov);
+            match gain {
+                None => {
+                    for j in 0..du {
+                        amu[d + dy + j] = traj.u[(t, j)];
+                    }
+                }
+                Some(k) => {
+                    let cross = acov.view((0, d), (d + dy, dy)) * k.transpose();
+                    let umean =
+                        k * &mm.mean + offset.cloned().unwrap_or_else(|| DVector::zeros(du));
+                    amu.rows_mut(d + dy, du).copy_from(&umean);
+                    acov.view_mut((0, d + dy), (d + dy, du)).copy_from(&cross);
+                    acov.view_mut((d + dy, 0), (du, d + dy))
+                        .copy_from(&cross.transpose());
+                    acov.view_mut((d + dy, d + dy), (du, du))
+                        .copy_from(&(k * &ycov * k.transpose()));
+                }
+            }
+            for i in 0..d {
+                mu[i] = amu[sel[i]];
+                for j in 0..d {
+                    sigma[(i, j)] = acov[(sel[i], sel[j])];
+                }
+            }
+            symmetrize(&mut sigma);
+        }
+        recs.push(rec);
+    }
+    log.merge(&nll_log);
+
+    // backward
+    let mut mubar_next = DVector::<f64>::zeros(d);
+    let mut sigmabar_next = DMatrix::<f64>::zeros(d, d);
+    let last = recs.len() - 1;
+    for (s, rec) in recs.iter().enumerate().rev() {
+        let mut mbar = DVector::<f64>::zeros(dy);
+        let mut cbar = DMatrix::<f64>::zeros(d, dy);
+        let mut xcovbar = DMatrix::<f64>::zeros(dy, dy);
+        let mut ycovbar = DMatrix::<f64>::zeros(dy, dy);
+        let mut mubar = DVector::<f64>::zeros(d);
+        let mut sigmabar = DMatrix::<f64>::zeros(d, d);
+        if s < last {
+            symmetrize(&mut sigmabar_next);
+            let mut amubar = DVector::<f64>::zeros(n_aug);
+            let mut acovbar = DMatrix::<f64>::zeros(n_aug, n_aug);
+            for i in 0..d {
+                amubar[sel[i]] += mubar_next[i];
+                for j in 0..d {
+                    acovbar[(sel[i], sel[j])] += sigmabar_next[(i, j)];
+                }
+            }
+            if let Some(k) = gain {
+                let crossbar = acovbar.view((0, d + dy), (d + dy, du)).into_owned()
+                    + acovbar.view((d + dy, 0), (du, d + dy)).transpose();
+                // cross = [C; xcov] Kᵀ
+                let pulled = &crossbar * k; // (d+dy) × dy
+                cbar += pulled.rows(0, d);
+                xcovbar += pulled.rows(d, dy);
+                mbar += k.transpose() * amubar.rows(d + dy, du);
+                let ucovbar = acovbar.view((d + dy, d + dy), (du, du)).into_owned();
+                ycovbar += k.transpose() * ucovbar * k;
+            }
+            mubar += amubar.rows(0, d);
+            mbar += amubar.rows(d, dy);
+            sigmabar += acovbar.view((0, 0), (d, d));
+            cbar += acovbar.view((0, d), (d, dy));
+            cbar += acovbar.view((d, 0), (dy, d)).transpose();
+            xcovbar += acovbar.view((d, d), (dy, dy));
+        }
+        // NLL = ½[rᵀV⁻¹r + log|V|]
+        let vch = cholesky(&rec.ycov, &gp.jitter, "predictive covariance")?;
+        let vinv = vch.inverse();
+        let alpha = &vinv * &rec.resid;
+        mbar -= &alpha;
+        ycovbar += (&vinv - &alpha * alpha.transpose()) * 0.5;
+        xcovbar += &ycovbar;
+        for j in 0..dy {
+            adj.sy2[j] += ycovbar[(j, j)];
+            adj.sx2[j] += xcovbar[(j, j)];
+        }
+        let mut scratch = JitterLog::default();
+        let cache = mm_forward(gp, &rec.mu, &rec.sigma, &mut scratch)?;
+        let (mub, sigb) = mm_backward(gp, &rec.sigma, &cache, &mbar, &xcovbar, &cbar, adj);
+        mubar += mub;
+        sigmabar += sigb;
+        debug_assert!((cache.mean.clone() - &rec.mean).abs().max() == 0.0);
+        mubar_next = mubar;
+        sigmabar_next = sigmabar;
+    }
+    for k in 0..spec.ly {
+        for j in 0..dy {
+            let i = spec.y_index(k, j);
+            adj.sy2[j] += sigmabar_next[(i, i)];
+        }
+    }
+    Ok((nll, recs.len()))
+}
+
+/// Value and gradient (in [`GpParams::to_flat`] layout) of the MSGP loss, by the adjoint sweep.
+pub fn loss_and_gradient(
+    params: &GpParams<f64>,
+    config: &GpConfig,
+    spec: &NarxSpec,
+    episodes: &[Episode],
+    complexity: Complexity,
+    log: &mut JitterLog,
+) -> Result<(LossValue<f64>, Vec<f64>)> {
+    let shape: GpShape = params.shape()?;
+    let GpShape { m, d, e } = shape;
+    let gp = PreparedGp::new(params, config, log)?;
+    let mut adj = GpAdjoint::zeros(m, d, e);
+    let mut nll = 0.0;
+    let mut steps = 0;
+    for (k, ep) in episodes.iter().enumerate() {
+        ep.traj
+            .check(spec)
+            .map_err(|err| MsgpError::Data(format!("episode {k}: {err}")))?;
+        let (gain, offset) = match &ep.excitation {
+            Excitation::FeedForward => (None, None),
+            Excitation::Feedback(p) => (Some(&p.gain), Some(&p.offset)),
+        };
+        let (v, n) = episode_adjoint(&gp, spec, &ep.traj, gain, offset, &mut adj, log)?;
+        nll += v;
+        steps += n;
+    }
+    let comp = complexity_term(params, &gp, complexity);
+    let mut ybar = DMatrix::<f64>::zeros(m, e);
+    let mut logdet_bar = vec![0.0; e];
+    for a in 0..e {
+        match complexity {
+            Complexity::None => {}
+            Complexity::HalfLogDet => logdet_bar[a] = 0.5,
+            Complexity::NegHalfLogDet => logdet_bar[a] = -0.5,
+            Complexity::PseudoDataNll => {
+                logdet_bar[a] = 0.5;
+                // ½ ȳᵀβ with β = K̃⁻¹ȳ: d/dȳ = β (symmetric K̃), routed as ȳ̄ += ½β, β̄ += ½ȳ
+                for i in 0..m {
+                    ybar[(i, a)] += 0.5 * gp.outputs[a].beta[i];
+                }
+                let ycol = params.pseudo_targets.column(a).into_owned();
+                adj.beta[a] += ycol * 0.5;
+            }
+        }
+    }
+
+    // pull through the preparation: β = K̃⁻¹ȳ, K̃⁻¹, log|K̃|, K̃ = K + σx² I
+    let mut grad = vec![0.0; shape.len()];
+    let mut inv_l2_bar = adj.inv_l2.clone();
+    let mut sf2_bar = adj.sf2.clone();
+    let mut sx2_bar = adj.sx2.clone();
+    for (a, o) in gp.outputs.iter().enumerate() {
+        let w = &o.kinv * &adj.beta[a];
+        for i in 0..m {
+            ybar[(i, a)] += w[i];
+        }
+        let ktbar =
+            -(&o.kinv * &adj.kinv[a] * &o.kinv) - &w * o.beta.transpose() + &o.kinv * logdet_bar[a];
+        sx2_bar[a] += ktbar.trace();
+        let k = kernel_matrix(
+            &params.pseudo_inputs,
+            &params.pseudo_inputs,
+            &o.inv_l2,
+            o.sf2,
+        );
+        for i in 0..m {
+            for j in 0..m {
+                let g = ktbar[(i, j)] * k[(i, j)];
+                if g == 0.0 {
+                    continue;
+                }
+                sf2_bar[a] += g / o.sf2;
+                for dd in 0..d {
+                    let diff = params.pseudo_inputs[(i, dd)] - params.pseudo_inputs[(j, dd)];
+                    inv_l2_bar[(a, dd)] -= 0.5 * g * diff * diff;
+                    adj.xbar[(i, dd)] -= g * o.inv_l2[dd] * diff;
+                    adj.xbar[(j, dd)] += g * o.inv_l2[dd] * diff;
+                }
+            }
+        }
+    }
+    let r = shape.group_range(ParamGroup::PseudoInputs);
+    for i in 0..m {
+        for dd in 0..d {
+            grad[r.start + i * d + dd] = adj.xbar[(i, dd)];
+        }
+    }
+    let r = shape.group_range(ParamGroup::PseudoTargets);
+    for i in 0..m {
+        for a in 0..e {
+            grad[r.start + i * e + a] = ybar[(i, a)];
+        }
+    }
+    let r = shape.group_range(ParamGroup::Lengthscales);
+    for (a, o) in gp.outputs.iter().enumerate() {
+        for dd in 0..d {
+            grad[r.start + a * d + dd] = -2.0 * o.inv_l2[dd] * inv_l2_bar[(a, dd)];
+        }
+    }
+    for (a, o) in gp.outputs.iter().enumerate() {
+        grad[shape.group_range(ParamGroup::SignalVar).start + a] = sf2_bar[a] * o.sf2;
+        grad[shape.group_range(ParamGroup::ProcessNoise).start + a] =
+            sx2_bar[a] * (o.sx2 - config.noise_floor);
+        grad[shape.group_range(ParamGroup::ObsNoise).start + a] =
+            adj.sy2[a] * (o.sy2 - config.noise_floor);
+    }
+    Ok((
+        LossValue {
+            nll,
+            complexity: comp,
+            steps,
+        },
+        grad,
+    ))
+}
