@@ -13,15 +13,21 @@
 //! - [`loss`]: the trajectory likelihood and complexity term;
 //! - [`grad`]: exact gradients.
 
+pub mod baseline;
 pub mod data;
+pub mod dense;
 pub mod error;
+pub mod fit;
 pub mod gp;
 pub mod grad;
 pub mod kernel;
+pub mod kmeans;
 pub mod linalg;
 pub mod loss;
+pub mod model;
 pub mod moments;
 pub mod narx;
+pub mod optim;
 pub mod policy;
 pub mod rollout;
 pub mod scalar;

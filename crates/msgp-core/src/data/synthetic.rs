@@ -22,9 +22,9 @@ use crate::trajectory::Trajectory;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub enum NoiseScale {
     /// `s` is the variance (noise std `√s`).
-    #[default]
     Variance,
-    /// `s` is the standard deviation.
+    /// `s` is the standard deviation (the default: it reproduces the paper's GP-NARX column).
+    #[default]
     StdDev,
 }
 
@@ -177,6 +177,9 @@ mod tests {
         let s = SyntheticSystem::new(4).expect("valid");
         let a = s.generate(7, NoiseScale::Variance).expect("gen");
         let b = s.generate(7, NoiseScale::Variance).expect("gen");
+        let d = s.generate(7, NoiseScale::StdDev).expect("gen");
+        assert_eq!(NoiseScale::default(), NoiseScale::StdDev);
+        assert_eq!(a.test, d.test);
         assert_eq!(a, b);
         let c = s.generate(8, NoiseScale::Variance).expect("gen");
         assert_ne!(a.train, c.train);

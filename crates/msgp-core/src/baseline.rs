@@ -1,0 +1,300 @@
+//! The one-step baselines: GP-NARX trained by the marginal likelihood (eq. 5) on one-step pairs,
+//! and PILCO's variant with penalties on the signal-to-noise ratio and extreme length-scales
+//! (appendix A.1.1; PILCO's `hypCurb`: `Σ_d ((log ℓ_d − log std(x_d)) / log 100)^30 +
+//! ((log σ_f − log σ_n) / log 500)^30`).
+//!
+//! The fitted full GP is then made sparse for moment-matching rollouts: `m` pseudo-inputs from
+//! seeded k-means over the training windows and pseudo-targets chosen so that the sparse mean
+//! `k(x)ᵀ K̃_m⁻¹ ȳ` equals the DTC/projected-process mean
+//! `k(x)ᵀ (σ_n² K_mm + K_mn K_nm)⁻¹ K_mn y`, i.e. `ȳ = K̃_m (σ_n² K_mm + K_mn K_nm)⁻¹ K_mn y`.
+//! This sparse GP-NARX is also MSGP's initialisation, as in the paper.
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::dense::DenseChol;
+use crate::error::{MsgpError, Result};
+use crate::gp::{GpConfig, GpParams};
+use crate::kernel::kernel_matrix;
+use crate::kmeans::kmeans;
+use crate::linalg::JitterLog;
+use crate::narx::NarxSpec;
+use crate::optim::{Adam, Flow, Objective, minimize};
+use crate::trajectory::Trajectory;
+
+const LN_2PI: f64 = 1.837_877_066_409_345_3;
+
+/// One-step training pairs: windows `x̃_t` (N × D) and next outputs `y_{t+1}` (N × E).
+#[derive(Clone, Debug)]
+pub struct OneStepData {
+    /// Inputs.
+    pub x: DMatrix<f64>,
+    /// Targets.
+    pub y: DMatrix<f64>,
+}
+
+/// Builds one-step pairs from every trajectory.
+pub fn one_step_pairs(spec: &NarxSpec, trajs: &[&Trajectory]) -> Result<OneStepData> {
+    let d = spec.input_dim();
+    let mut rows_x: Vec<Vec<f64>> = Vec::new();
+    let mut rows_y: Vec<Vec<f64>> = Vec::new();
+    for traj in trajs {
+        traj.check(spec)?;
+        for t in (spec.warmup() - 1)..(traj.len() - 1) {
+            rows_x.push(spec.window(&traj.y, &traj.u, t));
+            rows_y.push((0..spec.dy).map(|j| traj.y[(t + 1, j)]).collect());
+        }
+    }
+    let n = rows_x.len();
+    Ok(OneStepData {
+        x: DMatrix::from_fn(n, d, |i, k| rows_x[i][k]),
+        y: DMatrix::from_fn(n, spec.dy, |i, j| rows_y[i][j]),
+    })
+}
+
+/// Hyperparameters of one output's full GP.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Hyper {
+    /// `log ℓ_d`.
+    pub log_lengthscales: Vec<f64>,
+    /// `log σ_f²`.
+    pub log_signal_var: f64,
+    /// `log(σ_n² − floor)`.
+    pub log_noise: f64,
+}
+
+impl Hyper {
+    fn to_vec(&self) -> Vec<f64> {
+        let mut v = self.log_lengthscales.clone();
+        v.push(self.log_signal_var);
+        v.push(self.log_noise);
+        v
+    }
+    fn from_vec(v: &[f64]) -> Self {
+        let d = v.len() - 2;
+        Self {
+            log_lengthscales: v[..d].to_vec(),
+            log_signal_var: v[d],
+            log_noise: v[d + 1],
+        }
+    }
+}
+
+/// Negative log marginal likelihood (eq. 5) of one output, optionally with PILCO's penalties.
+struct Marginal<'a> {
+    x: &'a DMatrix<f64>,
+    y: DVector<f64>,
+    config: GpConfig,
+    /// `Some(std of each input dimension)` adds PILCO's penalties.
+    pilco_std: Option<Vec<f64>>,
+    log: JitterLog,
+}
+
+impl Objective for Marginal<'_> {
+    fn value_and_gradient(&mut self, p: &[f64]) -> Result<(f64, Vec<f64>)> {
+        let (n, d) = self.x.shape();
+        let h = Hyper::from_vec(p);
+        let inv_l2: Vec<f64> = h
+            .log_lengthscales
+            .iter()
+            .map(|l| (-2.0 * l).exp())
+            .collect();
+        let sf2 = h.log_signal_var.exp();
+        let sn2 = self.config.noise_floor + h.log_noise.exp();
+        let kf = kernel_matrix(self.x, self.x, &inv_l2, sf2);
+        let mut k = kf.clone();
+        for i in 0..n {
+            k[(i, i)] += sn2;
+        }
+        let ch = DenseChol::new(
+            &k,
+            &self.config.jitter,
+            "one-step GP kernel matrix",
+            &mut self.log,
+        )?;
+        let kinv = ch.inverse();
+        let alpha = &kinv * &self.y;
+        let mut value = 0.5 * self.y.dot(&alpha) + 0.5 * ch.log_det() + 0.5 * n as f64 * LN_2PI;
+        // dNLL/dθ = −½ tr((ααᵀ − K⁻¹) ∂K/∂θ)
+        let mut grad = vec![0.0; d + 2];
+        let mut tr_sf = 0.0;
+        for i in 0..n {
+            for j in 0..n {
+                let w = alpha[i] * alpha[j] - kinv[(i, j)];
+                let g = w * kf[(i, j)];
+                tr_sf += g;
+                if i != j {
+                    for dd in 0..d {
+                        let diff = self.x[(i, dd)] - self.x[(j, dd)];
+                        grad[dd] -= 0.5 * g * diff * diff * inv_l2[dd];
+                    }
+                }
+            }
+        }
+        grad[d] = -0.5 * tr_sf;
+        let tr_w: f64 = (0..n).map(|i| alpha[i] * alpha[i] - kinv[(i, i)]).sum();
+        grad[d + 1] = -0.5 * tr_w * h.log_noise.exp();
+        if let Some(std) = &self.pilco_std {
+            let p30 = |z: f64| z.powi(30);
+            let dp30 = |z: f64| 30.0 * z.powi(29);
+            let lls = 100f64.ln();
+            for dd in 0..d {
+                let z = (h.log_lengthscales[dd] - std[dd].ln()) / lls;
+                value += p30(z);
+                grad[dd] += dp30(z) / lls;
+            }
+            let lsnr = 500f64.ln();
+            // log σ_f − log σ_n, with σ_n² = floor + e^θ
+            let z = (0.5 * h.log_signal_var - 0.5 * sn2.ln()) / lsnr;
+            value += p30(z);
+            grad[d] += dp30(z) * 0.5 / lsnr;
+            grad[d + 1] -= dp30(z) * 0.5 / lsnr * h.log_noise.exp() / sn2;
+        }
+        Ok((value, grad))
+    }
+}
+
+/// Settings of the one-step fit.
+#[derive(Clone, Copy, Debug)]
+pub struct OneStepSettings {
+    /// Adam iterations on the marginal likelihood.
+    pub iterations: usize,
+    /// Adam step size.
+    pub learning_rate: f64,
+    /// Add PILCO's penalties.
+    pub pilco_penalty: bool,
+    /// Most one-step pairs used for hyperparameters (an evenly spaced subset beyond that).
+    pub max_pairs: usize,
+}
+
+impl Default for OneStepSettings {
+    fn default() -> Self {
+        Self {
+            iterations: 300,
+            learning_rate: 0.05,
+            pilco_penalty: false,
+            max_pairs: 1000,
+        }
+    }
+}
+
+fn column_std(x: &DMatrix<f64>, d: usize) -> f64 {
+    let n = x.nrows() as f64;
+    let mean = x.column(d).sum() / n;
+    let var = x.column(d).iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+    var.sqrt().max(1e-6)
+}
+
+/// Fits one-step GP-NARX hyperparameters per output and projects onto `m` pseudo-inputs.
+/// Returns the sparse model (process noise = one-step noise, observation noise at the floor).
+pub fn fit_one_step(
+    data: &OneStepData,
+    m: usize,
+    settings: &OneStepSettings,
+    config: &GpConfig,
+    seed: u64,
+    log: &mut JitterLog,
+) -> Result<GpParams<f64>> {
+    let (n, d) = data.x.shape();
+    let e = data.y.ncols();
+    if n < 2 {
+        return Err(MsgpError::Data(format!(
+            "{n} one-step pairs are too few to fit a GP"
+        )));
+    }
+    let stride = n.div_ceil(settings.max_pairs.max(1));
+    let idx: Vec<usize> = (0..n).step_by(stride).collect();
+    let xs = DMatrix::from_fn(idx.len(), d, |i, k| data.x[(idx[i], k)]);
+    let std: Vec<f64> = (0..d).map(|k| column_std(&data.x, k)).collect();
+
+    let pseudo = if m >= n {
+        data.x.clone()
+    } else {
+        kmeans(&data.x, m, 30, seed)?
+    };
+    let mm = pseudo.nrows();
+    let mut params = GpParams {
+        pseudo_inputs: pseudo.clone(),
+        pseudo_targets: DMatrix::zeros(mm, e),
+        log_lengthscales: DMatrix::zeros(e, d),
+        log_signal_var: DVector::zeros(e),
+        log_process_noise: DVector::zeros(e),
+        log_obs_noise: DVector::from_element(e, (1e-3 * config.noise_floor).ln()),
+    };
+    for a in 0..e {
+        let ys = DVector::from_fn(idx.len(), |i, _| data.y[(idx[i], a)]);
+        let var_y = {
+            let mean = ys.mean();
+            ys.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (ys.len() as f64 - 1.0).max(1.0)
+        }
+        .max(1e-6);
+        let init = Hyper {
+            log_lengthscales: std.iter().map(|s| s.ln()).collect(),
+            log_signal_var: var_y.ln(),
+            log_noise: (0.05 * var_y).ln(),
+        };
+        let mut objective = Marginal {
+            x: &xs,
+            y: ys,
+            config: *config,
+            pilco_std: settings.pilco_penalty.then(|| std.clone()),
+            log: JitterLog::default(),
+        };
+        let adam = Adam {
+            learning_rate: settings.learning_rate,
+            ..Adam::default()
+        };
+        let active = vec![true; d + 2];
+        let mut best = (f64::INFINITY, init.to_vec());
+        let (x, v) = minimize(
+            &mut objective,
+            &adam,
+            init.to_vec(),
+            &active,
+            settings.iterations,
+            |_, v, x| {
+                if v < best.0 {
+                    best = (v, x.to_vec());
+                }
+                Ok(Flow::Continue)
+            },
+        )?;
+        let h = if v.is_finite() && v < best.0 {
+            Hyper::from_vec(&x)
+        } else {
+            Hyper::from_vec(&best.1)
+        };
+        log.merge(&objective.log);
+
+        // project onto the pseudo-inputs (DTC mean)
+        let inv_l2: Vec<f64> = h
+            .log_lengthscales
+            .iter()
+            .map(|l| (-2.0 * l).exp())
+            .collect();
+        let sf2 = h.log_signal_var.exp();
+        let sn2 = config.noise_floor + h.log_noise.exp();
+        let yfull = DVector::from_fn(n, |i, _| data.y[(i, a)]);
+        let ybar = if m >= n {
+            yfull
+        } else {
+            let kmm = kernel_matrix(&pseudo, &pseudo, &inv_l2, sf2);
+            let kmn = kernel_matrix(&pseudo, &data.x, &inv_l2, sf2);
+            let a_mat = &kmm * sn2 + &kmn * kmn.transpose();
+            let ch = DenseChol::new(&a_mat, &config.jitter, "σ² K_mm + K_mn K_nm", log)?;
+            let rhs = &kmn * &yfull;
+            let sol = ch.solve(&DMatrix::from_column_slice(mm, 1, rhs.as_slice()));
+            let mut kt = kmm;
+            for i in 0..mm {
+                kt[(i, i)] += sn2;
+            }
+            DVector::from_column_slice((&kt * sol).as_slice())
+        };
+        params.pseudo_targets.set_column(a, &ybar);
+        for k in 0..d {
+            params.log_lengthscales[(a, k)] = h.log_lengthscales[k];
+        }
+        params.log_signal_var[a] = h.log_signal_var;
+        params.log_process_noise[a] = h.log_noise;
+    }
+    Ok(params)
+}

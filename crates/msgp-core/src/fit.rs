@@ -1,0 +1,360 @@
+//! Fitting: the one-step baselines and MSGP (sparse GP-NARX initialisation, then Adam on the
+//! trajectory likelihood with exact adjoint gradients).
+//!
+//! ## Guarding against noise collapse
+//! The trajectory likelihood can be lowered by shrinking the noise variances while the free
+//! simulation gets worse. Two guards, both documented in `docs/design.md`:
+//! 1. a variance floor on `σ_x²` and `σ_y²` ([`FitSettings::noise_floor`], normalised units),
+//!    built into the parametrisation `σ² = floor + e^θ`;
+//! 2. early stopping on a held-out tail of the *training* data: the last
+//!    [`FitSettings::validation_fraction`] of each training trajectory is kept out of training,
+//!    its free-simulation NLL is computed every [`FitSettings::eval_every`] iterations, and the
+//!    parameters with the best validation NLL are returned. The test data are never seen.
+
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use crate::baseline::{OneStepSettings, fit_one_step, one_step_pairs};
+use crate::data::Normalizer;
+use crate::error::{MsgpError, Result};
+use crate::gp::{GpConfig, GpParams, GpShape, ParamGroup, PreparedGp};
+use crate::grad::adjoint::loss_and_gradient;
+use crate::linalg::JitterLog;
+use crate::loss::{Complexity, gaussian_nll};
+use crate::model::{Method, Model};
+use crate::narx::NarxSpec;
+use crate::optim::{Adam, Flow, Objective, minimize};
+use crate::rollout::{Control, rollout};
+use crate::trajectory::{Episode, Trajectory};
+
+/// Everything that controls a fit.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FitSettings {
+    /// Training method.
+    pub method: Method,
+    /// `l_y`.
+    pub ly: usize,
+    /// `l_u`.
+    pub lu: usize,
+    /// Number of pseudo-inputs `m`.
+    pub inducing: usize,
+    /// Adam iterations on the MSGP loss.
+    pub iterations: usize,
+    /// Adam step size for MSGP.
+    pub learning_rate: f64,
+    /// Seed for every random choice (k-means).
+    pub seed: u64,
+    /// Complexity term of the MSGP loss.
+    pub complexity: Complexity,
+    /// Fraction of each training trajectory held out for early stopping (MSGP).
+    pub validation_fraction: f64,
+    /// Iterations between validation checks.
+    pub eval_every: usize,
+    /// Stop after this many validation checks without improvement.
+    pub patience: usize,
+    /// Floor on the MSGP noise variances (normalised units).
+    pub noise_floor: f64,
+    /// Parameter groups kept fixed during MSGP training.
+    pub frozen: Vec<ParamGroup>,
+    /// Adam iterations on the one-step marginal likelihood.
+    pub one_step_iterations: usize,
+}
+
+impl Default for FitSettings {
+    fn default() -> Self {
+        Self {
+            method: Method::Msgp,
+            ly: 2,
+            lu: 2,
+            inducing: 100,
+            iterations: 400,
+            learning_rate: 0.002,
+            seed: 0,
+            complexity: Complexity::NegHalfLogDet,
+            validation_fraction: 0.2,
+            eval_every: 10,
+            patience: 20,
+            noise_floor: 1e-4,
+            // the paper optimises "the GP hyperparameters and targets"; moving the pseudo-inputs
+            // too overfits (docs/design.md)
+            frozen: vec![ParamGroup::PseudoInputs],
+            one_step_iterations: 300,
+        }
+    }
+}
+
+/// One line of fit progress.
+#[derive(Clone, Copy, Debug)]
+pub struct FitProgress {
+    /// Adam iteration.
+    pub iteration: usize,
+    /// Total iterations planned.
+    pub iterations: usize,
+    /// Training loss per predicted step.
+    pub loss: f64,
+    /// Validation NLL per step, when checked at this iteration.
+    pub validation: Option<f64>,
+    /// Seconds since the fit started.
+    pub elapsed: f64,
+}
+
+/// What happened during a fit.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct FitReport {
+    /// Adam iterations run.
+    pub iterations_run: usize,
+    /// Iteration whose parameters were kept.
+    pub best_iteration: usize,
+    /// (iteration, training loss per step, validation NLL per step).
+    pub history: Vec<(usize, f64, f64)>,
+    /// Wall-clock seconds.
+    pub train_seconds: f64,
+    /// Jitter added along the way.
+    pub jitter: JitterLog,
+}
+
+struct MsgpObjective<'a> {
+    shape: GpShape,
+    spec: NarxSpec,
+    config: GpConfig,
+    episodes: &'a [Episode],
+    complexity: Complexity,
+    log: JitterLog,
+}
+
+impl Objective for MsgpObjective<'_> {
+    fn value_and_gradient(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>)> {
+        let params = GpParams::from_flat(self.shape, x)?;
+        let (v, mut g) = loss_and_gradient(
+            &params,
+            &self.config,
+            &self.spec,
+            self.episodes,
+            self.complexity,
+            &mut self.log,
+        )?;
+        let scale = 1.0 / v.steps.max(1) as f64;
+        g.iter_mut().for_each(|gi| *gi *= scale);
+        Ok((v.total() * scale, g))
+    }
+}
+
+/// Mean NLL per step of free simulations of `episodes` (normalised units).
+fn validation_nll(
+    params: &GpParams<f64>,
+    config: &GpConfig,
+    spec: &NarxSpec,
+    episodes: &[Episode],
+) -> Result<f64> {
+    let mut log = JitterLog::default();
+    let gp = PreparedGp::new(params, config, &mut log)?;
+    let mut total = 0.0;
+    let mut steps = 0usize;
+    for ep in episodes {
+        let mut row = vec![0.0; spec.dy];
+        rollout(
+            &gp,
+            spec,
+            &ep.traj,
+            &Control::FeedForward,
+            ep.traj.len(),
+            &mut log,
+            |p| {
+                for j in 0..spec.dy {
+                    row[j] = ep.traj.y[(p.t, j)];
+                }
+                let mut l2 = JitterLog::default();
+                total += gaussian_nll(&row, &p.mean, &p.cov, &config.jitter, &mut l2)?;
+                steps += 1;
+                Ok(())
+            },
+        )?;
+    }
+    Ok(total / steps.max(1) as f64)
+}
+
+/// Fits a model on training trajectories given in original units.
+pub fn fit(
+    train: &[Trajectory],
+    settings: &FitSettings,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<(Model, FitReport)> {
+    let start = Instant::now();
+    let first = train
+        .first()
+        .ok_or_else(|| MsgpError::Data("no training trajectories".into()))?;
+    let spec = NarxSpec {
+        ly: settings.ly,
+        lu: settings.lu,
+        dy: first.y.ncols(),
+        du: first.u.ncols(),
+    };
+    spec.validate()?;
+    for (k, t) in train.iter().enumerate() {
+        t.check(&spec)
+            .map_err(|e| MsgpError::Data(format!("training trajectory {k}: {e}")))?;
+    }
+    if settings.inducing == 0 {
+        return Err(MsgpError::InvalidSetting {
+            name: "inducing",
+            reason: "need at least one pseudo-input".into(),
+        });
+    }
+    let refs: Vec<&Trajectory> = train.iter().collect();
+    let normalizer = Normalizer::fit(&refs)?;
+    let norm: Vec<Trajectory> = train.iter().map(|t| normalizer.apply(t)).collect();
+    let mut report = FitReport::default();
+    let one_step = OneStepSettings {
+        iterations: settings.one_step_iterations,
+        pilco_penalty: settings.method == Method::PilcoNarx,
+        ..OneStepSettings::default()
+    };
+
+    if settings.method != Method::Msgp {
+        let config = GpConfig::default();
+        let nrefs: Vec<&Trajectory> = norm.iter().collect();
+        let data = one_step_pairs(&spec, &nrefs)?;
+        let params = fit_one_step(
+            &data,
+            settings.inducing,
+            &one_step,
+            &config,
+            settings.seed,
+            &mut report.jitter,
+        )?;
+        report.train_seconds = start.elapsed().as_secs_f64();
+        let model = Model {
+            method: settings.method,
+            spec,
+            params,
+            config,
+            normalizer,
+        };
+        return Ok((model, report));
+    }
+
+    // MSGP: split each trajectory into a training head and a validation tail.
+    let w = spec.warmup();
+    let mut heads = Vec::new();
+    let mut tails = Vec::new();
+    for t in &norm {
+        let n_val = (t.len() as f64 * settings.validation_fraction).round() as usize;
+        if settings.validation_fraction > 0.0 && n_val >= 10 && t.len() - n_val > w + 10 {
+            heads.push(t.slice(0, t.len() - n_val));
+            tails.push(Episode::feed_forward(t.slice(t.len() - n_val - w, t.len())));
+        } else {
+            heads.push(t.clone());
+        }
+    }
+    let config = GpConfig {
+        noise_floor: settings.noise_floor,
+        ..GpConfig::default()
+    };
+    let head_refs: Vec<&Trajectory> = heads.iter().collect();
+    let data = one_step_pairs(&spec, &head_refs)?;
+    let mut init = fit_one_step(
+        &data,
+        settings.inducing,
+        &one_step,
+        &config,
+        settings.seed,
+        &mut report.jitter,
+    )?;
+    // split the one-step noise between process and observation noise
+    for a in 0..spec.dy {
+        let total = init.log_process_noise[a].exp() + config.noise_floor;
+        let half = (0.5 * total - config.noise_floor).max(1e-3 * config.noise_floor);
+        init.log_process_noise[a] = half.ln();
+        init.log_obs_noise[a] = half.ln();
+    }
+    let episodes: Vec<Episode> = heads.into_iter().map(Episode::feed_forward).collect();
+    let shape = init.shape()?;
+    let predicted: usize = episodes.iter().map(|e| e.traj.len() - w).sum();
+    if settings.complexity == Complexity::NegHalfLogDet && predicted <= shape.m {
+        return Err(MsgpError::InvalidSetting {
+            name: "inducing",
+            reason: format!(
+                "the complexity term −½log|K̃| is bounded only when the training rollouts predict more \
+                 steps ({predicted}) than there are pseudo-inputs ({}); use fewer pseudo-inputs",
+                shape.m
+            ),
+        });
+    }
+    let mut active = vec![true; shape.len()];
+    for g in &settings.frozen {
+        for i in shape.group_range(*g) {
+            active[i] = false;
+        }
+    }
+    let mut objective = MsgpObjective {
+        shape,
+        spec,
+        config,
+        episodes: &episodes,
+        complexity: settings.complexity,
+        log: JitterLog::default(),
+    };
+    let adam = Adam {
+        learning_rate: settings.learning_rate,
+        ..Adam::default()
+    };
+    let mut best: (f64, Vec<f64>, usize) = (f64::INFINITY, init.to_flat(), 0);
+    let mut since_best = 0usize;
+    let every = settings.eval_every.max(1);
+    let iterations = settings.iterations;
+    let (last_x, _) = minimize(
+        &mut objective,
+        &adam,
+        init.to_flat(),
+        &active,
+        iterations + 1,
+        |it, loss, x| {
+            let mut validation = None;
+            if it % every == 0 || it == iterations {
+                let p = GpParams::from_flat(shape, x)?;
+                let v = if tails.is_empty() {
+                    loss
+                } else {
+                    validation_nll(&p, &config, &spec, &tails)?
+                };
+                validation = Some(v);
+                report.history.push((it, loss, v));
+                if v < best.0 {
+                    best = (v, x.to_vec(), it);
+                    since_best = 0;
+                } else {
+                    since_best += 1;
+                }
+            }
+            report.iterations_run = it;
+            progress(&FitProgress {
+                iteration: it,
+                iterations,
+                loss,
+                validation,
+                elapsed: start.elapsed().as_secs_f64(),
+            });
+            if it == iterations || (!tails.is_empty() && since_best >= settings.patience) {
+                return Ok(Flow::Stop);
+            }
+            Ok(Flow::Continue)
+        },
+    )?;
+    report.jitter.merge(&objective.log);
+    let chosen = if tails.is_empty() { last_x } else { best.1 };
+    report.best_iteration = if tails.is_empty() {
+        report.iterations_run
+    } else {
+        best.2
+    };
+    report.train_seconds = start.elapsed().as_secs_f64();
+    let model = Model {
+        method: Method::Msgp,
+        spec,
+        params: GpParams::from_flat(shape, &chosen)?,
+        config,
+        normalizer,
+    };
+    Ok((model, report))
+}
