@@ -1,1 +1,50 @@
-//! Criterion benchmarks live in `benches/`.
+//! Shared set-ups for the criterion benchmarks in `benches/`.
+
+use msgp_core::data::Normalizer;
+use msgp_core::data::{NoiseScale, SyntheticSystem};
+use msgp_core::gp::GpParams;
+use msgp_core::narx::NarxSpec;
+use msgp_core::trajectory::{Episode, Trajectory};
+use nalgebra::{DMatrix, DVector};
+
+/// A seeded MSGP problem: `m` pseudo-inputs, history (l_y, l_u) = (d/2, d/2), `t` predicted steps,
+/// data from synthetic system 4 driven by its random training input.
+pub fn problem(
+    m: usize,
+    d: usize,
+    t: usize,
+    seed: u64,
+) -> msgp_core::Result<(GpParams<f64>, NarxSpec, Vec<Episode>)> {
+    let spec = NarxSpec::siso(d / 2, d - d / 2);
+    let sys = SyntheticSystem::new(4)?;
+    let mut u = Vec::new();
+    let mut s = seed;
+    while u.len() < t + spec.warmup() {
+        let b = sys.generate(s, NoiseScale::StdDev)?;
+        u.extend(b.train.u.iter().copied());
+        s += 1;
+    }
+    u.truncate(t + spec.warmup());
+    let y = sys.respond(&u);
+    let traj = Trajectory::siso(&u, &y)?;
+    let norm = Normalizer::fit(&[&traj])?;
+    let traj = norm.apply(&traj);
+    let n = traj.len();
+    let pseudo = DMatrix::from_fn(m, spec.input_dim(), |i, k| {
+        let tt = spec.warmup() - 1 + (i * (n - spec.warmup())) / m;
+        spec.window(&traj.y, &traj.u, tt)[k]
+    });
+    let targets = DMatrix::from_fn(m, 1, |i, _| {
+        let tt = spec.warmup() + (i * (n - spec.warmup())) / m;
+        traj.y[(tt.min(n - 1), 0)]
+    });
+    let params = GpParams {
+        pseudo_inputs: pseudo,
+        pseudo_targets: targets,
+        log_lengthscales: DMatrix::from_element(1, spec.input_dim(), 0.3),
+        log_signal_var: DVector::from_element(1, 0.0),
+        log_process_noise: DVector::from_element(1, (0.01f64).ln()),
+        log_obs_noise: DVector::from_element(1, (0.01f64).ln()),
+    };
+    Ok((params, spec, vec![Episode::feed_forward(traj)]))
+}

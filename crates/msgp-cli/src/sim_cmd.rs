@@ -33,7 +33,7 @@ pub struct PendulumArgs {
     #[command(flatten)]
     controller: ControllerArgs,
     /// Episode length in seconds (the episode stops early if |θ| > stop-theta or |x| > stop-x).
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
     seconds: f64,
     /// Seed of the initial angle, the measurement noise and the random excitation.
     #[arg(long, default_value_t = 0)]

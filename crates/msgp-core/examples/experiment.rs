@@ -72,13 +72,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .push(msgp_core::gp::ParamGroup::PseudoInputs);
     }
     let (model, report) = fit(std::slice::from_ref(&bench.train), &settings, &mut |p| {
-        if let Some(v) = p.validation {
-            if p.iteration % 50 == 0 {
-                eprintln!(
-                    "it {:4} loss {:.4} val {:.4} ({:.1}s)",
-                    p.iteration, p.loss, v, p.elapsed
-                );
-            }
+        if let (Some(v), true) = (p.validation, p.iteration % 50 == 0) {
+            eprintln!(
+                "it {:4} loss {:.4} val {:.4} ({:.1}s)",
+                p.iteration, p.loss, v, p.elapsed
+            );
         }
     })?;
     let m = model.evaluate(&bench.test)?;

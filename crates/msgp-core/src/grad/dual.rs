@@ -15,6 +15,9 @@ pub const LANES: usize = 8;
 /// The dual scalar used for gradients.
 pub type Dual = DualSVec64<LANES>;
 
+/// Value and `(index, derivative)` pairs from one chunk of directions.
+type ChunkResult = Result<(f64, Vec<(usize, f64)>)>;
+
 /// Value and gradient of `f` at `x` with respect to the coordinates listed in `active`
 /// (entries of the gradient outside `active` are 0). `threads = 0` uses all cores.
 pub fn gradient<F>(x: &[f64], active: &[usize], threads: usize, f: F) -> Result<(f64, Vec<f64>)>
@@ -31,7 +34,7 @@ where
     }
     .clamp(1, chunks.len().max(1));
 
-    let eval_chunk = |chunk: &[usize]| -> Result<(f64, Vec<(usize, f64)>)> {
+    let eval_chunk = |chunk: &[usize]| -> ChunkResult {
         let mut xd: Vec<Dual> = x.iter().map(|&v| Dual::from_re(v)).collect();
         for (lane, &i) in chunk.iter().enumerate() {
             xd[i] = Dual::from_re(x[i]).derivative(lane);
@@ -50,7 +53,7 @@ where
         return Ok((y.re, vec![0.0; x.len()]));
     }
 
-    let results: Vec<Result<(f64, Vec<(usize, f64)>)>> = if threads == 1 {
+    let results: Vec<ChunkResult> = if threads == 1 {
         chunks.iter().map(|ch| eval_chunk(ch)).collect()
     } else {
         let per = chunks.len().div_ceil(threads);

@@ -1,0 +1,282 @@
+//! MCAP run logs with JSON-encoded messages (opens in Foxglove).
+//!
+//! Every channel uses message encoding `json` and a schema with encoding `jsonschema`.
+//! Each control step `k` produces one message on each topic, all with
+//! `log_time = publish_time = round(t·10⁹)` ns and `sequence = k`:
+//!
+//! | topic | schema | fields |
+//! |---|---|---|
+//! | `/pendulum/measurement` | `msgp.pendulum.Measurement` | `step`, `t` \[s\], `theta` \[rad\], `x` \[m\] (noisy; what the controller sees) |
+//! | `/pendulum/command` | `msgp.pendulum.Command` | `step`, `t` \[s\], `acceleration` \[m/s²\] (issued, clipped) |
+//! | `/pendulum/latent` | `msgp.pendulum.Latent` | `step`, `t` \[s\], `theta` \[rad\], `theta_dot` \[rad/s\], `x` \[m\], `x_dot` \[m/s\], `lag_acceleration` \[m/s²\], `delayed_command` \[m/s²\] (**true latent state**, not measurable) |
+//!
+//! The latent channel also carries the channel metadata `latent = true`. A metadata record
+//! named `msgp.pendulum.episode` holds `format_version` (`"1"`) and `episode`: the
+//! [`EpisodeInfo`] as JSON (parameters, seed, initial angle, controller, termination).
+//! Chunks are zstd-compressed single-threaded, so the bytes do not depend on the machine.
+
+use std::collections::{BTreeMap, HashMap};
+use std::io::{Seek, Write};
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::episode::{Episode, EpisodeInfo, Sample};
+use crate::error::SimError;
+use crate::log::RunLog;
+use crate::plant::{LatentState, Measurement};
+
+/// Topic of the noisy measurements.
+pub const TOPIC_MEASUREMENT: &str = "/pendulum/measurement";
+/// Topic of the issued commands.
+pub const TOPIC_COMMAND: &str = "/pendulum/command";
+/// Topic of the true latent states.
+pub const TOPIC_LATENT: &str = "/pendulum/latent";
+/// Name of the metadata record holding the [`EpisodeInfo`].
+pub const METADATA_NAME: &str = "msgp.pendulum.episode";
+/// Value of the `format_version` metadata key.
+pub const FORMAT_VERSION: &str = "1";
+
+const MEASUREMENT_SCHEMA: &str = r#"{"title":"msgp.pendulum.Measurement","description":"Noisy measurement seen by the controller","type":"object","properties":{"step":{"type":"integer","description":"control-step index"},"t":{"type":"number","description":"time [s]"},"theta":{"type":"number","description":"measured pole angle [rad], positive toward +x"},"x":{"type":"number","description":"measured end-effector position [m]"}},"required":["step","t","theta","x"]}"#;
+const COMMAND_SCHEMA: &str = r#"{"title":"msgp.pendulum.Command","description":"Issued end-effector acceleration command","type":"object","properties":{"step":{"type":"integer","description":"control-step index"},"t":{"type":"number","description":"time [s]"},"acceleration":{"type":"number","description":"clipped acceleration command [m/s^2]"}},"required":["step","t","acceleration"]}"#;
+const LATENT_SCHEMA: &str = r#"{"title":"msgp.pendulum.Latent","description":"True latent state (not measurable by the controller)","type":"object","properties":{"step":{"type":"integer","description":"control-step index"},"t":{"type":"number","description":"time [s]"},"theta":{"type":"number","description":"true pole angle [rad]"},"theta_dot":{"type":"number","description":"true pole angular velocity [rad/s]"},"x":{"type":"number","description":"true end-effector position [m]"},"x_dot":{"type":"number","description":"true end-effector velocity [m/s]"},"lag_acceleration":{"type":"number","description":"lag state = end-effector acceleration [m/s^2]"},"delayed_command":{"type":"number","description":"command applied during the next control period [m/s^2]"}},"required":["step","t","theta","theta_dot","x","x_dot","lag_acceleration","delayed_command"]}"#;
+
+#[derive(Debug, Serialize, Deserialize)]
+struct MeasurementMsg {
+    step: u64,
+    t: f64,
+    theta: f64,
+    x: f64,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct CommandMsg {
+    step: u64,
+    t: f64,
+    acceleration: f64,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct LatentMsg {
+    step: u64,
+    t: f64,
+    #[serde(flatten)]
+    state: LatentState,
+}
+
+/// Writes `episode` to `path` atomically.
+pub fn write(path: &Path, episode: &Episode) -> Result<(), SimError> {
+    super::write_atomically(path, |w| write_to(w, episode, path))
+}
+
+/// Encodes `episode` as MCAP bytes in memory; `path` is only used in error messages.
+pub fn encode(episode: &Episode, path: &Path) -> Result<Vec<u8>, SimError> {
+    let mut cursor = std::io::Cursor::new(Vec::new());
+    write_to(&mut cursor, episode, path)?;
+    Ok(cursor.into_inner())
+}
+
+fn write_to<W: Write + Seek>(w: W, episode: &Episode, path: &Path) -> Result<(), SimError> {
+    let mcap_err = |source| SimError::Mcap {
+        path: path.to_owned(),
+        source,
+    };
+    let json_err = |source| SimError::Json {
+        context: path.display().to_string(),
+        source,
+    };
+    let mut writer = mcap::WriteOptions::new()
+        .compression(Some(mcap::Compression::Zstd))
+        .compression_threads(0)
+        .create(w)
+        .map_err(mcap_err)?;
+    let mut channel = |name: &str, schema: &str, topic: &str, latent: bool| {
+        let schema_id = writer
+            .add_schema(name, "jsonschema", schema.as_bytes())
+            .map_err(mcap_err)?;
+        let mut meta = BTreeMap::new();
+        if latent {
+            meta.insert("latent".to_owned(), "true".to_owned());
+        }
+        writer
+            .add_channel(schema_id, topic, "json", &meta)
+            .map_err(mcap_err)
+    };
+    let ch_meas = channel(
+        "msgp.pendulum.Measurement",
+        MEASUREMENT_SCHEMA,
+        TOPIC_MEASUREMENT,
+        false,
+    )?;
+    let ch_cmd = channel(
+        "msgp.pendulum.Command",
+        COMMAND_SCHEMA,
+        TOPIC_COMMAND,
+        false,
+    )?;
+    let ch_lat = channel("msgp.pendulum.Latent", LATENT_SCHEMA, TOPIC_LATENT, true)?;
+
+    let mut metadata = BTreeMap::new();
+    metadata.insert("format_version".to_owned(), FORMAT_VERSION.to_owned());
+    metadata.insert(
+        "episode".to_owned(),
+        serde_json::to_string(&episode.info).map_err(json_err)?,
+    );
+    writer
+        .write_metadata(&mcap::records::Metadata {
+            name: METADATA_NAME.to_owned(),
+            metadata,
+        })
+        .map_err(mcap_err)?;
+
+    for s in &episode.samples {
+        let time_ns = time_to_ns(s.t);
+        // Sequence numbers are u32 in MCAP; they wrap after ~2.7 years at 50 Hz.
+        let sequence = s.step as u32;
+        let header = |channel_id| mcap::records::MessageHeader {
+            channel_id,
+            sequence,
+            log_time: time_ns,
+            publish_time: time_ns,
+        };
+        let meas = serde_json::to_vec(&MeasurementMsg {
+            step: s.step,
+            t: s.t,
+            theta: s.measurement.theta,
+            x: s.measurement.x,
+        })
+        .map_err(json_err)?;
+        let cmd = serde_json::to_vec(&CommandMsg {
+            step: s.step,
+            t: s.t,
+            acceleration: s.command,
+        })
+        .map_err(json_err)?;
+        let lat = serde_json::to_vec(&LatentMsg {
+            step: s.step,
+            t: s.t,
+            state: s.latent,
+        })
+        .map_err(json_err)?;
+        writer
+            .write_to_known_channel(&header(ch_meas), &meas)
+            .map_err(mcap_err)?;
+        writer
+            .write_to_known_channel(&header(ch_cmd), &cmd)
+            .map_err(mcap_err)?;
+        writer
+            .write_to_known_channel(&header(ch_lat), &lat)
+            .map_err(mcap_err)?;
+    }
+    writer.finish().map_err(mcap_err)?;
+    Ok(())
+}
+
+/// Nanoseconds for a non-negative time in seconds.
+fn time_to_ns(t: f64) -> u64 {
+    // Episode times are within 0..=86400 s, far inside u64 nanoseconds.
+    (t * 1e9).round().max(0.0) as u64
+}
+
+#[derive(Default)]
+struct Partial {
+    t: Option<f64>,
+    measurement: Option<Measurement>,
+    command: Option<f64>,
+    latent: Option<LatentState>,
+}
+
+/// Parses MCAP bytes written by [`write()`]; `path` is only used in error messages. Messages
+/// on other topics are ignored.
+pub fn decode(bytes: &[u8], path: &Path) -> Result<RunLog, SimError> {
+    let mcap_err = |source| SimError::Mcap {
+        path: path.to_owned(),
+        source,
+    };
+    let malformed = |reason: String| SimError::MalformedLog {
+        path: path.to_owned(),
+        reason,
+    };
+    let json_err = |topic: &str| {
+        let context = format!("{} topic {topic}", path.display());
+        move |source| SimError::Json { context, source }
+    };
+    let mut steps: BTreeMap<u64, Partial> = BTreeMap::new();
+    for message in mcap::MessageStream::new(bytes).map_err(mcap_err)? {
+        let message = message.map_err(mcap_err)?;
+        let topic = message.channel.topic.as_str();
+        let data = message.data.as_ref();
+        match topic {
+            TOPIC_MEASUREMENT => {
+                let m: MeasurementMsg = serde_json::from_slice(data).map_err(json_err(topic))?;
+                let entry = steps.entry(m.step).or_default();
+                entry.t = Some(m.t);
+                entry.measurement = Some(Measurement {
+                    theta: m.theta,
+                    x: m.x,
+                });
+            }
+            TOPIC_COMMAND => {
+                let m: CommandMsg = serde_json::from_slice(data).map_err(json_err(topic))?;
+                let entry = steps.entry(m.step).or_default();
+                entry.t = Some(m.t);
+                entry.command = Some(m.acceleration);
+            }
+            TOPIC_LATENT => {
+                let m: LatentMsg = serde_json::from_slice(data).map_err(json_err(topic))?;
+                let entry = steps.entry(m.step).or_default();
+                entry.t = Some(m.t);
+                entry.latent = Some(m.state);
+            }
+            _ => {}
+        }
+    }
+    let mut samples = Vec::with_capacity(steps.len());
+    for (step, p) in steps {
+        match (p.t, p.measurement, p.command, p.latent) {
+            (Some(t), Some(measurement), Some(command), Some(latent)) => samples.push(Sample {
+                step,
+                t,
+                command,
+                measurement,
+                latent,
+            }),
+            _ => {
+                return Err(malformed(format!(
+                    "step {step} lacks a message on one of {TOPIC_MEASUREMENT}, {TOPIC_COMMAND}, {TOPIC_LATENT}"
+                )));
+            }
+        }
+    }
+    Ok(RunLog {
+        info: read_info(bytes, path)?,
+        samples,
+    })
+}
+
+/// The [`EpisodeInfo`] metadata record, if the file has one.
+fn read_info(bytes: &[u8], path: &Path) -> Result<Option<EpisodeInfo>, SimError> {
+    let mcap_err = |source| SimError::Mcap {
+        path: path.to_owned(),
+        source,
+    };
+    let Some(summary) = mcap::Summary::read(bytes).map_err(mcap_err)? else {
+        return Ok(None);
+    };
+    for index in summary
+        .metadata_indexes
+        .iter()
+        .filter(|i| i.name == METADATA_NAME)
+    {
+        let record = mcap::read::metadata(bytes, index).map_err(mcap_err)?;
+        let fields: HashMap<_, _> = record.metadata.into_iter().collect();
+        if let Some(json) = fields.get("episode") {
+            let info = serde_json::from_str(json).map_err(|source| SimError::Json {
+                context: format!("{} metadata {METADATA_NAME}", path.display()),
+                source,
+            })?;
+            return Ok(Some(info));
+        }
+    }
+    Ok(None)
+}
