@@ -298,3 +298,64 @@ pub fn fit_one_step(
     }
     Ok(params)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn problem() -> (DMatrix<f64>, DVector<f64>) {
+        let x = DMatrix::from_fn(40, 3, |i, k| ((i * 7 + k * 3) as f64 * 0.37).sin());
+        let y = DVector::from_fn(40, |i, _| {
+            (x[(i, 0)] * 2.0).sin() + 0.3 * x[(i, 2)] + 0.05 * ((i as f64) * 1.3).cos()
+        });
+        (x, y)
+    }
+
+    fn check(pilco: bool) {
+        let (x, y) = problem();
+        let std: Vec<f64> = (0..3).map(|k| column_std(&x, k)).collect();
+        let mut obj = Marginal {
+            x: &x,
+            y,
+            config: GpConfig::default(),
+            pilco_std: pilco.then_some(std),
+            log: JitterLog::default(),
+        };
+        // near the penalties' active region for the PILCO case
+        let p = vec![-0.3, 0.4, 4.0, 0.2, -3.0];
+        let (_, g) = obj.value_and_gradient(&p).expect("value");
+        for i in 0..p.len() {
+            let h = 1e-4;
+            let mut f = |d: f64| {
+                let mut q = p.clone();
+                q[i] += d;
+                obj.value_and_gradient(&q).expect("value").0
+            };
+            let fd = (8.0 * (f(h) - f(-h)) - (f(2.0 * h) - f(-2.0 * h))) / (12.0 * h);
+            assert!(
+                (fd - g[i]).abs() <= 1e-6 * fd.abs().max(1.0),
+                "param {i}: analytic {} vs fd {fd}",
+                g[i]
+            );
+        }
+    }
+
+    #[test]
+    fn marginal_likelihood_gradient_matches_finite_differences() {
+        check(false);
+        check(true);
+    }
+
+    #[test]
+    fn one_step_pairs_follow_the_window_layout() {
+        let t = Trajectory::siso(&[1.0, 2.0, 3.0, 4.0], &[10.0, 20.0, 30.0, 40.0]).expect("traj");
+        let spec = NarxSpec::siso(2, 1);
+        let d = one_step_pairs(&spec, &[&t]).expect("pairs");
+        assert_eq!(d.x.nrows(), 2);
+        assert_eq!(
+            d.x.row(0).iter().copied().collect::<Vec<_>>(),
+            vec![20.0, 10.0, 2.0]
+        );
+        assert_eq!(d.y[(0, 0)], 30.0);
+    }
+}

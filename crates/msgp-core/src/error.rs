@@ -45,6 +45,31 @@ pub enum MsgpError {
         /// What went wrong, with line and column where known.
         message: String,
     },
+    /// A data file with a problem at a known place (CSV cell, ...).
+    #[error("{}:{line}:{column}: {message}", path.display())]
+    FileAt {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: u64,
+        /// 1-based column (field number for CSV).
+        column: usize,
+        /// What is wrong there.
+        message: String,
+    },
+    /// A model file of a format version this build cannot read.
+    #[error(
+        "{}: model file format version {found} is not supported (this build reads {supported})",
+        path.display()
+    )]
+    ModelVersion {
+        /// The file.
+        path: PathBuf,
+        /// Version found in the file.
+        found: String,
+        /// Versions this build reads (e.g. "1.x").
+        supported: String,
+    },
 }
 
 /// Result alias for msgp-core.

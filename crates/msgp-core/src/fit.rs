@@ -59,6 +59,8 @@ pub struct FitSettings {
     pub frozen: Vec<ParamGroup>,
     /// Adam iterations on the one-step marginal likelihood.
     pub one_step_iterations: usize,
+    /// After early stopping, refit on all training data for the chosen number of iterations.
+    pub refit: bool,
 }
 
 impl Default for FitSettings {
@@ -80,6 +82,7 @@ impl Default for FitSettings {
             // too overfits (docs/design.md)
             frozen: vec![ParamGroup::PseudoInputs],
             one_step_iterations: 300,
+            refit: false,
         }
     }
 }
@@ -87,6 +90,8 @@ impl Default for FitSettings {
 /// One line of fit progress.
 #[derive(Clone, Copy, Debug)]
 pub struct FitProgress {
+    /// 1: training with early stopping on the held-out tail; 2: refit on all training data.
+    pub stage: u8,
     /// Adam iteration.
     pub iteration: usize,
     /// Total iterations planned.
@@ -102,9 +107,9 @@ pub struct FitProgress {
 /// What happened during a fit.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct FitReport {
-    /// Adam iterations run.
+    /// Adam iterations run (all stages).
     pub iterations_run: usize,
-    /// Iteration whose parameters were kept.
+    /// Iteration chosen by early stopping (the refit runs this many).
     pub best_iteration: usize,
     /// (iteration, training loss per step, validation NLL per step).
     pub history: Vec<(usize, f64, f64)>,
@@ -251,110 +256,169 @@ pub fn fit(
         noise_floor: settings.noise_floor,
         ..GpConfig::default()
     };
-    let head_refs: Vec<&Trajectory> = heads.iter().collect();
-    let data = one_step_pairs(&spec, &head_refs)?;
-    let mut init = fit_one_step(
-        &data,
-        settings.inducing,
-        &one_step,
-        &config,
-        settings.seed,
-        &mut report.jitter,
-    )?;
-    // split the one-step noise between process and observation noise
-    for a in 0..spec.dy {
-        let total = init.log_process_noise[a].exp() + config.noise_floor;
-        let half = (0.5 * total - config.noise_floor).max(1e-3 * config.noise_floor);
-        init.log_process_noise[a] = half.ln();
-        init.log_obs_noise[a] = half.ln();
-    }
-    let episodes: Vec<Episode> = heads.into_iter().map(Episode::feed_forward).collect();
-    let shape = init.shape()?;
-    let predicted: usize = episodes.iter().map(|e| e.traj.len() - w).sum();
-    if settings.complexity == Complexity::NegHalfLogDet && predicted <= shape.m {
-        return Err(MsgpError::InvalidSetting {
-            name: "inducing",
-            reason: format!(
-                "the complexity term −½log|K̃| is bounded only when the training rollouts predict more \
-                 steps ({predicted}) than there are pseudo-inputs ({}); use fewer pseudo-inputs",
-                shape.m
-            ),
-        });
-    }
-    let mut active = vec![true; shape.len()];
-    for g in &settings.frozen {
-        for i in shape.group_range(*g) {
-            active[i] = false;
-        }
-    }
-    let mut objective = MsgpObjective {
-        shape,
+    let mut stage = Stage {
         spec,
         config,
-        episodes: &episodes,
-        complexity: settings.complexity,
-        log: JitterLog::default(),
+        settings,
+        start,
+        progress,
+        report: &mut report,
     };
-    let adam = Adam {
-        learning_rate: settings.learning_rate,
-        ..Adam::default()
-    };
-    let mut best: (f64, Vec<f64>, usize) = (f64::INFINITY, init.to_flat(), 0);
-    let mut since_best = 0usize;
-    let every = settings.eval_every.max(1);
-    let iterations = settings.iterations;
-    let (last_x, _) = minimize(
-        &mut objective,
-        &adam,
-        init.to_flat(),
-        &active,
-        iterations + 1,
-        |it, loss, x| {
-            let mut validation = None;
-            if it % every == 0 || it == iterations {
-                let p = GpParams::from_flat(shape, x)?;
-                let v = if tails.is_empty() {
-                    loss
-                } else {
-                    validation_nll(&p, &config, &spec, &tails)?
-                };
-                validation = Some(v);
-                report.history.push((it, loss, v));
-                if v < best.0 {
-                    best = (v, x.to_vec(), it);
-                    since_best = 0;
-                } else {
-                    since_best += 1;
-                }
-            }
-            report.iterations_run = it;
-            progress(&FitProgress {
-                iteration: it,
-                iterations,
-                loss,
-                validation,
-                elapsed: start.elapsed().as_secs_f64(),
-            });
-            if it == iterations || (!tails.is_empty() && since_best >= settings.patience) {
-                return Ok(Flow::Stop);
-            }
-            Ok(Flow::Continue)
-        },
-    )?;
-    report.jitter.merge(&objective.log);
-    let chosen = if tails.is_empty() { last_x } else { best.1 };
-    report.best_iteration = if tails.is_empty() {
-        report.iterations_run
-    } else {
-        best.2
-    };
+    let head_eps: Vec<Episode> = heads.into_iter().map(Episode::feed_forward).collect();
+    let init = stage.initial(&head_eps, &one_step)?;
+    let (mut chosen, best_iteration) =
+        stage.train(init, &head_eps, &tails, settings.iterations, 1)?;
+    stage.report.best_iteration = best_iteration;
+    if settings.refit && !tails.is_empty() {
+        // stage 2: the same number of iterations on the whole training data
+        let all_eps: Vec<Episode> = norm.iter().cloned().map(Episode::feed_forward).collect();
+        let init = stage.initial(&all_eps, &one_step)?;
+        chosen = if best_iteration == 0 {
+            init
+        } else {
+            stage.train(init, &all_eps, &[], best_iteration, 2)?.0
+        };
+    }
     report.train_seconds = start.elapsed().as_secs_f64();
     let model = Model {
         method: Method::Msgp,
         spec,
-        params: GpParams::from_flat(shape, &chosen)?,
+        params: chosen,
         config,
         normalizer,
     };
     Ok((model, report))
+}
+
+/// One MSGP training run: initialisation and Adam with optional early stopping.
+struct Stage<'a, 'p> {
+    spec: NarxSpec,
+    config: GpConfig,
+    settings: &'a FitSettings,
+    start: Instant,
+    progress: &'p mut dyn FnMut(&FitProgress),
+    report: &'a mut FitReport,
+}
+
+impl Stage<'_, '_> {
+    /// The sparse one-step GP-NARX fit on `episodes`, with the one-step noise split equally
+    /// between process and observation noise.
+    fn initial(
+        &mut self,
+        episodes: &[Episode],
+        one_step: &OneStepSettings,
+    ) -> Result<GpParams<f64>> {
+        let refs: Vec<&Trajectory> = episodes.iter().map(|e| &e.traj).collect();
+        let data = one_step_pairs(&self.spec, &refs)?;
+        let mut init = fit_one_step(
+            &data,
+            self.settings.inducing,
+            one_step,
+            &self.config,
+            self.settings.seed,
+            &mut self.report.jitter,
+        )?;
+        let floor = self.config.noise_floor;
+        for a in 0..self.spec.dy {
+            let total = init.log_process_noise[a].exp() + floor;
+            let half = (0.5 * total - floor).max(1e-3 * floor);
+            init.log_process_noise[a] = half.ln();
+            init.log_obs_noise[a] = half.ln();
+        }
+        let m = init.pseudo_inputs.nrows();
+        let predicted: usize = episodes
+            .iter()
+            .map(|e| e.traj.len() - self.spec.warmup())
+            .sum();
+        if self.settings.complexity == Complexity::NegHalfLogDet && predicted <= m {
+            return Err(MsgpError::InvalidSetting {
+                name: "inducing",
+                reason: format!(
+                    "the complexity term −½log|K̃| is bounded only when the training rollouts predict \
+                     more steps ({predicted}) than there are pseudo-inputs ({m}); use fewer pseudo-inputs"
+                ),
+            });
+        }
+        Ok(init)
+    }
+
+    /// Adam from `init` for up to `iterations` steps. With validation episodes, checks them every
+    /// `eval_every` steps, stops after `patience` checks without improvement and returns the best
+    /// parameters and their iteration; otherwise returns the last parameters.
+    fn train(
+        &mut self,
+        init: GpParams<f64>,
+        episodes: &[Episode],
+        tails: &[Episode],
+        iterations: usize,
+        stage: u8,
+    ) -> Result<(GpParams<f64>, usize)> {
+        let shape = init.shape()?;
+        let mut active = vec![true; shape.len()];
+        for g in &self.settings.frozen {
+            for i in shape.group_range(*g) {
+                active[i] = false;
+            }
+        }
+        let mut objective = MsgpObjective {
+            shape,
+            spec: self.spec,
+            config: self.config,
+            episodes,
+            complexity: self.settings.complexity,
+            log: JitterLog::default(),
+        };
+        let adam = Adam {
+            learning_rate: self.settings.learning_rate,
+            ..Adam::default()
+        };
+        let (spec, config, settings, start) = (self.spec, self.config, self.settings, self.start);
+        let every = settings.eval_every.max(1);
+        let mut best: (f64, Vec<f64>, usize) = (f64::INFINITY, init.to_flat(), 0);
+        let mut since_best = 0usize;
+        let report = &mut *self.report;
+        let progress = &mut *self.progress;
+        let (last_x, _) = minimize(
+            &mut objective,
+            &adam,
+            init.to_flat(),
+            &active,
+            iterations + 1,
+            |it, loss, x| {
+                let mut validation = None;
+                if !tails.is_empty() && (it % every == 0 || it == iterations) {
+                    let p = GpParams::from_flat(shape, x)?;
+                    let v = validation_nll(&p, &config, &spec, tails)?;
+                    validation = Some(v);
+                    report.history.push((it, loss, v));
+                    if v < best.0 {
+                        best = (v, x.to_vec(), it);
+                        since_best = 0;
+                    } else {
+                        since_best += 1;
+                    }
+                }
+                report.iterations_run += 1;
+                progress(&FitProgress {
+                    stage,
+                    iteration: it,
+                    iterations,
+                    loss,
+                    validation,
+                    elapsed: start.elapsed().as_secs_f64(),
+                });
+                if it == iterations || (!tails.is_empty() && since_best >= settings.patience) {
+                    return Ok(Flow::Stop);
+                }
+                Ok(Flow::Continue)
+            },
+        )?;
+        report.jitter.merge(&objective.log);
+        let (x, it) = if tails.is_empty() {
+            (last_x, iterations)
+        } else {
+            (best.1, best.2)
+        };
+        Ok((GpParams::from_flat(shape, &x)?, it))
+    }
 }

@@ -25,6 +25,7 @@ pub mod kmeans;
 pub mod linalg;
 pub mod loss;
 pub mod model;
+pub mod model_file;
 pub mod moments;
 pub mod narx;
 pub mod optim;

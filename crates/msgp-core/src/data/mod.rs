@@ -1,5 +1,7 @@
 //! Data: the paper's synthetic systems, the real benchmark series, normalisation.
 
+#[cfg(feature = "mcap")]
+pub mod mcap;
 pub mod normalize;
 pub mod real;
 pub mod synthetic;

@@ -1,8 +1,28 @@
-//! Numeric CSV tables with a header; every error names the file, line and column.
+//! Numeric tables with named columns: CSV files with a header (and, through
+//! [`crate::data::mcap`], aligned MCAP signals). Every error names the file and, for a cell,
+//! its line and column.
+//!
+//! Rules of the CSV reader:
+//! - the first line is the header; names are trimmed, must be non-empty and unique;
+//! - every data cell must parse as a finite `f64` (`NaN`, `inf` and empty cells are errors);
+//! - every line has as many fields as the header;
+//! - blank lines are skipped; a file without data lines is an error;
+//! - an optional column named [`EPISODE_COLUMN`] splits the rows into trajectories: each
+//!   contiguous run of rows with the same value is one trajectory.
 
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
+use nalgebra::DMatrix;
+
 use crate::error::{MsgpError, Result};
+use crate::trajectory::Trajectory;
+
+/// Name of the column whose value changes mark the start of a new trajectory.
+pub const EPISODE_COLUMN: &str = "episode";
+
+/// Names accepted for a time column (matched case-insensitively), in order of preference.
+pub const TIME_COLUMNS: [&str; 2] = ["t", "time"];
 
 /// A numeric table: column names and row-major values.
 #[derive(Clone, Debug, PartialEq)]
@@ -13,6 +33,9 @@ pub struct Table {
     pub columns: Vec<String>,
     /// Rows of values, one `Vec` per data line.
     pub rows: Vec<Vec<f64>>,
+    /// For each row, the 1-based line of the file it came from (for messages; for non-text
+    /// sources such as MCAP the 1-based row number).
+    pub lines: Vec<u64>,
 }
 
 fn file_err(path: &Path, message: String) -> MsgpError {
@@ -22,54 +45,85 @@ fn file_err(path: &Path, message: String) -> MsgpError {
     }
 }
 
+fn at(path: &Path, line: u64, column: usize, message: String) -> MsgpError {
+    MsgpError::FileAt {
+        path: path.to_path_buf(),
+        line,
+        column,
+        message,
+    }
+}
+
 impl Table {
     /// Reads a CSV file with a header line; every cell must be a finite number.
     pub fn read_csv(path: &Path) -> Result<Self> {
+        let bytes = std::fs::read(path).map_err(|e| file_err(path, format!("cannot read: {e}")))?;
+        Self::parse_csv(&bytes, path)
+    }
+
+    /// Parses CSV bytes; `path` is only used in messages.
+    pub fn parse_csv(bytes: &[u8], path: &Path) -> Result<Self> {
+        if bytes.iter().all(u8::is_ascii_whitespace) {
+            return Err(file_err(path, "empty file: no header line".into()));
+        }
         let mut reader = csv::ReaderBuilder::new()
             .has_headers(true)
             .trim(csv::Trim::All)
-            .from_path(path)
-            .map_err(|e| file_err(path, format!("cannot open: {e}")))?;
-        let columns: Vec<String> = reader
-            .headers()
-            .map_err(|e| file_err(path, format!("cannot read the header: {e}")))?
-            .iter()
-            .map(str::to_string)
-            .collect();
-        if columns.is_empty() || columns.iter().all(String::is_empty) {
-            return Err(file_err(path, "empty file: no header line".into()));
+            .from_reader(bytes);
+        let header = reader.headers().map_err(|e| csv_err(path, &e, "header"))?;
+        let columns: Vec<String> = header.iter().map(str::to_string).collect();
+        for (j, name) in columns.iter().enumerate() {
+            if name.is_empty() {
+                return Err(at(path, 1, j + 1, "empty column name in the header".into()));
+            }
+            if let Some(k) = columns[..j].iter().position(|c| c == name) {
+                return Err(at(
+                    path,
+                    1,
+                    j + 1,
+                    format!("duplicate column name `{name}` (also column {})", k + 1),
+                ));
+            }
         }
         let mut rows = Vec::new();
+        let mut lines = Vec::new();
         for rec in reader.records() {
-            let rec = rec.map_err(|e| {
-                let line = e.position().map_or(0, |p| p.line());
-                file_err(path, format!("line {line}: {e}"))
-            })?;
+            let rec = rec.map_err(|e| csv_err(path, &e, "data"))?;
             let line = rec.position().map_or(0, |p| p.line());
+            if rec.len() == 1 && rec.get(0).is_some_and(str::is_empty) && columns.len() > 1 {
+                continue; // a blank line
+            }
             let mut row = Vec::with_capacity(columns.len());
             for (j, cell) in rec.iter().enumerate() {
                 let name = columns.get(j).map_or("?", String::as_str);
-                let v: f64 = cell.parse().map_err(|_| {
-                    file_err(
+                if cell.is_empty() {
+                    return Err(at(
                         path,
-                        format!(
-                            "line {line}, column {} (`{name}`): `{cell}` is not a number",
-                            j + 1
-                        ),
+                        line,
+                        j + 1,
+                        format!("empty cell in column `{name}`"),
+                    ));
+                }
+                let v: f64 = cell.parse().map_err(|_| {
+                    at(
+                        path,
+                        line,
+                        j + 1,
+                        format!("`{cell}` in column `{name}` is not a number"),
                     )
                 })?;
                 if !v.is_finite() {
-                    return Err(file_err(
+                    return Err(at(
                         path,
-                        format!(
-                            "line {line}, column {} (`{name}`): non-finite value `{cell}`",
-                            j + 1
-                        ),
+                        line,
+                        j + 1,
+                        format!("non-finite value `{cell}` in column `{name}`"),
                     ));
                 }
                 row.push(v);
             }
             rows.push(row);
+            lines.push(line);
         }
         if rows.is_empty() {
             return Err(file_err(path, "no data rows after the header".into()));
@@ -78,17 +132,181 @@ impl Table {
             path: path.to_path_buf(),
             columns,
             rows,
+            lines,
+        })
+    }
+
+    /// Number of data rows.
+    pub fn len(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// True when there are no rows.
+    pub fn is_empty(&self) -> bool {
+        self.rows.is_empty()
+    }
+
+    /// Index of the named column.
+    pub fn column_index(&self, name: &str) -> Result<usize> {
+        self.columns.iter().position(|c| c == name).ok_or_else(|| {
+            file_err(
+                &self.path,
+                format!("no column `{name}` (columns: {})", self.columns.join(", ")),
+            )
         })
     }
 
     /// Values of the named column.
     pub fn column(&self, name: &str) -> Result<Vec<f64>> {
-        let j = self.columns.iter().position(|c| c == name).ok_or_else(|| {
-            file_err(
-                &self.path,
-                format!("no column `{name}` (columns: {})", self.columns.join(", ")),
-            )
-        })?;
+        let j = self.column_index(name)?;
         Ok(self.rows.iter().map(|r| r[j]).collect())
+    }
+
+    /// Index of the time column (`t` or `time`, any case), if there is one.
+    pub fn time_column(&self) -> Option<usize> {
+        TIME_COLUMNS.iter().find_map(|want| {
+            self.columns
+                .iter()
+                .position(|c| c.eq_ignore_ascii_case(want))
+        })
+    }
+
+    /// Row ranges of the trajectories: one per contiguous run of equal values in the
+    /// [`EPISODE_COLUMN`], or the whole table when there is no such column.
+    pub fn episodes(&self) -> Vec<Range<usize>> {
+        let Some(e) = self.columns.iter().position(|c| c == EPISODE_COLUMN) else {
+            return vec![0..self.rows.len()];
+        };
+        let mut out = Vec::new();
+        let mut start = 0;
+        for i in 1..self.rows.len() {
+            if self.rows[i][e] != self.rows[i - 1][e] {
+                out.push(start..i);
+                start = i;
+            }
+        }
+        out.push(start..self.rows.len());
+        out
+    }
+
+    /// The episode value of each trajectory of [`episodes`](Self::episodes) (`None` without an
+    /// episode column).
+    pub fn episode_ids(&self) -> Option<Vec<f64>> {
+        let e = self.columns.iter().position(|c| c == EPISODE_COLUMN)?;
+        Some(
+            self.episodes()
+                .iter()
+                .map(|r| self.rows[r.start][e])
+                .collect(),
+        )
+    }
+
+    /// One trajectory per episode with the named input and output columns.
+    pub fn trajectories(&self, inputs: &[&str], outputs: &[&str]) -> Result<Vec<Trajectory>> {
+        if outputs.is_empty() {
+            return Err(file_err(&self.path, "no output column selected".into()));
+        }
+        let ui: Vec<usize> = inputs
+            .iter()
+            .map(|n| self.column_index(n))
+            .collect::<Result<_>>()?;
+        let yi: Vec<usize> = outputs
+            .iter()
+            .map(|n| self.column_index(n))
+            .collect::<Result<_>>()?;
+        let mut out = Vec::new();
+        for r in self.episodes() {
+            let n = r.len();
+            let rows = &self.rows[r];
+            let u = DMatrix::from_fn(n, ui.len(), |i, j| rows[i][ui[j]]);
+            let y = DMatrix::from_fn(n, yi.len(), |i, j| rows[i][yi[j]]);
+            out.push(Trajectory::new(u, y).map_err(|e| file_err(&self.path, e.to_string()))?);
+        }
+        Ok(out)
+    }
+
+    /// Time stamps of the rows in `range`: the time column when there is one, otherwise the
+    /// row index within the range.
+    pub fn times(&self, range: Range<usize>) -> Vec<f64> {
+        match self.time_column() {
+            Some(j) => self.rows[range].iter().map(|r| r[j]).collect(),
+            None => (0..range.len()).map(|i| i as f64).collect(),
+        }
+    }
+}
+
+/// A csv-crate error as a message with the line (and field) it happened at.
+fn csv_err(path: &Path, e: &csv::Error, what: &str) -> MsgpError {
+    let line = e.position().map_or(0, csv::Position::line);
+    match e.kind() {
+        csv::ErrorKind::UnequalLengths {
+            expected_len, len, ..
+        } => at(
+            path,
+            line,
+            (*len as usize).min(*expected_len as usize) + 1,
+            format!("{what} line has {len} fields, the header has {expected_len}"),
+        ),
+        csv::ErrorKind::Utf8 { err, .. } => at(
+            path,
+            line,
+            err.field() + 1,
+            format!("{what} line is not valid UTF-8"),
+        ),
+        csv::ErrorKind::Io(io) => file_err(path, format!("cannot read: {io}")),
+        _ => file_err(path, format!("line {line}: {e}")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Table> {
+        Table::parse_csv(text.as_bytes(), Path::new("x.csv"))
+    }
+
+    fn message(text: &str) -> String {
+        match parse(text) {
+            Ok(_) => panic!("expected an error for {text:?}"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn reads_columns_time_and_episodes() {
+        let t = parse("t,u,y,episode\n0,1,2,0\n1,3,4,0\n\n2,5,6,1\n").expect("valid");
+        assert_eq!(t.column("u").expect("u"), vec![1.0, 3.0, 5.0]);
+        assert_eq!(t.time_column(), Some(0));
+        assert_eq!(t.lines, vec![2, 3, 5]);
+        assert_eq!(t.episodes(), vec![0..2, 2..3]);
+        assert_eq!(t.episode_ids(), Some(vec![0.0, 1.0]));
+        let trajs = t.trajectories(&["u"], &["y"]).expect("trajectories");
+        assert_eq!(trajs.len(), 2);
+        assert_eq!(trajs[1].y[(0, 0)], 6.0);
+        assert_eq!(t.times(2..3), vec![2.0]);
+    }
+
+    #[test]
+    fn errors_name_file_line_and_column() {
+        assert_eq!(
+            message("t,u,y\n0,1,2\n1,x,3\n"),
+            "x.csv:3:2: `x` in column `u` is not a number"
+        );
+        assert_eq!(
+            message("t,u,y\n0,NaN,2\n"),
+            "x.csv:2:2: non-finite value `NaN` in column `u`"
+        );
+        assert!(message("t,u,y\n0,inf,2\n").contains("non-finite"));
+        assert!(message("t,u,y\n0,,2\n").contains("x.csv:2:2: empty cell"));
+        assert!(message("t,u,y\n0,1\n").contains("x.csv:2:"));
+        assert!(message("").contains("empty file"));
+        assert!(message("  \n").contains("empty file"));
+        assert!(message("t,u,y\n").contains("no data rows"));
+        assert!(message("t,u,u\n1,2,3\n").contains("duplicate column name `u`"));
+        assert!(message("t,,y\n1,2,3\n").contains("empty column name"));
+        let t = parse("t,u\n0,1\n").expect("valid");
+        let e = t.column("y").expect_err("missing").to_string();
+        assert!(e.contains("no column `y` (columns: t, u)"), "{e}");
     }
 }
