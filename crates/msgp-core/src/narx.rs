@@ -76,6 +76,32 @@ impl NarxSpec {
         self.ly * self.dy + k * self.du + j
     }
 
+    /// The window shift as a gather map: entry `i` of `x̃_{t+1}` is entry `shift_map()[i]` of the
+    /// augmented vector `[x̃_t (D), x_{t+1} (d_y), u_{t+1} (d_u)]`.
+    pub fn shift_map(&self) -> Vec<usize> {
+        let d = self.input_dim();
+        let mut sel = vec![0usize; d];
+        for j in 0..self.dy {
+            sel[self.y_index(0, j)] = d + j;
+        }
+        for k in 1..self.ly {
+            for j in 0..self.dy {
+                sel[self.y_index(k, j)] = self.y_index(k - 1, j);
+            }
+        }
+        if self.lu > 0 {
+            for j in 0..self.du {
+                sel[self.u_index(0, j)] = d + self.dy + j;
+            }
+            for k in 1..self.lu {
+                for j in 0..self.du {
+                    sel[self.u_index(k, j)] = self.u_index(k - 1, j);
+                }
+            }
+        }
+        sel
+    }
+
     /// The window at time `t` built from measured data (rows are time steps).
     /// Needs `t + 1 ≥ warmup()`.
     pub fn window(

@@ -18,7 +18,7 @@ use crate::gp::PreparedGp;
 use crate::linalg::{JitterLog, symmetrize};
 use crate::moments::moment_match;
 use crate::narx::NarxSpec;
-use crate::policy::FeedbackPolicy;
+use crate::policy::{FeedbackPolicy, PolicyMoments};
 use crate::scalar::{Scalar, c};
 use crate::trajectory::Trajectory;
 
@@ -95,43 +95,8 @@ pub fn rollout<T: Scalar>(
         )));
     }
 
-    // initial window at time t0 − 1
-    let mut mu = DVector::<T>::zeros(d);
-    let mut sigma = DMatrix::<T>::zeros(d, d);
-    for k in 0..spec.ly {
-        for j in 0..dy {
-            let i = spec.y_index(k, j);
-            mu[i] = c(traj.y[(t0 - 1 - k, j)]);
-            sigma[(i, i)] = gp.outputs[j].sy2;
-        }
-    }
-    for k in 0..spec.lu {
-        for j in 0..du {
-            mu[spec.u_index(k, j)] = c(traj.u[(t0 - 1 - k, j)]);
-        }
-    }
-
-    // augmented vector [window (D), x_new (dy), u_new (du)]
-    let n_aug = d + dy + du;
-    let mut sel = vec![0usize; d];
-    for j in 0..dy {
-        sel[spec.y_index(0, j)] = d + j;
-    }
-    for k in 1..spec.ly {
-        for j in 0..dy {
-            sel[spec.y_index(k, j)] = spec.y_index(k - 1, j);
-        }
-    }
-    if spec.lu > 0 {
-        for j in 0..du {
-            sel[spec.u_index(0, j)] = d + dy + j;
-        }
-        for k in 1..spec.lu {
-            for j in 0..du {
-                sel[spec.u_index(k, j)] = spec.u_index(k - 1, j);
-            }
-        }
-    }
+    let (mut mu, mut sigma) = initial_window(gp, spec, traj);
+    let sel = spec.shift_map();
 
     for t in t0..horizon {
         let mm = moment_match(gp, &mu, &sigma, log)?;
@@ -159,15 +124,7 @@ pub fn rollout<T: Scalar>(
             break;
         }
 
-        let mut amu = DVector::<T>::zeros(n_aug);
-        let mut acov = DMatrix::<T>::zeros(n_aug, n_aug);
-        amu.rows_mut(0, d).copy_from(&mu);
-        amu.rows_mut(d, dy).copy_from(&mm.mean);
-        acov.view_mut((0, 0), (d, d)).copy_from(&sigma);
-        acov.view_mut((0, d), (d, dy)).copy_from(&mm.io_cov);
-        acov.view_mut((d, 0), (dy, d))
-            .copy_from(&mm.io_cov.transpose());
-        acov.view_mut((d, d), (dy, dy)).copy_from(&xcov);
+        let (mut amu, mut acov) = augmented(&mu, &sigma, &mm.mean, &mm.io_cov, &xcov, du);
         match control {
             Control::FeedForward => {
                 for j in 0..du {
@@ -176,24 +133,92 @@ pub fn rollout<T: Scalar>(
             }
             Control::Feedback(policy) => {
                 let pm = policy.moments(&mean, &ycov)?;
-                // Cov(z, u) = Cov(z, x_{t+1}) C for z in [window, x_{t+1}]
-                let cross = acov.view((0, d), (d + dy, dy)) * &pm.c;
-                amu.rows_mut(d + dy, du).copy_from(&pm.mean);
-                acov.view_mut((0, d + dy), (d + dy, du)).copy_from(&cross);
-                acov.view_mut((d + dy, 0), (du, d + dy))
-                    .copy_from(&cross.transpose());
-                acov.view_mut((d + dy, d + dy), (du, du)).copy_from(&pm.cov);
+                set_policy_input(&mut amu, &mut acov, d, dy, &pm);
             }
         }
-        for i in 0..d {
-            mu[i] = amu[sel[i]];
-            for j in 0..d {
-                sigma[(i, j)] = acov[(sel[i], sel[j])];
-            }
-        }
-        symmetrize(&mut sigma);
+        (mu, sigma) = gather(&amu, &acov, &sel);
     }
     Ok(())
+}
+
+/// Moments of the window at time `t0 − 1` from the first `t0` measured samples: latent outputs
+/// `N(y, σ_y²)` (independent), inputs as measured (zero variance).
+pub(crate) fn initial_window<T: Scalar>(
+    gp: &PreparedGp<T>,
+    spec: &NarxSpec,
+    traj: &Trajectory,
+) -> (DVector<T>, DMatrix<T>) {
+    let d = spec.input_dim();
+    let t0 = spec.warmup();
+    let mut mu = DVector::<T>::zeros(d);
+    let mut sigma = DMatrix::<T>::zeros(d, d);
+    for k in 0..spec.ly {
+        for j in 0..spec.dy {
+            let i = spec.y_index(k, j);
+            mu[i] = c(traj.y[(t0 - 1 - k, j)]);
+            sigma[(i, i)] = gp.outputs[j].sy2;
+        }
+    }
+    for k in 0..spec.lu {
+        for j in 0..spec.du {
+            mu[spec.u_index(k, j)] = c(traj.u[(t0 - 1 - k, j)]);
+        }
+    }
+    (mu, sigma)
+}
+
+/// Joint moments of `[x̃_t, x_{t+1}, u_{t+1}]`, with the input slot left at zero.
+pub(crate) fn augmented<T: Scalar>(
+    mu: &DVector<T>,
+    sigma: &DMatrix<T>,
+    mean: &DVector<T>,
+    io_cov: &DMatrix<T>,
+    xcov: &DMatrix<T>,
+    du: usize,
+) -> (DVector<T>, DMatrix<T>) {
+    let (d, dy) = (mu.len(), mean.len());
+    let n = d + dy + du;
+    let mut amu = DVector::<T>::zeros(n);
+    let mut acov = DMatrix::<T>::zeros(n, n);
+    amu.rows_mut(0, d).copy_from(mu);
+    amu.rows_mut(d, dy).copy_from(mean);
+    acov.view_mut((0, 0), (d, d)).copy_from(sigma);
+    acov.view_mut((0, d), (d, dy)).copy_from(io_cov);
+    acov.view_mut((d, 0), (dy, d))
+        .copy_from(&io_cov.transpose());
+    acov.view_mut((d, d), (dy, dy)).copy_from(xcov);
+    (amu, acov)
+}
+
+/// Fills the input slot of the augmented moments from a policy acting on `y_{t+1}`:
+/// `Cov(z, u) = Cov(z, x_{t+1}) C` for `z` in `[x̃_t, x_{t+1}]`.
+pub(crate) fn set_policy_input<T: Scalar>(
+    amu: &mut DVector<T>,
+    acov: &mut DMatrix<T>,
+    d: usize,
+    dy: usize,
+    pm: &PolicyMoments<T>,
+) {
+    let du = pm.mean.len();
+    let cross = acov.view((0, d), (d + dy, dy)) * &pm.c;
+    amu.rows_mut(d + dy, du).copy_from(&pm.mean);
+    acov.view_mut((0, d + dy), (d + dy, du)).copy_from(&cross);
+    acov.view_mut((d + dy, 0), (du, d + dy))
+        .copy_from(&cross.transpose());
+    acov.view_mut((d + dy, d + dy), (du, du)).copy_from(&pm.cov);
+}
+
+/// The next window's moments, gathered from the augmented ones by [`NarxSpec::shift_map`].
+pub(crate) fn gather<T: Scalar>(
+    amu: &DVector<T>,
+    acov: &DMatrix<T>,
+    sel: &[usize],
+) -> (DVector<T>, DMatrix<T>) {
+    let d = sel.len();
+    let mu = DVector::from_fn(d, |i, _| amu[sel[i]]);
+    let mut sigma = DMatrix::from_fn(d, d, |i, j| acov[(sel[i], sel[j])]);
+    symmetrize(&mut sigma);
+    (mu, sigma)
 }
 
 /// Collects every step of a rollout.

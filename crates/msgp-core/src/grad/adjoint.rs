@@ -20,6 +20,8 @@ use crate::kernel::kernel_matrix;
 use crate::linalg::{JitterLog, cholesky, symmetrize};
 use crate::loss::{Complexity, LossValue, complexity_term, gaussian_nll};
 use crate::narx::NarxSpec;
+use crate::policy::{FeedbackPolicy, LinearPolicy};
+use crate::rollout::{augmented, gather, initial_window, set_policy_input};
 use crate::trajectory::{Episode, Excitation, Trajectory};
 
 /// Adjoint accumulators for the quantities the rollout reads from the prepared GP.
@@ -351,7 +353,6 @@ fn mm_backward(
 struct StepRecord {
     mu: DVector<f64>,
     sigma: DMatrix<f64>,
-    mean: DVector<f64>,
     ycov: DMatrix<f64>,
     resid: DVector<f64>,
 }
@@ -360,8 +361,7 @@ fn episode_adjoint(
     gp: &PreparedGp<f64>,
     spec: &NarxSpec,
     traj: &Trajectory,
-    gain: Option<&DMatrix<f64>>,
-    offset: Option<&DVector<f64>>,
+    policy: Option<&LinearPolicy<f64>>,
     adj: &mut GpAdjoint,
     log: &mut JitterLog,
 ) -> Result<(f64, usize)> {
@@ -370,39 +370,8 @@ fn episode_adjoint(
     let t0 = spec.warmup();
     let horizon = traj.len();
     let n_aug = d + dy + du;
-    let mut sel = vec![0usize; d];
-    for j in 0..dy {
-        sel[spec.y_index(0, j)] = d + j;
-    }
-    for k in 1..spec.ly {
-        for j in 0..dy {
-            sel[spec.y_index(k, j)] = spec.y_index(k - 1, j);
-        }
-    }
-    if spec.lu > 0 {
-        for j in 0..du {
-            sel[spec.u_index(0, j)] = d + dy + j;
-        }
-        for k in 1..spec.lu {
-            for j in 0..du {
-                sel[spec.u_index(k, j)] = spec.u_index(k - 1, j);
-            }
-        }
-    }
-    let mut mu = DVector::<f64>::zeros(d);
-    let mut sigma = DMatrix::<f64>::zeros(d, d);
-    for k in 0..spec.ly {
-        for j in 0..dy {
-            let i = spec.y_index(k, j);
-            mu[i] = traj.y[(t0 - 1 - k, j)];
-            sigma[(i, i)] = gp.outputs[j].sy2;
-        }
-    }
-    for k in 0..spec.lu {
-        for j in 0..du {
-            mu[spec.u_index(k, j)] = traj.u[(t0 - 1 - k, j)];
-        }
-    }
+    let sel = spec.shift_map();
+    let (mut mu, mut sigma) = initial_window(gp, spec, traj);
 
     // forward
     let mut recs: Vec<StepRecord> = Vec::with_capacity(horizon - t0);
@@ -429,45 +398,23 @@ fn episode_adjoint(
         let rec = StepRecord {
             mu: mu.clone(),
             sigma: sigma.clone(),
-            mean: mm.mean.clone(),
             ycov: ycov.clone(),
             resid,
         };
         if t + 1 < horizon {
-            let mut amu = DVector::<f64>::zeros(n_aug);
-            let mut acov = DMatrix::<f64>::zeros(n_aug, n_aug);
-            amu.rows_mut(0, d).copy_from(&mu);
-            amu.rows_mut(d, dy).copy_from(&mm.mean);
-            acov.view_mut((0, 0), (d, d)).copy_from(&sigma);
-            acov.view_mut((0, d), (d, dy)).copy_from(&mm.io_cov);
-            acov.view_mut((d, 0), (dy, d))
-                .copy_from(&mm.io_cov.transpose());
-            acov.view_mut((d, d), (dy, dy)).copy_from(&xcov);
-            match gain {
+            let (mut amu, mut acov) = augmented(&mu, &sigma, &mm.mean, &mm.io_cov, &xcov, du);
+            match policy {
                 None => {
                     for j in 0..du {
                         amu[d + dy + j] = traj.u[(t, j)];
                     }
                 }
-                Some(k) => {
-                    let cross = acov.view((0, d), (d + dy, dy)) * k.transpose();
-                    let umean =
-                        k * &mm.mean + offset.cloned().unwrap_or_else(|| DVector::zeros(du));
-                    amu.rows_mut(d + dy, du).copy_from(&umean);
-                    acov.view_mut((0, d + dy), (d + dy, du)).copy_from(&cross);
-                    acov.view_mut((d + dy, 0), (du, d + dy))
-                        .copy_from(&cross.transpose());
-                    acov.view_mut((d + dy, d + dy), (du, du))
-                        .copy_from(&(k * &ycov * k.transpose()));
+                Some(p) => {
+                    let pm = p.moments(&mm.mean, &ycov)?;
+                    set_policy_input(&mut amu, &mut acov, d, dy, &pm);
                 }
             }
-            for i in 0..d {
-                mu[i] = amu[sel[i]];
-                for j in 0..d {
-                    sigma[(i, j)] = acov[(sel[i], sel[j])];
-                }
-            }
-            symmetrize(&mut sigma);
+            (mu, sigma) = gather(&amu, &acov, &sel);
         }
         recs.push(rec);
     }
@@ -494,7 +441,7 @@ fn episode_adjoint(
                     acovbar[(sel[i], sel[j])] += sigmabar_next[(i, j)];
                 }
             }
-            if let Some(k) = gain {
+            if let Some(k) = policy.map(|p| &p.gain) {
                 let crossbar = acovbar.view((0, d + dy), (d + dy, du)).into_owned()
                     + acovbar.view((d + dy, 0), (du, d + dy)).transpose();
                 // cross = [C; xcov] Kᵀ
@@ -528,7 +475,6 @@ fn episode_adjoint(
         let (mub, sigb) = mm_backward(gp, &rec.sigma, &cache, &mbar, &xcovbar, &cbar, adj);
         mubar += mub;
         sigmabar += sigb;
-        debug_assert!((cache.mean.clone() - &rec.mean).abs().max() == 0.0);
         mubar_next = mubar;
         sigmabar_next = sigmabar;
     }
@@ -560,11 +506,11 @@ pub fn loss_and_gradient(
         ep.traj
             .check(spec)
             .map_err(|err| MsgpError::Data(format!("episode {k}: {err}")))?;
-        let (gain, offset) = match &ep.excitation {
-            Excitation::FeedForward => (None, None),
-            Excitation::Feedback(p) => (Some(&p.gain), Some(&p.offset)),
+        let policy = match &ep.excitation {
+            Excitation::FeedForward => None,
+            Excitation::Feedback(p) => Some(p),
         };
-        let (v, n) = episode_adjoint(&gp, spec, &ep.traj, gain, offset, &mut adj, log)?;
+        let (v, n) = episode_adjoint(&gp, spec, &ep.traj, policy, &mut adj, log)?;
         nll += v;
         steps += n;
     }
