@@ -14,6 +14,7 @@
 //! - [`grad`]: exact gradients.
 
 pub mod baseline;
+pub mod cost;
 pub mod data;
 pub mod dense;
 pub mod error;
@@ -31,6 +32,7 @@ pub mod narx;
 pub mod optim;
 pub mod policy;
 pub mod rollout;
+pub mod saturation;
 pub mod scalar;
 pub mod trajectory;
 

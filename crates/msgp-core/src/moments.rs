@@ -30,6 +30,9 @@ pub struct Moments<T: Scalar> {
     pub cov: DMatrix<T>,
     /// `Cov[x̃, f]` (D × E).
     pub io_cov: DMatrix<T>,
+    /// `V = Σ⁻¹ Cov[x̃, f]` (D × E), computed without inverting `Σ`: for any `z` jointly
+    /// Gaussian with `x̃`, `Cov[z, f] = Cov[z, x̃] V`.
+    pub v: DMatrix<T>,
 }
 
 /// `I + diag(p) Σ diag(p)`.
@@ -66,6 +69,7 @@ pub fn moment_match<T: Scalar>(
 
     let mut mean = DVector::<T>::zeros(e);
     let mut io_cov = DMatrix::<T>::zeros(d, e);
+    let mut v = DMatrix::<T>::zeros(d, e);
     // log k_a(x̄_i, μ) per output (m)
     let mut logk: Vec<Vec<T>> = Vec::with_capacity(e);
     for (a, o) in gp.outputs.iter().enumerate() {
@@ -103,8 +107,9 @@ pub fn moment_match<T: Scalar>(
             }
         }
         mean[a] = ma;
-        let col = sigma * acc;
+        let col = sigma * &acc;
         io_cov.set_column(a, &col);
+        v.set_column(a, &acc);
         logk.push(lk);
     }
 
@@ -166,5 +171,10 @@ pub fn moment_match<T: Scalar>(
             cov[(b, a)] = v;
         }
     }
-    Ok(Moments { mean, cov, io_cov })
+    Ok(Moments {
+        mean,
+        cov,
+        io_cov,
+        v,
+    })
 }

@@ -1,32 +1,45 @@
 //! Feedback policies `u = π(y; θ_π)` inside a moment-matching rollout (paper eq. 10).
 //!
-//! A policy receives the Gaussian of the current *observation* `y_t ~ N(m, S)` and returns the
-//! moments of `u_t`: its mean, covariance and the matrix `C` with `Cov(y_t, u_t) = S C`.
-//! The rollout then sets `Cov(z, u_t) = Cov(z, y_t) C` for every other state entry `z`, which is
-//! exact for linear policies and PILCO's moment-matching approximation for nonlinear ones
-//! (saturated policies implement this same trait).
+//! A policy may keep an internal state `p_t` (a previous observation for a finite-difference
+//! derivative, a running integral, …) that the rollout carries inside its Gaussian. At each step
+//! the policy receives the Gaussian of `q = [y_t; p_{t−1}]` (the current *observation* and its
+//! previous state) and returns the moments of `o = [u_t; p_t]`: mean, covariance and the matrix
+//! `C` with `Cov(q, o) = Cov(q) C`. The rollout then sets `Cov(z, o) = Cov(z, q) C` for every other
+//! state entry `z`, which is exact for linear maps and PILCO's moment-matching approximation for
+//! nonlinear ones (saturated policies implement this same trait). A stateless policy has
+//! `state_dim() = 0` and sees just `y_t`.
 
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::{MsgpError, Result};
 use crate::scalar::Scalar;
 
-/// Moments of a policy output.
+/// Moments of a policy output `o = [u_t; p_t]`.
 #[derive(Clone, Debug)]
 pub struct PolicyMoments<T: Scalar> {
-    /// `E[u]` (d_u).
+    /// `E[o]` (d_u + d_p).
     pub mean: DVector<T>,
-    /// `Cov[u]` (d_u × d_u).
+    /// `Cov[o]`.
     pub cov: DMatrix<T>,
-    /// `C` (d_y × d_u) with `Cov(y, u) = Cov(y) C`.
+    /// `C` ((d_y + d_p) × (d_u + d_p)) with `Cov(q, o) = Cov(q) C`.
     pub c: DMatrix<T>,
 }
 
 /// A feedback policy usable in closed-loop rollouts.
 pub trait FeedbackPolicy<T: Scalar>: Send + Sync {
-    /// Number of inputs it produces.
+    /// Number of inputs `d_u` it produces.
     fn input_dim(&self) -> usize;
-    /// Moments of `u = π(y)` for `y ~ N(mean, cov)`.
+    /// Dimension `d_p` of its internal state (0 for a stateless policy).
+    fn state_dim(&self) -> usize {
+        0
+    }
+    /// Its state after acting at time `t − 1`, computed from measured outputs `y` and inputs `u`
+    /// (rows are time steps) — the starting point of a rollout at `t`.
+    fn initial_state(&self, y: &DMatrix<f64>, u: &DMatrix<f64>, t: usize) -> DVector<f64> {
+        let _ = (y, u, t);
+        DVector::zeros(0)
+    }
+    /// Moments of `o = [u_t; p_t]` for `q = [y_t; p_{t−1}] ~ N(mean, cov)`.
     fn moments(&self, mean: &DVector<T>, cov: &DMatrix<T>) -> Result<PolicyMoments<T>>;
 }
 

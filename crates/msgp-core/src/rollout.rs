@@ -95,11 +95,35 @@ pub fn rollout<T: Scalar>(
         )));
     }
 
-    let (mut mu, mut sigma) = initial_window(gp, spec, traj);
-    let sel = spec.shift_map();
+    let ds = match control {
+        Control::FeedForward => 0,
+        Control::Feedback(p) => p.state_dim(),
+    };
+    let n = d + ds;
+    let (wmu, wsigma) = initial_window(gp, spec, traj);
+    let mut mu = DVector::<T>::zeros(n);
+    let mut sigma = DMatrix::<T>::zeros(n, n);
+    mu.rows_mut(0, d).copy_from(&wmu);
+    sigma.view_mut((0, 0), (d, d)).copy_from(&wsigma);
+    if let Control::Feedback(p) = control {
+        let p0 = p.initial_state(&traj.y, &traj.u, t0);
+        if p0.len() != ds {
+            return Err(MsgpError::Shape(format!(
+                "policy initial state has {} entries, its state dimension is {ds}",
+                p0.len()
+            )));
+        }
+        for k in 0..ds {
+            mu[d + k] = c(p0[k]);
+        }
+    }
+    let layout = Layout { d, ds, dy, du };
+    let sel = layout.gather_map(spec);
 
     for t in t0..horizon {
-        let mm = moment_match(gp, &mu, &sigma, log)?;
+        let wmu = mu.rows(0, d).into_owned();
+        let wsigma = sigma.view((0, 0), (d, d)).into_owned();
+        let mm = moment_match(gp, &wmu, &wsigma, log)?;
         let mut xcov = mm.cov.clone();
         for j in 0..dy {
             xcov[(j, j)] += gp.outputs[j].sx2;
@@ -113,27 +137,25 @@ pub fn rollout<T: Scalar>(
                 "rollout prediction at step {t}"
             )));
         }
-        let next_needed = t + 1 < horizon;
-        let mean = mm.mean.clone();
         visit(StepPrediction {
             t,
-            mean: mean.clone(),
+            mean: mm.mean.clone(),
             cov: ycov.clone(),
         })?;
-        if !next_needed {
+        if t + 1 >= horizon {
             break;
         }
-
-        let (mut amu, mut acov) = augmented(&mu, &sigma, &mm.mean, &mm.io_cov, &xcov, du);
+        let (mut amu, mut acov) = layout.augmented(&mu, &sigma, &mm.mean, &mm.v, &xcov);
         match control {
             Control::FeedForward => {
                 for j in 0..du {
-                    amu[d + dy + j] = c(traj.u[(t, j)]);
+                    amu[layout.u_slot() + j] = c(traj.u[(t, j)]);
                 }
             }
             Control::Feedback(policy) => {
-                let pm = policy.moments(&mean, &ycov)?;
-                set_policy_input(&mut amu, &mut acov, d, dy, &pm);
+                let (qm, qc) = layout.policy_input(&amu, &acov, &ycov);
+                let pm = policy.moments(&qm, &qc)?;
+                layout.set_policy_output(&mut amu, &mut acov, &pm);
             }
         }
         (mu, sigma) = gather(&amu, &acov, &sel);
@@ -167,45 +189,116 @@ pub(crate) fn initial_window<T: Scalar>(
     (mu, sigma)
 }
 
-/// Joint moments of `[x̃_t, x_{t+1}, u_{t+1}]`, with the input slot left at zero.
-pub(crate) fn augmented<T: Scalar>(
-    mu: &DVector<T>,
-    sigma: &DMatrix<T>,
-    mean: &DVector<T>,
-    io_cov: &DMatrix<T>,
-    xcov: &DMatrix<T>,
-    du: usize,
-) -> (DVector<T>, DMatrix<T>) {
-    let (d, dy) = (mu.len(), mean.len());
-    let n = d + dy + du;
-    let mut amu = DVector::<T>::zeros(n);
-    let mut acov = DMatrix::<T>::zeros(n, n);
-    amu.rows_mut(0, d).copy_from(mu);
-    amu.rows_mut(d, dy).copy_from(mean);
-    acov.view_mut((0, 0), (d, d)).copy_from(sigma);
-    acov.view_mut((0, d), (d, dy)).copy_from(io_cov);
-    acov.view_mut((d, 0), (dy, d))
-        .copy_from(&io_cov.transpose());
-    acov.view_mut((d, d), (dy, dy)).copy_from(xcov);
-    (amu, acov)
+/// Positions in the augmented vector `[x̃_t (D), p_t (d_p), x_{t+1} (d_y), u_{t+1} (d_u),
+/// p_{t+1} (d_p)]` of one step: the current state (window and policy state), the new latent
+/// output, and the policy's output.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Layout {
+    pub d: usize,
+    pub ds: usize,
+    pub dy: usize,
+    pub du: usize,
 }
 
-/// Fills the input slot of the augmented moments from a policy acting on `y_{t+1}`:
-/// `Cov(z, u) = Cov(z, x_{t+1}) C` for `z` in `[x̃_t, x_{t+1}]`.
-pub(crate) fn set_policy_input<T: Scalar>(
-    amu: &mut DVector<T>,
-    acov: &mut DMatrix<T>,
-    d: usize,
-    dy: usize,
-    pm: &PolicyMoments<T>,
-) {
-    let du = pm.mean.len();
-    let cross = acov.view((0, d), (d + dy, dy)) * &pm.c;
-    amu.rows_mut(d + dy, du).copy_from(&pm.mean);
-    acov.view_mut((0, d + dy), (d + dy, du)).copy_from(&cross);
-    acov.view_mut((d + dy, 0), (du, d + dy))
-        .copy_from(&cross.transpose());
-    acov.view_mut((d + dy, d + dy), (du, du)).copy_from(&pm.cov);
+impl Layout {
+    /// Size of the current state `[x̃_t, p_t]`.
+    pub fn n(&self) -> usize {
+        self.d + self.ds
+    }
+    /// Start of `x_{t+1}`.
+    pub fn x_slot(&self) -> usize {
+        self.n()
+    }
+    /// Start of `u_{t+1}` (followed by `p_{t+1}`).
+    pub fn u_slot(&self) -> usize {
+        self.n() + self.dy
+    }
+    /// Size of the augmented vector.
+    pub fn len(&self) -> usize {
+        self.u_slot() + self.du + self.ds
+    }
+
+    /// Where each entry of the next state `[x̃_{t+1}, p_{t+1}]` comes from.
+    pub fn gather_map(&self, spec: &NarxSpec) -> Vec<usize> {
+        let mut sel: Vec<usize> = spec
+            .shift_map()
+            .into_iter()
+            .map(|i| if i < self.d { i } else { i + self.ds })
+            .collect();
+        sel.extend((0..self.ds).map(|k| self.u_slot() + self.du + k));
+        sel
+    }
+
+    /// Augmented moments with the policy slots left at zero; `v` is the moment-matching
+    /// `Σ_w⁻¹ Cov(x̃, f)`, so `Cov([x̃; p], x_{t+1}) = Cov([x̃; p], x̃) V`.
+    pub fn augmented<T: Scalar>(
+        &self,
+        mu: &DVector<T>,
+        sigma: &DMatrix<T>,
+        mean: &DVector<T>,
+        v: &DMatrix<T>,
+        xcov: &DMatrix<T>,
+    ) -> (DVector<T>, DMatrix<T>) {
+        let (n, dy, x) = (self.n(), self.dy, self.x_slot());
+        let len = self.len();
+        let mut amu = DVector::<T>::zeros(len);
+        let mut acov = DMatrix::<T>::zeros(len, len);
+        amu.rows_mut(0, n).copy_from(mu);
+        amu.rows_mut(x, dy).copy_from(mean);
+        acov.view_mut((0, 0), (n, n)).copy_from(sigma);
+        let zx = sigma.columns(0, self.d) * v;
+        acov.view_mut((0, x), (n, dy)).copy_from(&zx);
+        acov.view_mut((x, 0), (dy, n)).copy_from(&zx.transpose());
+        acov.view_mut((x, x), (dy, dy)).copy_from(xcov);
+        (amu, acov)
+    }
+
+    /// Moments of the policy input `q = [y_{t+1}; p_t]` (`ycov` includes observation noise).
+    pub fn policy_input<T: Scalar>(
+        &self,
+        amu: &DVector<T>,
+        acov: &DMatrix<T>,
+        ycov: &DMatrix<T>,
+    ) -> (DVector<T>, DMatrix<T>) {
+        let (dy, ds, x, d) = (self.dy, self.ds, self.x_slot(), self.d);
+        let mut qm = DVector::<T>::zeros(dy + ds);
+        let mut qc = DMatrix::<T>::zeros(dy + ds, dy + ds);
+        qm.rows_mut(0, dy).copy_from(&amu.rows(x, dy));
+        qm.rows_mut(dy, ds).copy_from(&amu.rows(d, ds));
+        qc.view_mut((0, 0), (dy, dy)).copy_from(ycov);
+        qc.view_mut((0, dy), (dy, ds))
+            .copy_from(&acov.view((x, d), (dy, ds)));
+        qc.view_mut((dy, 0), (ds, dy))
+            .copy_from(&acov.view((d, x), (ds, dy)));
+        qc.view_mut((dy, dy), (ds, ds))
+            .copy_from(&acov.view((d, d), (ds, ds)));
+        (qm, qc)
+    }
+
+    /// Fills the policy slots: `Cov(z, o) = Cov(z, q) C` for `z` in `[x̃_t, p_t, x_{t+1}]`
+    /// (observation noise is independent of every `z`, so `Cov(z, y_{t+1}) = Cov(z, x_{t+1})`).
+    pub fn set_policy_output<T: Scalar>(
+        &self,
+        amu: &mut DVector<T>,
+        acov: &mut DMatrix<T>,
+        pm: &PolicyMoments<T>,
+    ) {
+        let (dy, ds, x, d, u) = (self.dy, self.ds, self.x_slot(), self.d, self.u_slot());
+        let no = self.du + ds;
+        let zq = {
+            let mut m = DMatrix::<T>::zeros(u, dy + ds);
+            m.view_mut((0, 0), (u, dy))
+                .copy_from(&acov.view((0, x), (u, dy)));
+            m.view_mut((0, dy), (u, ds))
+                .copy_from(&acov.view((0, d), (u, ds)));
+            m
+        };
+        let cross = zq * &pm.c;
+        amu.rows_mut(u, no).copy_from(&pm.mean);
+        acov.view_mut((0, u), (u, no)).copy_from(&cross);
+        acov.view_mut((u, 0), (no, u)).copy_from(&cross.transpose());
+        acov.view_mut((u, u), (no, no)).copy_from(&pm.cov);
+    }
 }
 
 /// The next window's moments, gathered from the augmented ones by [`NarxSpec::shift_map`].

@@ -21,7 +21,7 @@ use crate::linalg::{JitterLog, cholesky, symmetrize};
 use crate::loss::{Complexity, LossValue, complexity_term, gaussian_nll};
 use crate::narx::NarxSpec;
 use crate::policy::{FeedbackPolicy, LinearPolicy};
-use crate::rollout::{augmented, gather, initial_window, set_policy_input};
+use crate::rollout::{Layout, gather, initial_window};
 use crate::trajectory::{Episode, Excitation, Trajectory};
 
 /// Adjoint accumulators for the quantities the rollout reads from the prepared GP.
@@ -78,7 +78,6 @@ struct MmCache {
     pairs: Vec<PairCache>,
     mean: DVector<f64>,
     cov: DMatrix<f64>,
-    io_cov: DMatrix<f64>,
 }
 
 fn scaled_plus_identity(sigma: &DMatrix<f64>, p: &[f64]) -> DMatrix<f64> {
@@ -100,7 +99,6 @@ fn mm_forward(
     let nu = DMatrix::from_fn(m, d, |i, k| x[(i, k)] - mu[k]);
     let mut outs = Vec::with_capacity(e);
     let mut mean = DVector::zeros(e);
-    let mut io_cov = DMatrix::zeros(d, e);
     for (a, o) in gp.outputs.iter().enumerate() {
         let s: Vec<f64> = o.inv_l2.iter().map(|v| v.sqrt()).collect();
         let ch = cholesky(
@@ -131,7 +129,6 @@ fn mm_forward(
             acc[k] *= s[k];
         }
         mean[a] = bq.sum();
-        io_cov.set_column(a, &(sigma * &acc));
         outs.push(OutCache {
             s,
             shat_inv: ch.inverse(),
@@ -197,7 +194,6 @@ fn mm_forward(
         pairs,
         mean,
         cov,
-        io_cov,
     })
 }
 
@@ -370,7 +366,9 @@ fn episode_adjoint(
     let t0 = spec.warmup();
     let horizon = traj.len();
     let n_aug = d + dy + du;
-    let sel = spec.shift_map();
+    // stateless (linear) policies only: the policy-state block is empty
+    let layout = Layout { d, ds: 0, dy, du };
+    let sel = layout.gather_map(spec);
     let (mut mu, mut sigma) = initial_window(gp, spec, traj);
 
     // forward
@@ -402,7 +400,8 @@ fn episode_adjoint(
             resid,
         };
         if t + 1 < horizon {
-            let (mut amu, mut acov) = augmented(&mu, &sigma, &mm.mean, &mm.io_cov, &xcov, du);
+            let v = DMatrix::from_fn(d, dy, |k, a| mm.outs[a].acc[k]);
+            let (mut amu, mut acov) = layout.augmented(&mu, &sigma, &mm.mean, &v, &xcov);
             match policy {
                 None => {
                     for j in 0..du {
@@ -410,8 +409,9 @@ fn episode_adjoint(
                     }
                 }
                 Some(p) => {
-                    let pm = p.moments(&mm.mean, &ycov)?;
-                    set_policy_input(&mut amu, &mut acov, d, dy, &pm);
+                    let (qm, qc) = layout.policy_input(&amu, &acov, &ycov);
+                    let pm = p.moments(&qm, &qc)?;
+                    layout.set_policy_output(&mut amu, &mut acov, &pm);
                 }
             }
             (mu, sigma) = gather(&amu, &acov, &sel);
