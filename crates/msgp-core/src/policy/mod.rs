@@ -94,3 +94,9 @@ impl<T: Scalar> FeedbackPolicy<T> for LinearPolicy<T> {
         })
     }
 }
+
+mod normalized;
+mod pid;
+
+pub use normalized::Normalized;
+pub use pid::PidPolicy;
