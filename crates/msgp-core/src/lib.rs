@@ -31,6 +31,7 @@ pub mod moments;
 pub mod narx;
 pub mod optim;
 pub mod policy;
+pub mod policy_cost;
 pub mod rollout;
 pub mod saturation;
 pub mod scalar;

@@ -60,7 +60,7 @@ pub fn rollout<T: Scalar>(
     control: &Control<'_, T>,
     horizon: usize,
     log: &mut JitterLog,
-    mut visit: impl FnMut(StepPrediction<T>) -> Result<()>,
+    visit: impl FnMut(StepPrediction<T>) -> Result<()>,
 ) -> Result<()> {
     let d = spec.input_dim();
     let (dy, du) = (spec.dy, spec.du);
@@ -117,6 +117,70 @@ pub fn rollout<T: Scalar>(
             mu[d + k] = c(p0[k]);
         }
     }
+    let start = StartState {
+        mean: mu,
+        cov: sigma,
+    };
+    rollout_from(
+        gp,
+        spec,
+        &start,
+        control,
+        Some(&traj.u),
+        t0,
+        horizon,
+        log,
+        visit,
+    )
+}
+
+/// The Gaussian state a rollout starts from: the window `x̃_{t0−1}` followed by the policy's
+/// state (closed loop), in normalised units.
+#[derive(Clone, Debug)]
+pub struct StartState<T: Scalar> {
+    /// Mean (D + d_p).
+    pub mean: DVector<T>,
+    /// Covariance.
+    pub cov: DMatrix<T>,
+}
+
+/// Runs a rollout from a Gaussian start state over `t0..horizon`. Open loop, `inputs` (rows are
+/// absolute time steps) supplies `u_t` for `t0 ≤ t < horizon − 1`.
+pub fn rollout_from<T: Scalar>(
+    gp: &PreparedGp<T>,
+    spec: &NarxSpec,
+    start: &StartState<T>,
+    control: &Control<'_, T>,
+    inputs: Option<&DMatrix<f64>>,
+    t0: usize,
+    horizon: usize,
+    log: &mut JitterLog,
+    mut visit: impl FnMut(StepPrediction<T>) -> Result<()>,
+) -> Result<()> {
+    let d = spec.input_dim();
+    let (dy, du) = (spec.dy, spec.du);
+    let ds = match control {
+        Control::FeedForward => 0,
+        Control::Feedback(p) => p.state_dim(),
+    };
+    if start.mean.len() != d + ds || start.cov.shape() != (d + ds, d + ds) {
+        return Err(MsgpError::Shape(format!(
+            "start state has {} entries; window and policy state need {}",
+            start.mean.len(),
+            d + ds
+        )));
+    }
+    if let Control::FeedForward = control {
+        let rows = inputs.map_or(0, |u| u.nrows());
+        if horizon > t0 + 1 && rows + 1 < horizon {
+            return Err(MsgpError::Data(format!(
+                "an open-loop rollout to {horizon} needs inputs up to step {}; {rows} given",
+                horizon - 2
+            )));
+        }
+    }
+    let mut mu = start.mean.clone();
+    let mut sigma = start.cov.clone();
     let layout = Layout { d, ds, dy, du };
     let sel = layout.gather_map(spec);
 
@@ -148,8 +212,10 @@ pub fn rollout<T: Scalar>(
         let (mut amu, mut acov) = layout.augmented(&mu, &sigma, &mm.mean, &mm.v, &xcov);
         match control {
             Control::FeedForward => {
-                for j in 0..du {
-                    amu[layout.u_slot() + j] = c(traj.u[(t, j)]);
+                if let Some(u) = inputs {
+                    for j in 0..du {
+                        amu[layout.u_slot() + j] = c(u[(t, j)]);
+                    }
                 }
             }
             Control::Feedback(policy) => {
