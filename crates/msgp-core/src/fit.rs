@@ -73,7 +73,7 @@ impl Default for FitSettings {
             iterations: 400,
             learning_rate: 0.002,
             seed: 0,
-            complexity: Complexity::NegHalfLogDet,
+            complexity: Complexity::PseudoDataNll,
             validation_fraction: 0.2,
             eval_every: 10,
             patience: 20,
