@@ -28,7 +28,7 @@ use crate::error::{MsgpError, Result};
 use crate::gp::{GpConfig, GpParams, PreparedGp};
 use crate::linalg::{JitterLog, JitterPolicy, cholesky};
 use crate::narx::NarxSpec;
-use crate::policy::LinearPolicy;
+use crate::policy::FeedbackPolicy;
 use crate::rollout::{Control, rollout};
 use crate::scalar::{Scalar, c};
 use crate::trajectory::{Episode, Excitation};
@@ -121,13 +121,13 @@ pub fn msgp_loss<T: Scalar>(
         ep.traj
             .check(spec)
             .map_err(|e| MsgpError::Data(format!("episode {k}: {e}")))?;
-        let lifted: Option<LinearPolicy<T>> = match &ep.excitation {
+        let lifted: Option<Box<dyn FeedbackPolicy<T>>> = match &ep.excitation {
             Excitation::FeedForward => None,
-            Excitation::Feedback(p) => Some(p.map(c::<T>)),
+            Excitation::Feedback(p) => Some(p.lift::<T>()),
         };
         let control = match &lifted {
             None => Control::FeedForward,
-            Some(p) => Control::Feedback(p),
+            Some(p) => Control::Feedback(p.as_ref()),
         };
         let y = &ep.traj.y;
         let mut row = vec![0.0; spec.dy];

@@ -4,7 +4,7 @@ use nalgebra::DMatrix;
 
 use crate::error::{MsgpError, Result};
 use crate::narx::NarxSpec;
-use crate::policy::LinearPolicy;
+use crate::policy::PolicySpec;
 
 /// One measured trajectory: `u` is T × d_u, `y` is T × d_y.
 #[derive(Clone, Debug, PartialEq)]
@@ -91,8 +91,9 @@ impl Trajectory {
 pub enum Excitation {
     /// Inputs were applied open loop; the rollout uses the measured `u`.
     FeedForward,
-    /// Inputs came from this policy acting on the observations; the rollout closes the loop.
-    Feedback(LinearPolicy<f64>),
+    /// Inputs came from this policy acting on the observations; the rollout closes the loop
+    /// (the paper's `L_fb`).
+    Feedback(PolicySpec),
 }
 
 /// A trajectory plus how it was excited: one term of `L_ff` or `L_fb` (paper eq. 4).

@@ -10,7 +10,7 @@ use msgp_core::grad::{adjoint, dual};
 use msgp_core::linalg::JitterLog;
 use msgp_core::loss::{Complexity, msgp_loss};
 use msgp_core::narx::NarxSpec;
-use msgp_core::policy::LinearPolicy;
+use msgp_core::policy::{LinearPolicy, PolicySpec};
 use msgp_core::trajectory::{Episode, Excitation, Trajectory};
 use nalgebra::{DMatrix, DVector};
 
@@ -107,9 +107,57 @@ fn closed_and_open_loop_two_outputs() {
     let eps = vec![
         Episode {
             traj: traj.clone(),
-            excitation: Excitation::Feedback(policy),
+            excitation: Excitation::Feedback(PolicySpec::Linear(policy)),
         },
         Episode::feed_forward(traj),
+    ];
+    compare(&params, &spec, &eps, Complexity::PseudoDataNll);
+}
+
+#[test]
+fn closed_loop_with_saturated_pid_policies() {
+    use msgp_core::data::Normalizer;
+    use msgp_core::policy::{Normalized, PidPolicy};
+    let mut r = rng(23);
+    let spec = NarxSpec {
+        ly: 2,
+        lu: 2,
+        dy: 2,
+        du: 1,
+    };
+    let params = random_gp(&mut r, 9, spec.input_dim(), 2);
+    let n = 55;
+    let y = DMatrix::from_fn(n, 2, |t, j| {
+        0.3 * ((t as f64) * 0.2 + j as f64).sin() + 0.05 * normal(&mut r)
+    });
+    let u = DMatrix::from_fn(n, 1, |t, _| 0.3 * ((t as f64) * 0.13).cos());
+    let traj = Trajectory::new(u, y).expect("traj");
+    let pid = PidPolicy::new(
+        DMatrix::from_row_slice(1, 2, &[1.5, 0.4]),
+        DMatrix::from_row_slice(1, 2, &[0.0, 0.2]),
+        DMatrix::from_row_slice(1, 2, &[0.05, 0.02]),
+        0.1,
+        vec![1.2],
+    )
+    .expect("pid");
+    let normalizer = Normalizer {
+        u_mean: vec![0.1],
+        u_std: vec![0.7],
+        y_mean: vec![0.02, -0.1],
+        y_std: vec![0.5, 1.5],
+    };
+    let eps = vec![
+        Episode {
+            traj: traj.clone(),
+            excitation: Excitation::Feedback(PolicySpec::Pid(pid.clone())),
+        },
+        Episode {
+            traj: traj.slice(3, 55),
+            excitation: Excitation::Feedback(PolicySpec::NormalizedPid(Normalized {
+                inner: pid,
+                normalizer,
+            })),
+        },
     ];
     compare(&params, &spec, &eps, Complexity::PseudoDataNll);
 }

@@ -14,7 +14,7 @@ use msgp_core::grad::dual::gradient;
 use msgp_core::linalg::JitterLog;
 use msgp_core::loss::{Complexity, msgp_loss};
 use msgp_core::narx::NarxSpec;
-use msgp_core::policy::LinearPolicy;
+use msgp_core::policy::{LinearPolicy, PolicySpec};
 use msgp_core::scalar::Scalar;
 use msgp_core::trajectory::{Episode, Excitation, Trajectory};
 use nalgebra::{DMatrix, DVector};
@@ -135,7 +135,7 @@ fn closed_loop_gradients_match_finite_differences() {
     let episodes = vec![
         Episode {
             traj: traj.clone(),
-            excitation: Excitation::Feedback(policy),
+            excitation: Excitation::Feedback(PolicySpec::Linear(policy)),
         },
         Episode::feed_forward(traj),
     ];

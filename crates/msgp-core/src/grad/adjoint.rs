@@ -16,11 +16,12 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::error::{MsgpError, Result};
 use crate::gp::{GpConfig, GpParams, GpShape, ParamGroup, PreparedGp};
+use crate::grad::dual::{Dual, gradient};
 use crate::kernel::kernel_matrix;
 use crate::linalg::{JitterLog, cholesky, symmetrize};
 use crate::loss::{Complexity, LossValue, complexity_term, gaussian_nll};
 use crate::narx::NarxSpec;
-use crate::policy::{FeedbackPolicy, LinearPolicy};
+use crate::policy::{FeedbackPolicy, PolicyMoments, PolicySpec};
 use crate::rollout::{Layout, gather, initial_window};
 use crate::trajectory::{Episode, Excitation, Trajectory};
 
@@ -221,7 +222,7 @@ fn mm_backward(
     c: &MmCache,
     mbar_in: &DVector<f64>,
     sbar: &DMatrix<f64>,
-    cbar: &DMatrix<f64>,
+    vbar: &DMatrix<f64>,
     adj: &mut GpAdjoint,
 ) -> (DVector<f64>, DMatrix<f64>) {
     let (m, d) = c.nu.shape();
@@ -298,10 +299,8 @@ fn mm_backward(
 
     for (a, oc) in c.outs.iter().enumerate() {
         let o = &gp.outputs[a];
-        let cb = cbar.column(a).into_owned();
-        // io_cov[:, a] = Σ acc
-        sigma_bar += &cb * oc.acc.transpose();
-        let accbar = sigma * &cb;
+        // V[:, a] = acc
+        let accbar = vbar.column(a).into_owned();
         let mut sbar_v = vec![0.0; d];
         let mut bqbar = DVector::from_element(m, mbar[a]);
         let mut wbar = DMatrix::<f64>::zeros(d, m);
@@ -351,13 +350,59 @@ struct StepRecord {
     sigma: DMatrix<f64>,
     ycov: DMatrix<f64>,
     resid: DVector<f64>,
+    v: DMatrix<f64>,
+    /// Closed loop: policy input moments, the policy's output, and `Cov(z, q)`.
+    policy: Option<PolicyRecord>,
+}
+
+struct PolicyRecord {
+    qm: DVector<f64>,
+    qc: DMatrix<f64>,
+    pm: PolicyMoments<f64>,
+    zq: DMatrix<f64>,
+}
+
+/// Vector–Jacobian product of a policy's moment map at `(qm, qc)`: the gradient of
+/// `⟨ō_mean, mean⟩ + ⟨ō_cov, cov⟩ + ⟨C̄, C⟩` with respect to every entry of `qm` and `qc`,
+/// by forward-mode duals (the policy block is small: `n_q + n_q²` directions).
+fn policy_vjp(
+    policy: &dyn FeedbackPolicy<Dual>,
+    rec: &PolicyRecord,
+    mean_bar: &DVector<f64>,
+    cov_bar: &DMatrix<f64>,
+    c_bar: &DMatrix<f64>,
+) -> Result<(DVector<f64>, DMatrix<f64>)> {
+    let nq = rec.qm.len();
+    let mut x: Vec<f64> = rec.qm.iter().copied().collect();
+    x.extend(rec.qc.iter().copied());
+    let active: Vec<usize> = (0..x.len()).collect();
+    let (_, g) = gradient(&x, &active, 1, |xd: &[Dual]| {
+        let qm = DVector::from_column_slice(&xd[..nq]);
+        let qc = DMatrix::from_column_slice(nq, nq, &xd[nq..]);
+        let pm = policy.moments(&qm, &qc)?;
+        let mut acc = Dual::from_re(0.0);
+        for (o, b) in pm.mean.iter().zip(mean_bar.iter()) {
+            acc += *o * *b;
+        }
+        for (o, b) in pm.cov.iter().zip(cov_bar.iter()) {
+            acc += *o * *b;
+        }
+        for (o, b) in pm.c.iter().zip(c_bar.iter()) {
+            acc += *o * *b;
+        }
+        Ok(acc)
+    })?;
+    Ok((
+        DVector::from_column_slice(&g[..nq]),
+        DMatrix::from_column_slice(nq, nq, &g[nq..]),
+    ))
 }
 
 fn episode_adjoint(
     gp: &PreparedGp<f64>,
     spec: &NarxSpec,
     traj: &Trajectory,
-    policy: Option<&LinearPolicy<f64>>,
+    policy: Option<&PolicySpec>,
     adj: &mut GpAdjoint,
     log: &mut JitterLog,
 ) -> Result<(f64, usize)> {
@@ -365,18 +410,30 @@ fn episode_adjoint(
     let (dy, du) = (spec.dy, spec.du);
     let t0 = spec.warmup();
     let horizon = traj.len();
-    let n_aug = d + dy + du;
-    // stateless (linear) policies only: the policy-state block is empty
-    let layout = Layout { d, ds: 0, dy, du };
+    let pol: Option<Box<dyn FeedbackPolicy<f64>>> = policy.map(|p| p.lift::<f64>());
+    let pol_dual: Option<Box<dyn FeedbackPolicy<Dual>>> = policy.map(|p| p.lift::<Dual>());
+    let ds = pol.as_ref().map_or(0, |p| p.state_dim());
+    let layout = Layout { d, ds, dy, du };
+    let (n, x, u) = (layout.n(), layout.x_slot(), layout.u_slot());
+    let len = layout.len();
     let sel = layout.gather_map(spec);
-    let (mut mu, mut sigma) = initial_window(gp, spec, traj);
+    let (wmu, wsigma) = initial_window(gp, spec, traj);
+    let mut mu = DVector::<f64>::zeros(n);
+    let mut sigma = DMatrix::<f64>::zeros(n, n);
+    mu.rows_mut(0, d).copy_from(&wmu);
+    sigma.view_mut((0, 0), (d, d)).copy_from(&wsigma);
+    if let Some(p) = &pol {
+        let p0 = p.initial_state(&traj.y, &traj.u, t0);
+        mu.rows_mut(d, ds).copy_from(&p0);
+    }
 
     // forward
     let mut recs: Vec<StepRecord> = Vec::with_capacity(horizon - t0);
     let mut nll = 0.0;
     let mut nll_log = JitterLog::default();
     for t in t0..horizon {
-        let mm = mm_forward(gp, &mu, &sigma, log)?;
+        let wsig = sigma.view((0, 0), (d, d)).into_owned();
+        let mm = mm_forward(gp, &mu.rows(0, d).into_owned(), &wsig, log)?;
         let mut xcov = mm.cov.clone();
         for j in 0..dy {
             xcov[(j, j)] += gp.outputs[j].sx2;
@@ -392,26 +449,33 @@ fn episode_adjoint(
                 "trajectory likelihood at step {t}"
             )));
         }
-        let resid = DVector::from_fn(dy, |j, _| yrow[j] - mm.mean[j]);
-        let rec = StepRecord {
+        let v = DMatrix::from_fn(d, dy, |k, a| mm.outs[a].acc[k]);
+        let mut rec = StepRecord {
             mu: mu.clone(),
             sigma: sigma.clone(),
             ycov: ycov.clone(),
-            resid,
+            resid: DVector::from_fn(dy, |j, _| yrow[j] - mm.mean[j]),
+            v: v.clone(),
+            policy: None,
         };
         if t + 1 < horizon {
-            let v = DMatrix::from_fn(d, dy, |k, a| mm.outs[a].acc[k]);
             let (mut amu, mut acov) = layout.augmented(&mu, &sigma, &mm.mean, &v, &xcov);
-            match policy {
+            match &pol {
                 None => {
                     for j in 0..du {
-                        amu[d + dy + j] = traj.u[(t, j)];
+                        amu[u + j] = traj.u[(t, j)];
                     }
                 }
                 Some(p) => {
                     let (qm, qc) = layout.policy_input(&amu, &acov, &ycov);
                     let pm = p.moments(&qm, &qc)?;
+                    let mut zq = DMatrix::<f64>::zeros(u, dy + ds);
+                    zq.view_mut((0, 0), (u, dy))
+                        .copy_from(&acov.view((0, x), (u, dy)));
+                    zq.view_mut((0, dy), (u, ds))
+                        .copy_from(&acov.view((0, d), (u, ds)));
                     layout.set_policy_output(&mut amu, &mut acov, &pm);
+                    rec.policy = Some(PolicyRecord { qm, qc, pm, zq });
                 }
             }
             (mu, sigma) = gather(&amu, &acov, &sel);
@@ -421,43 +485,72 @@ fn episode_adjoint(
     log.merge(&nll_log);
 
     // backward
-    let mut mubar_next = DVector::<f64>::zeros(d);
-    let mut sigmabar_next = DMatrix::<f64>::zeros(d, d);
+    let mut mubar_next = DVector::<f64>::zeros(n);
+    let mut sigmabar_next = DMatrix::<f64>::zeros(n, n);
     let last = recs.len() - 1;
     for (s, rec) in recs.iter().enumerate().rev() {
         let mut mbar = DVector::<f64>::zeros(dy);
-        let mut cbar = DMatrix::<f64>::zeros(d, dy);
         let mut xcovbar = DMatrix::<f64>::zeros(dy, dy);
         let mut ycovbar = DMatrix::<f64>::zeros(dy, dy);
-        let mut mubar = DVector::<f64>::zeros(d);
-        let mut sigmabar = DMatrix::<f64>::zeros(d, d);
+        let mut mubar = DVector::<f64>::zeros(n);
+        let mut sigmabar = DMatrix::<f64>::zeros(n, n);
+        let mut vbar = DMatrix::<f64>::zeros(d, dy);
         if s < last {
             symmetrize(&mut sigmabar_next);
-            let mut amubar = DVector::<f64>::zeros(n_aug);
-            let mut acovbar = DMatrix::<f64>::zeros(n_aug, n_aug);
-            for i in 0..d {
+            let mut amubar = DVector::<f64>::zeros(len);
+            let mut acovbar = DMatrix::<f64>::zeros(len, len);
+            for i in 0..n {
                 amubar[sel[i]] += mubar_next[i];
-                for j in 0..d {
+                for j in 0..n {
                     acovbar[(sel[i], sel[j])] += sigmabar_next[(i, j)];
                 }
             }
-            if let Some(k) = policy.map(|p| &p.gain) {
-                let crossbar = acovbar.view((0, d + dy), (d + dy, du)).into_owned()
-                    + acovbar.view((d + dy, 0), (du, d + dy)).transpose();
-                // cross = [C; xcov] Kᵀ
-                let pulled = &crossbar * k; // (d+dy) × dy
-                cbar += pulled.rows(0, d);
-                xcovbar += pulled.rows(d, dy);
-                mbar += k.transpose() * amubar.rows(d + dy, du);
-                let ucovbar = acovbar.view((d + dy, d + dy), (du, du)).into_owned();
-                ycovbar += k.transpose() * ucovbar * k;
+            if let (Some(pr), Some(pd)) = (&rec.policy, &pol_dual) {
+                let no = du + ds;
+                // set_policy_output: mean, cov, and cross = Z_q C
+                let mean_bar = amubar.rows(u, no).into_owned();
+                let cov_bar = acovbar.view((u, u), (no, no)).into_owned();
+                let cross_bar = acovbar.view((0, u), (u, no)).into_owned()
+                    + acovbar.view((u, 0), (no, u)).transpose();
+                let zq_bar = &cross_bar * pr.pm.c.transpose();
+                let c_bar = pr.zq.transpose() * &cross_bar;
+                add_block(&mut acovbar, (0, x), &zq_bar.columns(0, dy).into_owned());
+                add_block(&mut acovbar, (0, d), &zq_bar.columns(dy, ds).into_owned());
+                // the policy's own moment map
+                let (qm_bar, qc_bar) = policy_vjp(pd.as_ref(), pr, &mean_bar, &cov_bar, &c_bar)?;
+                // policy_input: q = [y_{t+1}; p_t]
+                for k in 0..dy {
+                    amubar[x + k] += qm_bar[k];
+                }
+                for k in 0..ds {
+                    amubar[d + k] += qm_bar[dy + k];
+                }
+                ycovbar += qc_bar.view((0, 0), (dy, dy));
+                add_block(
+                    &mut acovbar,
+                    (x, d),
+                    &qc_bar.view((0, dy), (dy, ds)).into_owned(),
+                );
+                add_block(
+                    &mut acovbar,
+                    (d, x),
+                    &qc_bar.view((dy, 0), (ds, dy)).into_owned(),
+                );
+                add_block(
+                    &mut acovbar,
+                    (d, d),
+                    &qc_bar.view((dy, dy), (ds, ds)).into_owned(),
+                );
             }
-            mubar += amubar.rows(0, d);
-            mbar += amubar.rows(d, dy);
-            sigmabar += acovbar.view((0, 0), (d, d));
-            cbar += acovbar.view((0, d), (d, dy));
-            cbar += acovbar.view((d, 0), (dy, d)).transpose();
-            xcovbar += acovbar.view((d, d), (dy, dy));
+            // augmented: [z; x_{t+1}] with Cov(z, x) = Σ[:, :d] V
+            mubar += amubar.rows(0, n);
+            mbar += amubar.rows(x, dy);
+            sigmabar += acovbar.view((0, 0), (n, n));
+            let zxbar = acovbar.view((0, x), (n, dy)).into_owned()
+                + acovbar.view((x, 0), (dy, n)).transpose();
+            add_block(&mut sigmabar, (0, 0), &(&zxbar * rec.v.transpose()));
+            vbar += rec.sigma.columns(0, d).transpose() * &zxbar;
+            xcovbar += acovbar.view((x, x), (dy, dy));
         }
         // NLL = ½[rᵀV⁻¹r + log|V|]
         let vch = cholesky(&rec.ycov, &gp.jitter, "predictive covariance")?;
@@ -470,11 +563,14 @@ fn episode_adjoint(
             adj.sy2[j] += ycovbar[(j, j)];
             adj.sx2[j] += xcovbar[(j, j)];
         }
+        let wsig = rec.sigma.view((0, 0), (d, d)).into_owned();
         let mut scratch = JitterLog::default();
-        let cache = mm_forward(gp, &rec.mu, &rec.sigma, &mut scratch)?;
-        let (mub, sigb) = mm_backward(gp, &rec.sigma, &cache, &mbar, &xcovbar, &cbar, adj);
-        mubar += mub;
-        sigmabar += sigb;
+        let cache = mm_forward(gp, &rec.mu.rows(0, d).into_owned(), &wsig, &mut scratch)?;
+        let (mub, sigb) = mm_backward(gp, &wsig, &cache, &mbar, &xcovbar, &vbar, adj);
+        for k in 0..d {
+            mubar[k] += mub[k];
+        }
+        add_block(&mut sigmabar, (0, 0), &sigb);
         mubar_next = mubar;
         sigmabar_next = sigmabar;
     }
@@ -485,6 +581,15 @@ fn episode_adjoint(
         }
     }
     Ok((nll, recs.len()))
+}
+
+/// `m[at..] += b` for a block.
+fn add_block(m: &mut DMatrix<f64>, at: (usize, usize), b: &DMatrix<f64>) {
+    for i in 0..b.nrows() {
+        for j in 0..b.ncols() {
+            m[(at.0 + i, at.1 + j)] += b[(i, j)];
+        }
+    }
 }
 
 /// Value and gradient (in [`GpParams::to_flat`] layout) of the MSGP loss, by the adjoint sweep.

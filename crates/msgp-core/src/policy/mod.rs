@@ -100,3 +100,38 @@ mod pid;
 
 pub use normalized::Normalized;
 pub use pid::PidPolicy;
+
+/// The policy that produced a feedback trajectory, as data (f64 parameters), so the loss can
+/// rebuild it on any scalar type: f64 for values, duals for gradients and for the adjoint
+/// sweep's policy Jacobians.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PolicySpec {
+    /// `u = K y + b`.
+    Linear(LinearPolicy<f64>),
+    /// Saturated PID.
+    Pid(PidPolicy<f64>),
+    /// A saturated PID in original units inside a normalised model.
+    NormalizedPid(Normalized<PidPolicy<f64>>),
+}
+
+impl PolicySpec {
+    /// The policy on scalar type `T`.
+    pub fn lift<T: Scalar>(&self) -> Box<dyn FeedbackPolicy<T>> {
+        let c = crate::scalar::c::<T>;
+        let pid = |p: &PidPolicy<f64>| PidPolicy {
+            kp: p.kp.map(c),
+            ki: p.ki.map(c),
+            kd: p.kd.map(c),
+            period: p.period,
+            u_max: p.u_max.clone(),
+        };
+        match self {
+            PolicySpec::Linear(p) => Box::new(p.map(c)),
+            PolicySpec::Pid(p) => Box::new(pid(p)),
+            PolicySpec::NormalizedPid(n) => Box::new(Normalized {
+                inner: pid(&n.inner),
+                normalizer: n.normalizer.clone(),
+            }),
+        }
+    }
+}

@@ -13,7 +13,7 @@ use crate::error::Result;
 use crate::scalar::{Scalar, c};
 
 /// Wraps a policy in original units for a rollout in normalised units.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Normalized<P> {
     /// The policy in original units.
     pub inner: P,
