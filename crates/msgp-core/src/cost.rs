@@ -34,7 +34,7 @@ impl SaturatingCost {
     /// `W = diag(1/width²)`: each output counts on the scale `width` (∞ or 0 width: see below).
     /// A width of `f64::INFINITY` removes that output from the cost.
     pub fn with_widths(target: DVector<f64>, widths: &[f64]) -> Result<Self> {
-        if widths.len() != target.len() || widths.iter().any(|w| !(*w > 0.0)) {
+        if widths.len() != target.len() || widths.iter().any(|w| w.is_nan() || *w <= 0.0) {
             return Err(MsgpError::InvalidSetting {
                 name: "cost widths",
                 reason: format!("need {} positive widths, got {widths:?}", target.len()),

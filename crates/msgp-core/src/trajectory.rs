@@ -93,7 +93,7 @@ pub enum Excitation {
     FeedForward,
     /// Inputs came from this policy acting on the observations; the rollout closes the loop
     /// (the paper's `L_fb`).
-    Feedback(PolicySpec),
+    Feedback(Box<PolicySpec>),
 }
 
 /// A trajectory plus how it was excited: one term of `L_ff` or `L_fb` (paper eq. 4).

@@ -107,7 +107,7 @@ fn closed_and_open_loop_two_outputs() {
     let eps = vec![
         Episode {
             traj: traj.clone(),
-            excitation: Excitation::Feedback(PolicySpec::Linear(policy)),
+            excitation: Excitation::Feedback(Box::new(PolicySpec::Linear(policy))),
         },
         Episode::feed_forward(traj),
     ];
@@ -149,14 +149,14 @@ fn closed_loop_with_saturated_pid_policies() {
     let eps = vec![
         Episode {
             traj: traj.clone(),
-            excitation: Excitation::Feedback(PolicySpec::Pid(pid.clone())),
+            excitation: Excitation::Feedback(Box::new(PolicySpec::Pid(pid.clone()))),
         },
         Episode {
             traj: traj.slice(3, 55),
-            excitation: Excitation::Feedback(PolicySpec::NormalizedPid(Normalized {
+            excitation: Excitation::Feedback(Box::new(PolicySpec::NormalizedPid(Normalized {
                 inner: pid,
                 normalizer,
-            })),
+            }))),
         },
     ];
     compare(&params, &spec, &eps, Complexity::PseudoDataNll);

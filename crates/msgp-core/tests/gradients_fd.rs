@@ -135,7 +135,7 @@ fn closed_loop_gradients_match_finite_differences() {
     let episodes = vec![
         Episode {
             traj: traj.clone(),
-            excitation: Excitation::Feedback(PolicySpec::Linear(policy)),
+            excitation: Excitation::Feedback(Box::new(PolicySpec::Linear(policy))),
         },
         Episode::feed_forward(traj),
     ];

@@ -613,7 +613,7 @@ pub fn loss_and_gradient(
             .map_err(|err| MsgpError::Data(format!("episode {k}: {err}")))?;
         let policy = match &ep.excitation {
             Excitation::FeedForward => None,
-            Excitation::Feedback(p) => Some(p),
+            Excitation::Feedback(p) => Some(p.as_ref()),
         };
         let (v, n) = episode_adjoint(&gp, spec, &ep.traj, policy, &mut adj, log)?;
         nll += v;

@@ -49,7 +49,7 @@ impl<T: Scalar> PidPolicy<T> {
                 shape.0, shape.1, shape.0
             )));
         }
-        if !(period > 0.0) || u_max.iter().any(|u| !(*u > 0.0)) {
+        if period.is_nan() || period <= 0.0 || u_max.iter().any(|u| u.is_nan() || *u <= 0.0) {
             return Err(MsgpError::InvalidSetting {
                 name: "PID policy",
                 reason: format!("period {period} and limits {u_max:?} must be positive"),
