@@ -25,8 +25,9 @@ use crate::loss::{Complexity, gaussian_nll};
 use crate::model::{Method, Model};
 use crate::narx::NarxSpec;
 use crate::optim::{Adam, Flow, Objective, minimize};
+use crate::policy::PolicySpec;
 use crate::rollout::{Control, rollout};
-use crate::trajectory::{Episode, Trajectory};
+use crate::trajectory::{Episode, Excitation, Trajectory};
 
 /// Everything that controls a fit.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -185,7 +186,35 @@ pub fn fit(
     settings: &FitSettings,
     progress: &mut dyn FnMut(&FitProgress),
 ) -> Result<(Model, FitReport)> {
+    let episodes: Vec<TrainingEpisode> = train
+        .iter()
+        .map(|t| TrainingEpisode {
+            traj: t.clone(),
+            policy: None,
+        })
+        .collect();
+    fit_episodes(&episodes, settings, progress)
+}
+
+/// A training trajectory in original units and, for a feedback trajectory, the policy (in
+/// original units) that produced its inputs. MSGP rolls feedback trajectories out in closed
+/// loop under their policy (`L_fb`); the one-step baselines use them as data like any other.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainingEpisode {
+    /// Inputs and outputs, original units.
+    pub traj: Trajectory,
+    /// The feedback policy that chose the inputs, if any.
+    pub policy: Option<PolicySpec>,
+}
+
+/// Fits a model on feed-forward and feedback episodes (original units).
+pub fn fit_episodes(
+    episodes: &[TrainingEpisode],
+    settings: &FitSettings,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<(Model, FitReport)> {
     let start = Instant::now();
+    let train: Vec<Trajectory> = episodes.iter().map(|e| e.traj.clone()).collect();
     let first = train
         .first()
         .ok_or_else(|| MsgpError::Data("no training trajectories".into()))?;
@@ -240,16 +269,28 @@ pub fn fit(
     }
 
     // MSGP: split each trajectory into a training head and a validation tail.
+    // Feedback episodes train in closed loop under their (normalised) policy and are not split.
     let w = spec.warmup();
-    let mut heads = Vec::new();
+    let mut head_eps = Vec::new();
+    let mut all_eps = Vec::new();
     let mut tails = Vec::new();
-    for t in &norm {
+    for (t, ep) in norm.iter().zip(episodes) {
+        if let Some(p) = &ep.policy {
+            let fb = Episode {
+                traj: t.clone(),
+                excitation: Excitation::Feedback(Box::new(p.normalized(&normalizer)?)),
+            };
+            head_eps.push(fb.clone());
+            all_eps.push(fb);
+            continue;
+        }
+        all_eps.push(Episode::feed_forward(t.clone()));
         let n_val = (t.len() as f64 * settings.validation_fraction).round() as usize;
         if settings.validation_fraction > 0.0 && n_val >= 10 && t.len() - n_val > w + 10 {
-            heads.push(t.slice(0, t.len() - n_val));
+            head_eps.push(Episode::feed_forward(t.slice(0, t.len() - n_val)));
             tails.push(Episode::feed_forward(t.slice(t.len() - n_val - w, t.len())));
         } else {
-            heads.push(t.clone());
+            head_eps.push(Episode::feed_forward(t.clone()));
         }
     }
     let config = GpConfig {
@@ -264,14 +305,12 @@ pub fn fit(
         progress,
         report: &mut report,
     };
-    let head_eps: Vec<Episode> = heads.into_iter().map(Episode::feed_forward).collect();
     let init = stage.initial(&head_eps, &one_step)?;
     let (mut chosen, best_iteration) =
         stage.train(init, &head_eps, &tails, settings.iterations, 1)?;
     stage.report.best_iteration = best_iteration;
     if settings.refit && !tails.is_empty() {
         // stage 2: the same number of iterations on the whole training data
-        let all_eps: Vec<Episode> = norm.iter().cloned().map(Episode::feed_forward).collect();
         let init = stage.initial(&all_eps, &one_step)?;
         chosen = if best_iteration == 0 {
             init

@@ -115,6 +115,39 @@ pub enum PolicySpec {
 }
 
 impl PolicySpec {
+    /// The same policy (given in original units) for a rollout in the normalised units of
+    /// `normalizer`: a linear policy is converted exactly (`K_n = diag(1/s_u) K diag(s_y)`,
+    /// `b_n = (K m_y + b − m_u)/s_u`), a PID policy is wrapped in [`Normalized`].
+    pub fn normalized(&self, normalizer: &crate::data::Normalizer) -> Result<PolicySpec> {
+        let n = normalizer;
+        Ok(match self {
+            PolicySpec::Linear(p) => {
+                let (du, dy) = p.gain.shape();
+                if n.y_std.len() != dy || n.u_std.len() != du {
+                    return Err(MsgpError::Shape(
+                        "linear policy does not fit the data's dimensions".into(),
+                    ));
+                }
+                let gain =
+                    DMatrix::from_fn(du, dy, |i, j| p.gain[(i, j)] * n.y_std[j] / n.u_std[i]);
+                let ym = DVector::from_column_slice(&n.y_mean);
+                let k_ym = &p.gain * ym;
+                let offset = DVector::from_fn(du, |i, _| {
+                    (k_ym[i] + p.offset[i] - n.u_mean[i]) / n.u_std[i]
+                });
+                PolicySpec::Linear(LinearPolicy::new(gain, offset)?)
+            }
+            PolicySpec::Pid(p) => PolicySpec::NormalizedPid(Normalized {
+                inner: p.clone(),
+                normalizer: n.clone(),
+            }),
+            PolicySpec::NormalizedPid(w) => PolicySpec::NormalizedPid(Normalized {
+                inner: w.inner.clone(),
+                normalizer: n.clone(),
+            }),
+        })
+    }
+
     /// The policy on scalar type `T`.
     pub fn lift<T: Scalar>(&self) -> Box<dyn FeedbackPolicy<T>> {
         let c = crate::scalar::c::<T>;
@@ -133,5 +166,37 @@ impl PolicySpec {
                 normalizer: n.normalizer.clone(),
             }),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::Normalizer;
+
+    #[test]
+    fn normalised_linear_policy_acts_like_the_original() {
+        let p = LinearPolicy::new(
+            DMatrix::from_row_slice(1, 2, &[-0.7, 0.4]),
+            DVector::from_vec(vec![0.3]),
+        )
+        .expect("policy");
+        let n = Normalizer {
+            u_mean: vec![0.2],
+            u_std: vec![1.5],
+            y_mean: vec![1.0, -2.0],
+            y_std: vec![0.5, 3.0],
+        };
+        let PolicySpec::Linear(pn) = PolicySpec::Linear(p.clone())
+            .normalized(&n)
+            .expect("normalise")
+        else {
+            panic!("a linear policy stays linear");
+        };
+        let yo = DVector::from_vec(vec![1.3, -4.0]);
+        let yn = DVector::from_vec(vec![(1.3 - 1.0) / 0.5, (-4.0 + 2.0) / 3.0]);
+        let uo = &p.gain * &yo + &p.offset;
+        let un = &pn.gain * &yn + &pn.offset;
+        assert!(((uo[0] - 0.2) / 1.5 - un[0]).abs() < 1e-14);
     }
 }
