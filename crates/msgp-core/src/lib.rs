@@ -32,6 +32,7 @@ pub mod narx;
 pub mod optim;
 pub mod policy;
 pub mod policy_cost;
+pub mod policy_search;
 pub mod rollout;
 pub mod saturation;
 pub mod scalar;

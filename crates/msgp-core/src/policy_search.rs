@@ -1,0 +1,275 @@
+//! Policy search on a learned model (PILCO's inner loop): minimise the expected saturating cost
+//! of a closed-loop moment-matching rollout over the gains of a saturated PID policy, with exact
+//! gradients from forward-mode duals (a handful of gains: forward mode is the right tool) and
+//! Adam with seeded restarts around the current gains.
+//!
+//! Everything the user specifies (gains, cost target and widths, start state) is in original
+//! units; the model's normalisation is applied exactly inside.
+
+use nalgebra::{DMatrix, DVector};
+use rand::{SeedableRng, rngs::StdRng};
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+
+use crate::cost::SaturatingCost;
+use crate::error::{MsgpError, Result};
+use crate::gp::PreparedGp;
+use crate::grad::dual::gradient;
+use crate::linalg::JitterLog;
+use crate::model::Model;
+use crate::optim::{Adam, AdamState};
+use crate::policy::{FeedbackPolicy, Normalized, PidPolicy};
+use crate::policy_cost::closed_loop_cost;
+use crate::rollout::StartState;
+use crate::scalar::{Scalar, c};
+
+/// Which PID gains are optimised: `true` entries of the three d_u × d_y masks are free.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PidMask {
+    /// Free entries of `K_p`.
+    pub kp: DMatrix<bool>,
+    /// Free entries of `K_i`.
+    pub ki: DMatrix<bool>,
+    /// Free entries of `K_d`.
+    pub kd: DMatrix<bool>,
+}
+
+impl PidMask {
+    /// Number of free gains.
+    pub fn len(&self) -> usize {
+        [&self.kp, &self.ki, &self.kd]
+            .iter()
+            .map(|m| m.iter().filter(|b| **b).count())
+            .sum()
+    }
+
+    /// True when nothing is free.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The free gains of `p` as a vector (K_p, then K_i, then K_d; column-major).
+    pub fn pack(&self, p: &PidPolicy<f64>) -> Vec<f64> {
+        let mut v = Vec::new();
+        for (m, g) in [(&self.kp, &p.kp), (&self.ki, &p.ki), (&self.kd, &p.kd)] {
+            v.extend(m.iter().zip(g.iter()).filter(|(b, _)| **b).map(|(_, x)| *x));
+        }
+        v
+    }
+
+    /// `base` with its free gains replaced by `x`.
+    pub fn unpack<T: Scalar>(&self, base: &PidPolicy<f64>, x: &[T]) -> PidPolicy<T> {
+        let mut k = 0;
+        let mut fill = |m: &DMatrix<bool>, g: &DMatrix<f64>| {
+            DMatrix::from_fn(g.nrows(), g.ncols(), |i, j| {
+                if m[(i, j)] {
+                    k += 1;
+                    x[k - 1]
+                } else {
+                    c::<T>(g[(i, j)])
+                }
+            })
+        };
+        let kp = fill(&self.kp, &base.kp);
+        let ki = fill(&self.ki, &base.ki);
+        let kd = fill(&self.kd, &base.kd);
+        PidPolicy {
+            kp,
+            ki,
+            kd,
+            period: base.period,
+            u_max: base.u_max.clone(),
+        }
+    }
+}
+
+/// Settings of the policy optimisation.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PolicySearchSettings {
+    /// Adam steps per start.
+    pub iterations: usize,
+    /// Adam step size, relative to each gain's scale (`max(|g|, 1)`).
+    pub learning_rate: f64,
+    /// Extra starts: the current gains perturbed by `restart_spread` (relative), seeded.
+    pub restarts: usize,
+    /// Relative size of the restart perturbations.
+    pub restart_spread: f64,
+    /// Seed of the restarts.
+    pub seed: u64,
+}
+
+impl Default for PolicySearchSettings {
+    fn default() -> Self {
+        Self {
+            iterations: 60,
+            learning_rate: 0.05,
+            restarts: 2,
+            restart_spread: 0.3,
+            seed: 0,
+        }
+    }
+}
+
+/// The problem: model, start, cost and horizon, all in original units.
+#[derive(Debug)]
+pub struct PolicyProblem<'a> {
+    /// The learned dynamics model.
+    pub model: &'a Model,
+    /// Mean of the latent outputs at rest before the rollout (original units, d_y).
+    pub y0_mean: Vec<f64>,
+    /// Variance of the latent outputs at rest (original units, d_y).
+    pub y0_var: Vec<f64>,
+    /// Inputs before the rollout (original units, d_u).
+    pub u0: Vec<f64>,
+    /// Cost on the predicted observations (original units).
+    pub cost: SaturatingCost,
+    /// Number of predicted steps.
+    pub horizon: usize,
+}
+
+impl PolicyProblem<'_> {
+    /// Start state in normalised units: every output lag at `y0` (latent, variance `y0_var`,
+    /// fully correlated across lags: the system is at rest), inputs at `u0`, and the policy
+    /// state `[y_{−1} = y0; I = 0]` (deterministic).
+    fn start<T: Scalar>(&self, policy_state: usize) -> StartState<T> {
+        let spec = self.model.spec;
+        let n = &self.model.normalizer;
+        let d = spec.input_dim();
+        let mut mean = DVector::<T>::zeros(d + policy_state);
+        let mut cov = DMatrix::<T>::zeros(d + policy_state, d + policy_state);
+        for k in 0..spec.ly {
+            for j in 0..spec.dy {
+                mean[spec.y_index(k, j)] = c((self.y0_mean[j] - n.y_mean[j]) / n.y_std[j]);
+                for k2 in 0..spec.ly {
+                    cov[(spec.y_index(k, j), spec.y_index(k2, j))] =
+                        c(self.y0_var[j] / (n.y_std[j] * n.y_std[j]));
+                }
+            }
+        }
+        for k in 0..spec.lu {
+            for j in 0..spec.du {
+                mean[spec.u_index(k, j)] = c((self.u0[j] - n.u_mean[j]) / n.u_std[j]);
+            }
+        }
+        for j in 0..spec.dy.min(policy_state) {
+            mean[d + j] = c(self.y0_mean[j]);
+        }
+        StartState { mean, cov }
+    }
+
+    /// Normalised cost.
+    fn normalised_cost(&self) -> SaturatingCost {
+        let n = &self.model.normalizer;
+        let dy = self.cost.target.len();
+        SaturatingCost {
+            target: DVector::from_fn(dy, |j, _| (self.cost.target[j] - n.y_mean[j]) / n.y_std[j]),
+            a: DMatrix::from_fn(self.cost.a.nrows(), dy, |i, j| {
+                self.cost.a[(i, j)] * n.y_std[j]
+            }),
+        }
+    }
+
+    /// Expected total cost of `policy` and the per-step (mean, variance) of the cost.
+    pub fn evaluate<T: Scalar>(&self, policy: &PidPolicy<T>) -> Result<(T, Vec<(T, T)>)> {
+        let params = self.model.params.map(c::<T>);
+        let mut log = JitterLog::default();
+        let gp = PreparedGp::new(&params, &self.model.config, &mut log)?;
+        let wrapped = Normalized {
+            inner: policy.clone(),
+            normalizer: self.model.normalizer.clone(),
+        };
+        let start = self.start::<T>(wrapped.state_dim());
+        let t0 = self.model.spec.warmup();
+        let rc = closed_loop_cost(
+            &gp,
+            &self.model.spec,
+            &start,
+            &wrapped,
+            t0,
+            t0 + self.horizon,
+            &self.normalised_cost(),
+            &mut log,
+        )?;
+        Ok((rc.total, rc.steps.iter().map(|s| (s.mean, s.var)).collect()))
+    }
+}
+
+/// Result of a policy optimisation.
+#[derive(Clone, Debug)]
+pub struct PolicySearchResult {
+    /// The best gains found.
+    pub policy: PidPolicy<f64>,
+    /// Their expected total cost.
+    pub expected_cost: f64,
+    /// Per-step (mean, variance) of the cost under the best gains.
+    pub steps: Vec<(f64, f64)>,
+}
+
+/// Minimises the expected cost over the free gains, starting from `initial` and from
+/// `settings.restarts` seeded perturbations of it; returns the best.
+pub fn optimise_pid(
+    problem: &PolicyProblem<'_>,
+    initial: &PidPolicy<f64>,
+    mask: &PidMask,
+    settings: &PolicySearchSettings,
+) -> Result<PolicySearchResult> {
+    if mask.is_empty() {
+        return Err(MsgpError::InvalidSetting {
+            name: "policy search",
+            reason: "no free gains".into(),
+        });
+    }
+    let x0 = mask.pack(initial);
+    let mut rng = StdRng::seed_from_u64(settings.seed);
+    let mut starts = vec![x0.clone()];
+    for _ in 0..settings.restarts {
+        starts.push(
+            x0.iter()
+                .map(|g| {
+                    let z: f64 = StandardNormal.sample(&mut rng);
+                    g + settings.restart_spread * g.abs().max(1.0) * z
+                })
+                .collect(),
+        );
+    }
+    let active: Vec<usize> = (0..x0.len()).collect();
+    let scale: Vec<f64> = x0.iter().map(|g| g.abs().max(1.0)).collect();
+    let mut best: Option<(f64, Vec<f64>)> = None;
+    for start in starts {
+        // optimise in scaled coordinates z = g / scale so one step size fits every gain
+        let mut z: Vec<f64> = start.iter().zip(&scale).map(|(g, s)| g / s).collect();
+        let adam = Adam {
+            learning_rate: settings.learning_rate,
+            ..Adam::default()
+        };
+        let mut state = AdamState::new(z.len());
+        let on = vec![true; z.len()];
+        for _ in 0..settings.iterations {
+            let g: Vec<f64> = z.iter().zip(&scale).map(|(z, s)| z * s).collect();
+            let (value, grad) = gradient(&g, &active, 1, |gd| {
+                let p = mask.unpack(initial, gd);
+                Ok(problem.evaluate(&p)?.0)
+            })?;
+            if value.is_finite() && best.as_ref().is_none_or(|b| value < b.0) {
+                best = Some((value, g.clone()));
+            }
+            let gz: Vec<f64> = grad.iter().zip(&scale).map(|(d, s)| d * s).collect();
+            adam.step(&mut state, &mut z, &gz, &on);
+        }
+        let g: Vec<f64> = z.iter().zip(&scale).map(|(z, s)| z * s).collect();
+        if let Ok((value, _)) = problem.evaluate(&mask.unpack::<f64>(initial, &g)) {
+            if value.is_finite() && best.as_ref().is_none_or(|b| value < b.0) {
+                best = Some((value, g));
+            }
+        }
+    }
+    let (value, g) =
+        best.ok_or_else(|| MsgpError::NonFinite("every policy-search start diverged".into()))?;
+    let policy = mask.unpack::<f64>(initial, &g);
+    let (_, steps) = problem.evaluate(&policy)?;
+    Ok(PolicySearchResult {
+        policy,
+        expected_cost: value,
+        steps,
+    })
+}
