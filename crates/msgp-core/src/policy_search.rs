@@ -257,10 +257,11 @@ pub fn optimise_pid(
             adam.step(&mut state, &mut z, &gz, &on);
         }
         let g: Vec<f64> = z.iter().zip(&scale).map(|(z, s)| z * s).collect();
-        if let Ok((value, _)) = problem.evaluate(&mask.unpack::<f64>(initial, &g)) {
-            if value.is_finite() && best.as_ref().is_none_or(|b| value < b.0) {
-                best = Some((value, g));
-            }
+        if let Ok((value, _)) = problem.evaluate(&mask.unpack::<f64>(initial, &g))
+            && value.is_finite()
+            && best.as_ref().is_none_or(|b| value < b.0)
+        {
+            best = Some((value, g));
         }
     }
     let (value, g) =
