@@ -42,6 +42,7 @@ pub mod stability;
 
 pub use controller::{
     APOLLO_LQR_GAINS, Controller, ExcitationConfig, PidPdGains, PidPdPolicy, RandomExcitation,
+    Saturation,
 };
 pub use episode::{Episode, EpisodeConfig, EpisodeInfo, Sample, Termination, run_episode};
 pub use error::SimError;

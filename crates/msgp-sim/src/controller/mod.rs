@@ -4,7 +4,7 @@ mod excitation;
 mod pid_pd;
 
 pub use excitation::{ExcitationConfig, RandomExcitation};
-pub use pid_pd::{APOLLO_LQR_GAINS, PidPdGains, PidPdPolicy};
+pub use pid_pd::{APOLLO_LQR_GAINS, PidPdGains, PidPdPolicy, Saturation};
 
 use crate::plant::Measurement;
 

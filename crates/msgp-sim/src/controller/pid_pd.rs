@@ -13,6 +13,17 @@ use crate::plant::Measurement;
 /// `s = [theta, theta_dot, x, x_dot, integral of x]`. See [`PidPdGains::from_lqr`].
 pub const APOLLO_LQR_GAINS: [f64; 5] = [-34.55, -7.03, -1.98, -3.73, -0.3];
 
+/// How a policy limits its command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Saturation {
+    /// Hard clipping to `±action_limit`.
+    #[default]
+    Clip,
+    /// PILCO's sine saturation (unit slope at 0, smooth, bounded by the limit).
+    Sine,
+}
+
 /// Gains of the PID (end-effector position) + PD (pole angle) policy.
 ///
 /// The command is
@@ -40,6 +51,11 @@ pub const APOLLO_LQR_GAINS: [f64; 5] = [-34.55, -7.03, -1.98, -3.73, -0.3];
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct PidPdGains {
+    /// How the command is limited to the action limit: `clip` (default) or `sine`, PILCO's
+    /// smooth saturation `u_max (9 sin s + sin 3s)/8`, `s = 2ũ/(3 u_max)`, which the policy
+    /// search models exactly (`msgp_core::policy::PidPolicy`). Optional in policy files.
+    #[serde(default)]
+    pub saturation: Saturation,
     /// Proportional gain on the end-effector position \[1/s²\].
     pub kp_x: f64,
     /// Integral gain on the end-effector position \[1/s³\].
@@ -61,6 +77,7 @@ impl PidPdGains {
             kp_x: -k[2],
             kd_x: -k[3],
             ki_x: -k[4],
+            saturation: Saturation::Clip,
         }
     }
 
@@ -96,6 +113,7 @@ impl PidPdGains {
             kd_x: g[2],
             kp_theta: g[3],
             kd_theta: g[4],
+            saturation: Saturation::Clip,
         }
     }
 
@@ -208,7 +226,10 @@ impl Controller for PidPdPolicy {
             + g.kd_x * dx
             + g.kp_theta * y.theta
             + g.kd_theta * dtheta;
-        u.clamp(-self.action_limit, self.action_limit)
+        match g.saturation {
+            Saturation::Clip => u.clamp(-self.action_limit, self.action_limit),
+            Saturation::Sine => msgp_core::policy::PidPolicy::<f64>::saturate(u, self.action_limit),
+        }
     }
 
     fn describe(&self) -> String {
@@ -274,5 +295,45 @@ mod tests {
         assert!(PidPdGains::from_json_str(with_extra, "test").is_ok());
         assert!(PidPdGains::from_json_str(r#"{"kp_x":1}"#, "test").is_err());
         assert!(PidPdGains::from_json_str("not json", "test").is_err());
+    }
+}
+
+#[cfg(test)]
+mod saturation_tests {
+    use super::*;
+
+    #[test]
+    fn sine_saturation_is_smooth_bounded_and_parsed_from_policy_files() {
+        let json = r#"{"kp_x": 0, "ki_x": 0, "kd_x": 0, "kp_theta": 100, "kd_theta": 0, "saturation": "sine"}"#;
+        let gains = PidPdGains::from_json_str(json, "test").expect("parse");
+        assert_eq!(gains.saturation, Saturation::Sine);
+        let legacy = PidPdGains::from_json_str(
+            r#"{"kp_x":0,"ki_x":0,"kd_x":0,"kp_theta":1,"kd_theta":0}"#,
+            "t",
+        )
+        .expect("parse");
+        assert_eq!(legacy.saturation, Saturation::Clip);
+        let params = PendulumParams::default();
+        let mut p = PidPdPolicy::new(gains, &params).expect("policy");
+        let small = p.command(
+            0.0,
+            &Measurement {
+                theta: 1e-4,
+                x: 0.0,
+            },
+        );
+        assert!((small - 1e-2).abs() < 1e-6, "unit slope near zero: {small}");
+        p.reset();
+        let big = p.command(
+            0.0,
+            &Measurement {
+                theta: 0.07,
+                x: 0.0,
+            },
+        );
+        assert!(
+            big <= params.action_limit + 1e-12 && big > 2.9,
+            "saturates smoothly: {big}"
+        );
     }
 }
