@@ -9,6 +9,9 @@ use std::path::PathBuf;
 /// message), so print the whole chain, e.g. with anyhow's `{:#}`.
 #[derive(Debug, thiserror::Error)]
 pub enum SimError {
+    /// Model learning or policy search failed.
+    #[error("model: {0}")]
+    Model(#[from] msgp_core::MsgpError),
     /// A plant parameter, controller gain or episode setting is out of range.
     #[error("invalid {name} = {value}: {reason}")]
     InvalidParameter {

@@ -33,6 +33,7 @@ pub mod actuator;
 pub mod controller;
 pub mod episode;
 pub mod error;
+pub mod learn;
 pub mod log;
 pub mod params;
 pub mod physics;

@@ -1,0 +1,284 @@
+//! PILCO with MSGP (or one-step GP-NARX) models on the simulated pendulum: learning to balance
+//! from scratch (paper section 4.2).
+//!
+//! The loop: `random_rollouts` episodes of smooth random excitation → fit the model on every
+//! episode so far (random ones feed-forward, policy ones in closed loop under the gains that ran
+//! them, the paper's `L_fb`) → optimise the PID + PD gains on the model (expected saturating
+//! cost of a closed-loop moment-matching rollout from rest, exact dual gradients) → run them on
+//! the simulator for one episode → repeat. After every iteration the simulator's stability test
+//! judges the gains; it is neither interaction time nor training data.
+//!
+//! Outputs are `[θ, x]` (measured), the input is the commanded acceleration; the modelled policy
+//! is [`msgp_core::policy::PidPolicy`] with the sine saturation that the simulator's policy
+//! applies when its gains say `saturation: sine`.
+
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+use msgp_core::cost::SaturatingCost;
+use msgp_core::fit::{FitSettings, TrainingEpisode, fit_episodes};
+use msgp_core::model::Method;
+use msgp_core::policy::{PidPolicy, PolicySpec};
+use msgp_core::policy_search::{PidMask, PolicyProblem, PolicySearchSettings, optimise_pid};
+use msgp_core::trajectory::Trajectory;
+
+use crate::controller::{ExcitationConfig, PidPdGains, PidPdPolicy, RandomExcitation, Saturation};
+use crate::episode::{Episode, EpisodeConfig, run_episode};
+use crate::error::SimError;
+use crate::params::PendulumParams;
+use crate::stability::{StabilityCriteria, stability_test};
+
+/// Settings of the learning loop.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LearnSettings {
+    /// Model training method (`Msgp` or the one-step `GpNarx` of standard PILCO).
+    pub method: Method,
+    /// Policy-learning iterations after the random rollouts.
+    pub iterations: usize,
+    /// Random-excitation episodes before the first policy.
+    pub random_rollouts: usize,
+    /// Length of every interaction episode \[s\].
+    pub episode_seconds: f64,
+    /// Seed of everything random (episodes, excitation, fits, restarts).
+    pub seed: u64,
+    /// Model fit settings (history, inducing points, iterations).
+    pub fit: FitSettings,
+    /// Policy optimisation settings.
+    pub search: PolicySearchSettings,
+    /// Cost widths for `[θ, x]` (rad, m): `c = 1 − exp(−½ Σ (y_j / w_j)²)`.
+    pub cost_widths: [f64; 2],
+    /// Typical gain magnitudes `[kp_x, ki_x, kd_x, kp_θ, kd_θ]`: the first policy's gains and
+    /// the optimiser's coordinate scales (units of the problem, not a solution).
+    pub gain_scale: [f64; 5],
+}
+
+impl Default for LearnSettings {
+    fn default() -> Self {
+        Self {
+            method: Method::Msgp,
+            iterations: 8,
+            random_rollouts: 4,
+            episode_seconds: 3.0,
+            seed: 0,
+            fit: FitSettings {
+                ly: 2,
+                lu: 3,
+                inducing: 50,
+                iterations: 150,
+                validation_fraction: 0.0,
+                ..FitSettings::default()
+            },
+            search: PolicySearchSettings {
+                iterations: 30,
+                learning_rate: 0.1,
+                restarts: 1,
+                restart_spread: 0.5,
+                seed: 0,
+            },
+            cost_widths: [0.1, 0.3],
+            gain_scale: [1.0, 0.3, 1.0, 10.0, 2.0],
+        }
+    }
+}
+
+/// One iteration of the loop.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IterationReport {
+    /// 1-based iteration.
+    pub iteration: usize,
+    /// Expected total cost on the model, from rest.
+    pub predicted_cost: f64,
+    /// Its standard deviation (per-step variances summed; correlations over time ignored).
+    pub predicted_cost_std: f64,
+    /// Cost of the episode actually run, on the measured outputs.
+    pub actual_cost: f64,
+    /// Interaction time so far, random rollouts included \[s\].
+    pub interaction_seconds: f64,
+    /// Whether the gains passed the simulator's stability test.
+    pub stable: bool,
+    /// The gains run in this iteration.
+    pub gains: PidPdGains,
+}
+
+/// Everything the loop produced.
+#[derive(Clone, Debug)]
+pub struct LearnOutcome {
+    /// Per-iteration reports.
+    pub iterations: Vec<IterationReport>,
+    /// Every interaction episode, random ones first.
+    pub episodes: Vec<Episode>,
+    /// The last gains.
+    pub final_gains: PidPdGains,
+}
+
+impl LearnOutcome {
+    /// First iteration whose gains passed the stability test.
+    pub fn first_stable_iteration(&self) -> Option<usize> {
+        self.iterations
+            .iter()
+            .find(|r| r.stable)
+            .map(|r| r.iteration)
+    }
+}
+
+/// `[θ, x]` and the commands of an episode.
+pub fn episode_trajectory(ep: &Episode) -> Result<Trajectory, SimError> {
+    let n = ep.samples.len();
+    let u = DMatrix::from_fn(n, 1, |k, _| ep.samples[k].command);
+    let y = DMatrix::from_fn(n, 2, |k, j| {
+        let m = ep.samples[k].measurement;
+        if j == 0 { m.theta } else { m.x }
+    });
+    Ok(Trajectory::new(u, y)?)
+}
+
+/// The simulator's gains as the modelled policy on `[θ, x]`.
+pub fn modelled_policy(
+    g: &PidPdGains,
+    params: &PendulumParams,
+) -> Result<PidPolicy<f64>, SimError> {
+    Ok(PidPolicy::new(
+        DMatrix::from_row_slice(1, 2, &[g.kp_theta, g.kp_x]),
+        DMatrix::from_row_slice(1, 2, &[0.0, g.ki_x]),
+        DMatrix::from_row_slice(1, 2, &[g.kd_theta, g.kd_x]),
+        params.control_period(),
+        vec![params.action_limit],
+    )?)
+}
+
+fn gains_from(p: &PidPolicy<f64>) -> PidPdGains {
+    PidPdGains {
+        kp_theta: p.kp[(0, 0)],
+        kp_x: p.kp[(0, 1)],
+        ki_x: p.ki[(0, 1)],
+        kd_theta: p.kd[(0, 0)],
+        kd_x: p.kd[(0, 1)],
+        saturation: Saturation::Sine,
+    }
+}
+
+/// Cost of the measured outputs of an episode over the modelled window.
+fn episode_cost(ep: &Episode, cost: &SaturatingCost, from: usize, steps: usize) -> f64 {
+    ep.samples
+        .iter()
+        .skip(from)
+        .take(steps)
+        .map(|s| cost.at(&[s.measurement.theta, s.measurement.x]))
+        .sum()
+}
+
+/// Runs the loop; `progress` sees each iteration as it completes.
+pub fn learn_policy(
+    params: &PendulumParams,
+    settings: &LearnSettings,
+    progress: &mut dyn FnMut(&IterationReport),
+) -> Result<LearnOutcome, SimError> {
+    params.validate()?;
+    let mut episodes: Vec<Episode> = Vec::new();
+    let mut training: Vec<TrainingEpisode> = Vec::new();
+    let mut seconds = 0.0;
+    for k in 0..settings.random_rollouts {
+        let seed = settings.seed.wrapping_mul(1000).wrapping_add(k as u64);
+        let mut excitation = RandomExcitation::new(seed, &ExcitationConfig::default())?;
+        let ep = run_episode(
+            params,
+            &mut excitation,
+            &EpisodeConfig {
+                seconds: settings.episode_seconds,
+                seed,
+                initial_theta: None,
+            },
+        )?;
+        seconds += ep.samples.len().saturating_sub(1) as f64 * params.control_period();
+        training.push(TrainingEpisode {
+            traj: episode_trajectory(&ep)?,
+            policy: None,
+        });
+        episodes.push(ep);
+    }
+    let cost = SaturatingCost::with_widths(DVector::from_element(2, 0.0), &settings.cost_widths)?;
+    let horizon = (settings.episode_seconds * params.control_rate_hz).round() as usize;
+    let s = settings.gain_scale;
+    let mut gains = PidPdGains {
+        kp_x: s[0],
+        ki_x: s[1],
+        kd_x: s[2],
+        kp_theta: s[3],
+        kd_theta: s[4],
+        saturation: Saturation::Sine,
+    };
+    let mask = PidMask {
+        kp: DMatrix::from_element(1, 2, true),
+        ki: DMatrix::from_row_slice(1, 2, &[false, true]),
+        kd: DMatrix::from_element(1, 2, true),
+    };
+    let mut reports = Vec::new();
+    for it in 1..=settings.iterations {
+        let fit_settings = FitSettings {
+            method: settings.method,
+            seed: settings.seed.wrapping_add(it as u64),
+            ..settings.fit.clone()
+        };
+        let (model, _) = fit_episodes(&training, &fit_settings, &mut |_| {})?;
+        let problem = PolicyProblem {
+            model: &model,
+            y0_mean: vec![0.0, 0.0],
+            y0_var: vec![params.initial_theta_std.powi(2), 1e-8],
+            u0: vec![0.0],
+            cost: cost.clone(),
+            horizon,
+        };
+        let search = PolicySearchSettings {
+            seed: settings
+                .search
+                .seed
+                .wrapping_add(settings.seed)
+                .wrapping_add(it as u64),
+            ..settings.search
+        };
+        let result = optimise_pid(&problem, &modelled_policy(&gains, params)?, &mask, &search)?;
+        gains = gains_from(&result.policy);
+        let var: f64 = result.steps.iter().map(|(_, v)| v).sum();
+
+        let seed = settings
+            .seed
+            .wrapping_mul(1000)
+            .wrapping_add(500 + it as u64);
+        let mut controller = PidPdPolicy::new(gains, params)?;
+        let ep = run_episode(
+            params,
+            &mut controller,
+            &EpisodeConfig {
+                seconds: settings.episode_seconds,
+                seed,
+                initial_theta: None,
+            },
+        )?;
+        seconds += ep.samples.len().saturating_sub(1) as f64 * params.control_period();
+        let warm = settings.fit.ly.max(settings.fit.lu);
+        let actual = episode_cost(&ep, &cost, warm, horizon);
+        training.push(TrainingEpisode {
+            traj: episode_trajectory(&ep)?,
+            policy: Some(PolicySpec::Pid(modelled_policy(&gains, params)?)),
+        });
+        episodes.push(ep);
+        let stable =
+            stability_test(params, &gains, settings.seed, &StabilityCriteria::default())?.passed;
+        let report = IterationReport {
+            iteration: it,
+            predicted_cost: result.expected_cost,
+            predicted_cost_std: var.sqrt(),
+            actual_cost: actual,
+            interaction_seconds: seconds,
+            stable,
+            gains,
+        };
+        progress(&report);
+        reports.push(report);
+    }
+    Ok(LearnOutcome {
+        iterations: reports,
+        episodes,
+        final_gains: gains,
+    })
+}
