@@ -157,14 +157,17 @@ fn gains_from(p: &PidPolicy<f64>) -> PidPdGains {
     }
 }
 
-/// Cost of the measured outputs of an episode over the modelled window.
+/// Cost of the measured outputs of an episode over the modelled window; steps after an early
+/// stop (the pole fell or the arm left its range) count the full cost 1.
 fn episode_cost(ep: &Episode, cost: &SaturatingCost, from: usize, steps: usize) -> f64 {
-    ep.samples
+    let measured: Vec<f64> = ep
+        .samples
         .iter()
         .skip(from)
         .take(steps)
         .map(|s| cost.at(&[s.measurement.theta, s.measurement.x]))
-        .sum()
+        .collect();
+    measured.iter().sum::<f64>() + (steps - measured.len()) as f64
 }
 
 /// Runs the loop; `progress` sees each iteration as it completes.
