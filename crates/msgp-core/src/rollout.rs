@@ -188,14 +188,7 @@ pub fn rollout_from<T: Scalar>(
         let wmu = mu.rows(0, d).into_owned();
         let wsigma = sigma.view((0, 0), (d, d)).into_owned();
         let mm = moment_match(gp, &wmu, &wsigma, log)?;
-        let mut xcov = mm.cov.clone();
-        for j in 0..dy {
-            xcov[(j, j)] += gp.outputs[j].sx2;
-        }
-        let mut ycov = xcov.clone();
-        for j in 0..dy {
-            ycov[(j, j)] += gp.outputs[j].sy2;
-        }
+        let (xcov, ycov) = noisy_covariances(gp, &mm.cov);
         if mm.mean.iter().any(|v| !v.re().is_finite()) || ycov.iter().any(|v| !v.re().is_finite()) {
             return Err(MsgpError::NonFinite(format!(
                 "rollout prediction at step {t}"
@@ -378,6 +371,22 @@ pub(crate) fn gather<T: Scalar>(
     let mut sigma = DMatrix::from_fn(d, d, |i, j| acov[(sel[i], sel[j])]);
     symmetrize(&mut sigma);
     (mu, sigma)
+}
+
+/// `Cov[x_{t+1}] = S + Σ_x` and `Cov[y_{t+1}] = S + Σ_x + Σ_y` from the latent `S`.
+pub(crate) fn noisy_covariances<T: Scalar>(
+    gp: &PreparedGp<T>,
+    s: &DMatrix<T>,
+) -> (DMatrix<T>, DMatrix<T>) {
+    let mut xcov = s.clone();
+    for (j, o) in gp.outputs.iter().enumerate() {
+        xcov[(j, j)] += o.sx2;
+    }
+    let mut ycov = xcov.clone();
+    for (j, o) in gp.outputs.iter().enumerate() {
+        ycov[(j, j)] += o.sy2;
+    }
+    (xcov, ycov)
 }
 
 /// Collects every step of a rollout.

@@ -4,15 +4,17 @@
 
 mod common;
 
-use common::{config, normal, random_gp, rng};
+use common::{
+    config, linear_feedback_episodes, normal, random_gp, rng, sys4_problem, two_output_trajectory,
+};
 use msgp_core::gp::{GpParams, GpShape, ParamGroup};
 use msgp_core::grad::{adjoint, dual};
 use msgp_core::linalg::JitterLog;
 use msgp_core::loss::{Complexity, msgp_loss};
 use msgp_core::narx::NarxSpec;
-use msgp_core::policy::{LinearPolicy, PolicySpec};
+use msgp_core::policy::PolicySpec;
 use msgp_core::trajectory::{Episode, Excitation, Trajectory};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 
 fn compare(params: &GpParams<f64>, spec: &NarxSpec, episodes: &[Episode], complexity: Complexity) {
     let shape: GpShape = params.shape().expect("shape");
@@ -48,27 +50,11 @@ fn compare(params: &GpParams<f64>, spec: &NarxSpec, episodes: &[Episode], comple
     }
 }
 
-fn siso_setup(seed: u64) -> (GpParams<f64>, NarxSpec, Trajectory) {
-    let mut r = rng(seed);
-    let spec = NarxSpec::siso(2, 2);
-    let mut params = random_gp(&mut r, 10, spec.input_dim(), 1);
-    let sys = msgp_core::data::SyntheticSystem::new(4).expect("sys");
-    let bench = sys.generate(seed, Default::default()).expect("gen");
-    let traj = bench.train.slice(0, 70);
-    let norm = msgp_core::data::Normalizer::fit(&[&traj]).expect("norm");
-    let traj = norm.apply(&traj);
-    for i in 0..10 {
-        let w = spec.window(&traj.y, &traj.u, 2 + 6 * i);
-        for (k, v) in w.into_iter().enumerate() {
-            params.pseudo_inputs[(i, k)] = v + 0.1 * normal(&mut r);
-        }
-    }
-    (params, spec, traj)
-}
-
 #[test]
 fn open_loop_single_output() {
-    let (params, spec, traj) = siso_setup(21);
+    let spec = NarxSpec::siso(2, 2);
+    let mut r = rng(21);
+    let (params, traj) = sys4_problem(&mut r, 21, 10, &spec, 70);
     let eps = vec![
         Episode::feed_forward(traj.clone()),
         Episode::feed_forward(traj.slice(5, 60)),
@@ -93,25 +79,13 @@ fn closed_and_open_loop_two_outputs() {
         du: 1,
     };
     let params = random_gp(&mut r, 9, spec.input_dim(), 2);
-    let n = 55;
-    let y = DMatrix::from_fn(n, 2, |t, j| {
-        0.5 * ((t as f64) * 0.2 + j as f64).sin() + 0.05 * normal(&mut r)
-    });
-    let u = DMatrix::from_fn(n, 1, |t, _| 0.3 * ((t as f64) * 0.13).cos());
-    let traj = Trajectory::new(u, y).expect("traj");
-    let policy = LinearPolicy::new(
-        DMatrix::from_row_slice(1, 2, &[-0.6, 0.3]),
-        DVector::from_vec(vec![0.05]),
-    )
-    .expect("policy");
-    let eps = vec![
-        Episode {
-            traj: traj.clone(),
-            excitation: Excitation::Feedback(Box::new(PolicySpec::Linear(policy))),
-        },
-        Episode::feed_forward(traj),
-    ];
-    compare(&params, &spec, &eps, Complexity::PseudoDataNll);
+    let traj = two_output_trajectory(&mut r, 55);
+    compare(
+        &params,
+        &spec,
+        &linear_feedback_episodes(&traj),
+        Complexity::PseudoDataNll,
+    );
 }
 
 #[test]

@@ -8,16 +8,16 @@
 
 mod common;
 
-use common::{config, normal, random_gp, rng};
+use common::{
+    config, linear_feedback_episodes, random_gp, rng, sys4_problem, two_output_trajectory,
+};
 use msgp_core::gp::{GpParams, GpShape, ParamGroup};
 use msgp_core::grad::dual::gradient;
 use msgp_core::linalg::JitterLog;
 use msgp_core::loss::{Complexity, msgp_loss};
 use msgp_core::narx::NarxSpec;
-use msgp_core::policy::{LinearPolicy, PolicySpec};
 use msgp_core::scalar::Scalar;
-use msgp_core::trajectory::{Episode, Excitation, Trajectory};
-use nalgebra::{DMatrix, DVector};
+use msgp_core::trajectory::Episode;
 
 fn loss_at<T: Scalar>(
     shape: GpShape,
@@ -91,19 +91,7 @@ fn check_gradients(
 fn open_loop_gradients_match_finite_differences() {
     let mut r = rng(11);
     let spec = NarxSpec::siso(2, 1);
-    let mut params = random_gp(&mut r, 8, spec.input_dim(), 1);
-    // data from synthetic system 4 (normalised roughly), 60 samples
-    let sys = msgp_core::data::SyntheticSystem::new(4).expect("sys");
-    let bench = sys.generate(3, Default::default()).expect("gen");
-    let traj = bench.train.slice(0, 60);
-    let norm = msgp_core::data::Normalizer::fit(&[&traj]).expect("norm");
-    let traj = norm.apply(&traj);
-    for i in 0..8 {
-        let w = spec.window(&traj.y, &traj.u, 2 + 6 * i);
-        for (k, v) in w.into_iter().enumerate() {
-            params.pseudo_inputs[(i, k)] = v + 0.1 * normal(&mut r);
-        }
-    }
+    let (params, traj) = sys4_problem(&mut r, 3, 8, &spec, 60);
     let episodes = vec![
         Episode::feed_forward(traj.clone()),
         Episode::feed_forward(traj.slice(10, 60)),
@@ -121,23 +109,11 @@ fn closed_loop_gradients_match_finite_differences() {
         du: 1,
     };
     let params = random_gp(&mut r, 8, spec.input_dim(), 2);
-    let n = 55;
-    let y = DMatrix::from_fn(n, 2, |t, j| {
-        0.5 * ((t as f64) * 0.2 + j as f64).sin() + 0.05 * normal(&mut r)
-    });
-    let u = DMatrix::from_fn(n, 1, |t, _| 0.3 * ((t as f64) * 0.13).cos());
-    let traj = Trajectory::new(u, y).expect("traj");
-    let policy = LinearPolicy::new(
-        DMatrix::from_row_slice(1, 2, &[-0.6, 0.3]),
-        DVector::from_vec(vec![0.05]),
-    )
-    .expect("policy");
-    let episodes = vec![
-        Episode {
-            traj: traj.clone(),
-            excitation: Excitation::Feedback(Box::new(PolicySpec::Linear(policy))),
-        },
-        Episode::feed_forward(traj),
-    ];
-    check_gradients(&params, &spec, &episodes, Complexity::PseudoDataNll);
+    let traj = two_output_trajectory(&mut r, 55);
+    check_gradients(
+        &params,
+        &spec,
+        &linear_feedback_episodes(&traj),
+        Complexity::PseudoDataNll,
+    );
 }

@@ -22,7 +22,9 @@ use msgp_core::policy::{PidPolicy, PolicySpec};
 use msgp_core::policy_search::{PidMask, PolicyProblem, PolicySearchSettings, optimise_pid};
 use msgp_core::trajectory::Trajectory;
 
-use crate::controller::{ExcitationConfig, PidPdGains, PidPdPolicy, RandomExcitation, Saturation};
+use crate::controller::{
+    Controller, ExcitationConfig, PidPdGains, PidPdPolicy, RandomExcitation, Saturation,
+};
 use crate::episode::{Episode, EpisodeConfig, run_episode};
 use crate::error::SimError;
 use crate::params::PendulumParams;
@@ -170,6 +172,27 @@ fn episode_cost(ep: &Episode, cost: &SaturatingCost, from: usize, steps: usize) 
     measured.iter().sum::<f64>() + (steps - measured.len()) as f64
 }
 
+/// One interaction episode from a random initial angle; adds its duration to `seconds`.
+fn interact(
+    params: &PendulumParams,
+    controller: &mut dyn Controller,
+    length: f64,
+    seed: u64,
+    seconds: &mut f64,
+) -> Result<Episode, SimError> {
+    let ep = run_episode(
+        params,
+        controller,
+        &EpisodeConfig {
+            seconds: length,
+            seed,
+            initial_theta: None,
+        },
+    )?;
+    *seconds += ep.samples.len().saturating_sub(1) as f64 * params.control_period();
+    Ok(ep)
+}
+
 /// Runs the loop; `progress` sees each iteration as it completes.
 pub fn learn_policy(
     params: &PendulumParams,
@@ -183,16 +206,13 @@ pub fn learn_policy(
     for k in 0..settings.random_rollouts {
         let seed = settings.seed.wrapping_mul(1000).wrapping_add(k as u64);
         let mut excitation = RandomExcitation::new(seed, &ExcitationConfig::default())?;
-        let ep = run_episode(
+        let ep = interact(
             params,
             &mut excitation,
-            &EpisodeConfig {
-                seconds: settings.episode_seconds,
-                seed,
-                initial_theta: None,
-            },
+            settings.episode_seconds,
+            seed,
+            &mut seconds,
         )?;
-        seconds += ep.samples.len().saturating_sub(1) as f64 * params.control_period();
         training.push(TrainingEpisode {
             traj: episode_trajectory(&ep)?,
             policy: None,
@@ -248,16 +268,13 @@ pub fn learn_policy(
             .wrapping_mul(1000)
             .wrapping_add(500 + it as u64);
         let mut controller = PidPdPolicy::new(gains, params)?;
-        let ep = run_episode(
+        let ep = interact(
             params,
             &mut controller,
-            &EpisodeConfig {
-                seconds: settings.episode_seconds,
-                seed,
-                initial_theta: None,
-            },
+            settings.episode_seconds,
+            seed,
+            &mut seconds,
         )?;
-        seconds += ep.samples.len().saturating_sub(1) as f64 * params.control_period();
         let warm = settings.fit.ly.max(settings.fit.lu);
         let actual = episode_cost(&ep, &cost, warm, horizon);
         training.push(TrainingEpisode {

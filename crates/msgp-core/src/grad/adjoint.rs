@@ -22,7 +22,7 @@ use crate::linalg::{JitterLog, cholesky, symmetrize};
 use crate::loss::{Complexity, LossValue, complexity_term, gaussian_nll};
 use crate::narx::NarxSpec;
 use crate::policy::{FeedbackPolicy, PolicyMoments, PolicySpec};
-use crate::rollout::{Layout, gather, initial_window};
+use crate::rollout::{Layout, gather, initial_window, noisy_covariances};
 use crate::trajectory::{Episode, Excitation, Trajectory};
 
 /// Adjoint accumulators for the quantities the rollout reads from the prepared GP.
@@ -434,14 +434,7 @@ fn episode_adjoint(
     for t in t0..horizon {
         let wsig = sigma.view((0, 0), (d, d)).into_owned();
         let mm = mm_forward(gp, &mu.rows(0, d).into_owned(), &wsig, log)?;
-        let mut xcov = mm.cov.clone();
-        for j in 0..dy {
-            xcov[(j, j)] += gp.outputs[j].sx2;
-        }
-        let mut ycov = xcov.clone();
-        for j in 0..dy {
-            ycov[(j, j)] += gp.outputs[j].sy2;
-        }
+        let (xcov, ycov) = noisy_covariances(gp, &mm.cov);
         let yrow: Vec<f64> = (0..dy).map(|j| traj.y[(t, j)]).collect();
         nll += gaussian_nll(&yrow, &mm.mean, &ycov, &gp.jitter, &mut nll_log)?;
         if !nll.is_finite() {
