@@ -346,8 +346,9 @@ fn mm_backward(
 
 /// What the forward rollout records per step.
 struct StepRecord {
-    mu: DVector<f64>,
     sigma: DMatrix<f64>,
+    /// The moment-matching intermediates (kept, not recomputed: ≈ 8·m²·pairs bytes per step).
+    cache: MmCache,
     ycov: DMatrix<f64>,
     resid: DVector<f64>,
     v: DMatrix<f64>,
@@ -443,16 +444,18 @@ fn episode_adjoint(
             )));
         }
         let v = DMatrix::from_fn(d, dy, |k, a| mm.outs[a].acc[k]);
+        let resid = DVector::from_fn(dy, |j, _| yrow[j] - mm.mean[j]);
+        let mean = mm.mean.clone();
         let mut rec = StepRecord {
-            mu: mu.clone(),
             sigma: sigma.clone(),
+            cache: mm,
             ycov: ycov.clone(),
-            resid: DVector::from_fn(dy, |j, _| yrow[j] - mm.mean[j]),
+            resid,
             v: v.clone(),
             policy: None,
         };
         if t + 1 < horizon {
-            let (mut amu, mut acov) = layout.augmented(&mu, &sigma, &mm.mean, &v, &xcov);
+            let (mut amu, mut acov) = layout.augmented(&mu, &sigma, &mean, &v, &xcov);
             match &pol {
                 None => {
                     for j in 0..du {
@@ -557,9 +560,7 @@ fn episode_adjoint(
             adj.sx2[j] += xcovbar[(j, j)];
         }
         let wsig = rec.sigma.view((0, 0), (d, d)).into_owned();
-        let mut scratch = JitterLog::default();
-        let cache = mm_forward(gp, &rec.mu.rows(0, d).into_owned(), &wsig, &mut scratch)?;
-        let (mub, sigb) = mm_backward(gp, &wsig, &cache, &mbar, &xcovbar, &vbar, adj);
+        let (mub, sigb) = mm_backward(gp, &wsig, &rec.cache, &mbar, &xcovbar, &vbar, adj);
         for k in 0..d {
             mubar[k] += mub[k];
         }
