@@ -46,7 +46,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         (0.5711, 0.3287),
         (0.0164, 0.0143),
     ][usize::from(args.system - 1)];
-    println!("method    test RMSE   NLL/step  2σ coverage  train time  (paper RMSE)");
+    crate::output::out("method    test RMSE   NLL/step  2σ coverage  train time  (paper RMSE)")?;
     for (method, paper_rmse) in [(Method::GpNarx, paper.0), (Method::Msgp, paper.1)] {
         let settings = FitSettings {
             method,
@@ -76,14 +76,14 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         })
         .with_context(|| format!("fitting {}", method.name()))?;
         let metrics = model.evaluate(&bench.test)?;
-        println!(
+        crate::output::out(&format!(
             "{:<9} {:>9.4}  {:>9.3}  {:>11.3}  {:>8.1} s  ({paper_rmse:.4})",
             method.name(),
             metrics.rmse,
             metrics.nll,
             metrics.coverage_2sigma,
             started.elapsed().as_secs_f64()
-        );
+        ))?;
         if method == Method::Msgp {
             eprintln!(
                 "  kept iteration {} of {} (early stopping on the last 20% of the training data)",

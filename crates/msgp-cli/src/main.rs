@@ -1,6 +1,15 @@
-//! `msgp`: the command-line front of msgp-core (a thin clap layer).
+//! `msgp`: the command-line front of msgp-core (a thin clap layer: commands parse their
+//! arguments and call library functions).
 
+mod dataset;
 mod demo;
+mod eval_cmd;
+mod fit_cmd;
+mod output;
+mod plot;
+mod progress;
+mod report;
+mod reproduce;
 mod sim_cmd;
 
 use clap::{Parser, Subcommand};
@@ -15,6 +24,15 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Fit a model on CSV or MCAP data, save it, and score it on the held-out part.
+    Fit(Box<fit_cmd::FitArgs>),
+    /// Free simulation of data files with a saved model: RMSE, NLL and 2σ coverage.
+    Eval(Box<eval_cmd::EvalArgs>),
+    /// Free simulation with a saved model, written as CSV (mean, std, measured per step).
+    Simulate(Box<eval_cmd::SimulateArgs>),
+    /// Reproduce the paper's results.
+    #[command(subcommand)]
+    Reproduce(reproduce::ReproduceCommand),
     /// Generate the paper's synthetic system 4, fit GP-NARX and MSGP, print test RMSE.
     Demo(demo::DemoArgs),
     /// Simulate the pole on the robot end effector (rapier), run stability tests.
@@ -25,6 +43,10 @@ enum Command {
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
+        Command::Fit(args) => fit_cmd::run(args),
+        Command::Eval(args) => eval_cmd::run_eval(args),
+        Command::Simulate(args) => eval_cmd::run_simulate(args),
+        Command::Reproduce(cmd) => reproduce::run(cmd),
         Command::Demo(args) => demo::run(args),
         Command::Sim(cmd) => sim_cmd::run(cmd),
     };

@@ -299,16 +299,16 @@ fn run_pendulum(args: &PendulumArgs) -> anyhow::Result<()> {
             "seed": episode.info.seed,
             "controller": episode.info.controller,
         });
-        println!("{summary}");
+        crate::output::out(&summary.to_string())?;
     } else {
-        println!(
+        crate::output::out(&format!(
             "wrote {}: {} steps, {duration:.2} s simulated, initial θ {:+.4} rad, termination {:?}, controller: {}",
             args.out.display(),
             episode.samples.len(),
             episode.info.initial_theta,
             episode.info.termination,
             episode.info.controller
-        );
+        ))?;
     }
     Ok(())
 }
@@ -321,15 +321,17 @@ fn run_stability(args: &StabilityArgs) -> anyhow::Result<()> {
     };
     let report = stability_test(&params, &gains, args.seed, &StabilityCriteria::default())?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        crate::output::out(&serde_json::to_string_pretty(&report)?)?;
     } else {
-        println!(
+        crate::output::out(&format!(
             "gains kp_x={} ki_x={} kd_x={} kp_theta={} kd_theta={}, seed {}",
             gains.kp_x, gains.ki_x, gains.kd_x, gains.kp_theta, gains.kd_theta, args.seed
-        );
-        println!("  θ0 [rad]  result  max|θ| [rad]  max|x| [m]  RMS θ last 5 s  failure");
+        ))?;
+        crate::output::out(
+            "  θ0 [rad]  result  max|θ| [rad]  max|x| [m]  RMS θ last 5 s  failure",
+        )?;
         for s in &report.starts {
-            println!(
+            crate::output::out(&format!(
                 "  {:+8.3}  {:6}  {:12.4}  {:10.4}  {:14.4}  {}",
                 s.initial_theta,
                 if s.passed { "PASS" } else { "FAIL" },
@@ -337,7 +339,7 @@ fn run_stability(args: &StabilityArgs) -> anyhow::Result<()> {
                 s.max_abs_x,
                 s.rms_theta_final,
                 s.failure.as_deref().unwrap_or("")
-            );
+            ))?;
         }
     }
     let failed = report.starts.iter().filter(|s| !s.passed).count();
@@ -348,7 +350,7 @@ fn run_stability(args: &StabilityArgs) -> anyhow::Result<()> {
         );
     }
     if !args.json {
-        println!("stability test passed");
+        crate::output::out("stability test passed")?;
     }
     Ok(())
 }

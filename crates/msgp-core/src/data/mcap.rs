@@ -15,7 +15,8 @@
 //! Only the `json` message encoding is read; a topic with another encoding (ROS 2 `cdr`,
 //! protobuf, ...) is reported as an error when selected. Corrupt or truncated files, unknown
 //! topics, unknown fields and non-numeric values are errors that name the file, the topic, the
-//! message and the field; nothing here panics on bad input.
+//! message and the field; nothing here panics on bad input, and a corrupt length field cannot
+//! make it allocate more than 64 × the file size (at most 1 GiB) per record.
 
 use std::collections::HashMap;
 use std::fmt;
@@ -101,6 +102,13 @@ fn normalize_path(field: &str) -> String {
         .join(".")
 }
 
+/// Largest record (or decompressed chunk) accepted, for a file of `len` bytes: 64 × the file
+/// size, at least 1 MiB and at most 1 GiB. A corrupt length field then gives an error instead
+/// of an attempt to allocate exabytes.
+fn record_limit(len: usize) -> usize {
+    len.saturating_mul(64).clamp(1 << 20, 1 << 30)
+}
+
 #[derive(Clone, Debug)]
 struct RawMessage {
     topic: usize,
@@ -148,8 +156,22 @@ impl McapLog {
         let mut topics: Vec<TopicInfo> = Vec::new();
         let mut by_topic: HashMap<String, usize> = HashMap::new();
         let mut messages = Vec::new();
-        for message in mcap::MessageStream::new(bytes).map_err(corrupt)? {
-            let message = message.map_err(corrupt)?;
+        let mut reader = mcap::sans_io::MessageReader::new_with_options(
+            mcap::sans_io::LinearReaderOptions::default()
+                .with_record_length_limit(record_limit(bytes.len())),
+        );
+        let mut rest = bytes;
+        while let Some(event) = reader.next_event() {
+            let message = match event.map_err(corrupt)? {
+                mcap::sans_io::MessageReadEvent::ReadRequest(need) => {
+                    let n = need.min(rest.len());
+                    reader.insert(n).copy_from_slice(&rest[..n]);
+                    reader.notify_read(n);
+                    rest = &rest[n..];
+                    continue;
+                }
+                mcap::sans_io::MessageReadEvent::Message(m) => m,
+            };
             let ch = &message.channel;
             let k = match by_topic.get(&ch.topic) {
                 Some(&k) => {

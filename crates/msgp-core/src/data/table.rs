@@ -70,7 +70,9 @@ impl Table {
             .has_headers(true)
             .trim(csv::Trim::All)
             .from_reader(bytes);
-        let header = reader.headers().map_err(|e| csv_err(path, &e, "header"))?;
+        let header = reader
+            .headers()
+            .map_err(|e| csv_err(path, &e, "header", &mut LineCounter::new(bytes)))?;
         let columns: Vec<String> = header.iter().map(str::to_string).collect();
         for (j, name) in columns.iter().enumerate() {
             if name.is_empty() {
@@ -87,9 +89,11 @@ impl Table {
         }
         let mut rows = Vec::new();
         let mut lines = Vec::new();
+        // the csv crate's line counter skips blank lines; count newlines before each record
+        let mut counter = LineCounter::new(bytes);
         for rec in reader.records() {
-            let rec = rec.map_err(|e| csv_err(path, &e, "data"))?;
-            let line = rec.position().map_or(0, |p| p.line());
+            let rec = rec.map_err(|e| csv_err(path, &e, "data", &mut counter))?;
+            let line = rec.position().map_or(0, |p| counter.line_at(p.byte()));
             if rec.len() == 1 && rec.get(0).is_some_and(str::is_empty) && columns.len() > 1 {
                 continue; // a blank line
             }
@@ -175,7 +179,8 @@ impl Table {
     /// [`EPISODE_COLUMN`], or the whole table when there is no such column.
     pub fn episodes(&self) -> Vec<Range<usize>> {
         let Some(e) = self.columns.iter().position(|c| c == EPISODE_COLUMN) else {
-            return vec![0..self.rows.len()];
+            let whole: Range<usize> = 0..self.rows.len();
+            return std::iter::once(whole).collect();
         };
         let mut out = Vec::new();
         let mut start = 0;
@@ -235,9 +240,47 @@ impl Table {
     }
 }
 
+/// 1-based line numbers of byte offsets, for offsets that never decrease.
+struct LineCounter<'a> {
+    bytes: &'a [u8],
+    offset: usize,
+    line: u64,
+}
+
+impl<'a> LineCounter<'a> {
+    fn new(bytes: &'a [u8]) -> Self {
+        Self {
+            bytes,
+            offset: 0,
+            line: 1,
+        }
+    }
+
+    /// Line of the first non-newline byte at or after `offset` (offsets before the last one
+    /// asked give the last line).
+    fn line_at(&mut self, offset: u64) -> u64 {
+        let mut end = usize::try_from(offset)
+            .unwrap_or(usize::MAX)
+            .min(self.bytes.len());
+        // a record's position may point at the blank lines before it
+        while end < self.bytes.len() && matches!(self.bytes[end], b'\n' | b'\r') {
+            end += 1;
+        }
+        if end > self.offset {
+            let newlines = self.bytes[self.offset..end]
+                .iter()
+                .filter(|&&b| b == b'\n')
+                .count();
+            self.line += newlines as u64;
+            self.offset = end;
+        }
+        self.line
+    }
+}
+
 /// A csv-crate error as a message with the line (and field) it happened at.
-fn csv_err(path: &Path, e: &csv::Error, what: &str) -> MsgpError {
-    let line = e.position().map_or(0, csv::Position::line);
+fn csv_err(path: &Path, e: &csv::Error, what: &str, lines: &mut LineCounter<'_>) -> MsgpError {
+    let line = e.position().map_or(0, |p| lines.line_at(p.byte()));
     match e.kind() {
         csv::ErrorKind::UnequalLengths {
             expected_len, len, ..

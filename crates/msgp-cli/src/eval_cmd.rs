@@ -1,0 +1,236 @@
+//! `msgp eval` and `msgp simulate`: free simulation of data files with a saved model.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::Args;
+use msgp_core::model::Model;
+use msgp_core::model_file::{ModelFile, write_atomically};
+use serde_json::json;
+
+use crate::dataset::{
+    DataArgs, Dataset, Part, Selection, Simulated, check_lengths, pool, simulate_all,
+};
+use crate::output::{out, out_json};
+use crate::plot::plot;
+use crate::report::{metrics_json, metrics_line, trajectories};
+
+/// Options of `msgp eval`.
+#[derive(Debug, Args)]
+pub struct EvalArgs {
+    /// Model file written by `msgp fit`.
+    #[arg(long, value_name = "MODEL.json")]
+    model: PathBuf,
+    #[command(flatten)]
+    data: DataArgs,
+    /// Simulate each trajectory from sample N on (the first max(l_y, l_u) samples from N seed
+    /// the simulation).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    from: usize,
+    /// Write a PNG of the free simulation.
+    #[arg(long, value_name = "OUT.png")]
+    plot: Option<PathBuf>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Options of `msgp simulate`.
+#[derive(Debug, Args)]
+pub struct SimulateArgs {
+    /// Model file written by `msgp fit`.
+    #[arg(long, value_name = "MODEL.json")]
+    model: PathBuf,
+    #[command(flatten)]
+    data: DataArgs,
+    /// Simulate each trajectory from sample N on.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    from: usize,
+    /// Output CSV: `t, <output>_mean, <output>_std, <output>` per simulated step (and an
+    /// `episode` column first when there are several trajectories).
+    #[arg(long, value_name = "PRED.csv")]
+    out: PathBuf,
+    /// Print a JSON summary instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// The model, its file and the data sliced from `from`.
+struct Loaded {
+    file: ModelFile,
+    model: Model,
+    data: Dataset,
+    parts: Vec<Part>,
+}
+
+fn load(model_path: &std::path::Path, args: &DataArgs, from: usize) -> anyhow::Result<Loaded> {
+    let file = ModelFile::read(model_path)?;
+    let model = file.to_model_at(model_path)?;
+    let check = |given: &[String], saved: &[String], what: &str| -> anyhow::Result<()> {
+        if !given.is_empty() && given.len() != saved.len() {
+            bail!(
+                "the model has {} {what}(s) ({}); --{what} names {}",
+                saved.len(),
+                saved.join(", "),
+                given.len()
+            );
+        }
+        Ok(())
+    };
+    check(&args.input, &file.inputs, "input")?;
+    check(&args.output, &file.outputs, "output")?;
+    let inputs = if args.input.is_empty() {
+        &file.inputs
+    } else {
+        &args.input
+    };
+    let outputs = if args.output.is_empty() {
+        &file.outputs
+    } else {
+        &args.output
+    };
+    let data = Dataset::load(
+        &args.data,
+        &Selection {
+            inputs,
+            outputs,
+            topic: args.topic.as_deref(),
+        },
+    )?;
+    let mut parts = Vec::new();
+    for p in &data.parts {
+        if from >= p.traj.len() {
+            bail!(
+                "{}: --from {from} is past its {} samples",
+                p.label(),
+                p.traj.len()
+            );
+        }
+        parts.push(p.slice(from, p.traj.len()));
+    }
+    check_lengths(&parts, model.spec.warmup(), "simulated")?;
+    Ok(Loaded {
+        file,
+        model,
+        data,
+        parts,
+    })
+}
+
+/// Runs `msgp eval`.
+pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
+    let l = load(&args.model, &args.data, args.from)?;
+    let sims = simulate_all(&l.model, &l.parts)?;
+    let metrics = pool(
+        &sims.iter().map(|s| s.metrics).collect::<Vec<_>>(),
+        l.model.spec.dy,
+    );
+    if let Some(p) = &args.plot {
+        plot(
+            p,
+            &format!("{} free simulation", l.file.method),
+            &l.data.outputs,
+            &sims,
+        )?;
+    }
+    let n: usize = l.parts.iter().map(|p| p.traj.len()).sum();
+    if args.json {
+        let mut v = json!({
+            "command": "eval",
+            "model": args.model.display().to_string(),
+            "method": l.file.method,
+            "history": [l.model.spec.ly, l.model.spec.lu],
+            "inducing": l.model.params.pseudo_inputs.nrows(),
+            "seed": l.file.training.seed,
+            "trajectories": l.parts.len(),
+            "n_test": n,
+            "from": args.from,
+            "plot": args.plot.as_ref().map(|p| p.display().to_string()),
+        });
+        metrics_json(&mut v, metrics.as_ref());
+        return out_json(&v);
+    }
+    let mut text = format!(
+        "{} model {} on {} ({n} samples from sample {})\n",
+        l.file.method,
+        args.model.display(),
+        trajectories(l.parts.len()),
+        args.from
+    );
+    text.push_str(&metrics_line("free simulation", metrics.as_ref()));
+    if let Some(p) = &args.plot {
+        text.push_str(&format!("\nplot written to {}", p.display()));
+    }
+    out(&text)
+}
+
+/// The prediction CSV.
+fn prediction_csv(outputs: &[String], sims: &[Simulated]) -> String {
+    let several = sims.len() > 1;
+    let mut s = String::new();
+    if several {
+        s.push_str("episode,");
+    }
+    s.push('t');
+    for name in outputs {
+        // writing to a String cannot fail
+        let _ = write!(s, ",{name}_mean,{name}_std,{name}");
+    }
+    s.push('\n');
+    for (k, sim) in sims.iter().enumerate() {
+        let start = sim.sim.start;
+        for i in 0..sim.sim.mean.nrows() {
+            if several {
+                let _ = match sim.part.episode {
+                    Some(e) => write!(s, "{e},"),
+                    None => write!(s, "{k},"),
+                };
+            }
+            let _ = write!(s, "{}", sim.part.times[start + i]);
+            for j in 0..outputs.len() {
+                let _ = write!(
+                    s,
+                    ",{},{},{}",
+                    sim.sim.mean[(i, j)],
+                    sim.sim.var[(i, j)].max(0.0).sqrt(),
+                    sim.part.traj.y[(start + i, j)]
+                );
+            }
+            s.push('\n');
+        }
+    }
+    s
+}
+
+/// Runs `msgp simulate`.
+pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
+    let l = load(&args.model, &args.data, args.from)?;
+    let sims = simulate_all(&l.model, &l.parts)?;
+    let csv = prediction_csv(&l.data.outputs, &sims);
+    write_atomically(&args.out, csv.as_bytes())
+        .with_context(|| format!("cannot write predictions to {}", args.out.display()))?;
+    let rows: usize = sims.iter().map(|s| s.sim.mean.nrows()).sum();
+    let metrics = pool(
+        &sims.iter().map(|s| s.metrics).collect::<Vec<_>>(),
+        l.model.spec.dy,
+    );
+    if args.json {
+        let mut v = json!({
+            "command": "simulate",
+            "model": args.model.display().to_string(),
+            "method": l.file.method,
+            "out": args.out.display().to_string(),
+            "rows": rows,
+            "trajectories": sims.len(),
+        });
+        metrics_json(&mut v, metrics.as_ref());
+        return out_json(&v);
+    }
+    out(&format!(
+        "wrote {rows} simulated steps of {} to {}\n{}",
+        trajectories(sims.len()),
+        args.out.display(),
+        metrics_line("free simulation", metrics.as_ref())
+    ))
+}

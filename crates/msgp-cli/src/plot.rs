@@ -1,0 +1,205 @@
+//! PNG plots of free simulations, like the paper's Figure 3: the measured output, the predicted
+//! mean and the ±2σ band, one panel per output and trajectory.
+//!
+//! Drawn with plotters' bitmap backend; text uses DejaVu Sans embedded in the binary (crate
+//! `dejavu`), so no system font library is needed.
+
+use std::path::Path;
+use std::sync::OnceLock;
+
+use anyhow::{Context, anyhow};
+use plotters::prelude::*;
+use plotters::style::FontStyle;
+
+use crate::dataset::Simulated;
+
+/// Panels beyond this many are left out (the first trajectories are drawn).
+const MAX_PANELS: usize = 6;
+const WIDTH: u32 = 1200;
+const PANEL_HEIGHT: u32 = 340;
+
+/// Registers the embedded font once.
+fn font() -> anyhow::Result<()> {
+    static DONE: OnceLock<bool> = OnceLock::new();
+    let ok = DONE.get_or_init(|| {
+        plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())
+            .is_ok()
+    });
+    if *ok {
+        Ok(())
+    } else {
+        Err(anyhow!("cannot load the embedded font"))
+    }
+}
+
+/// One panel: a trajectory's output `j`.
+struct Panel<'a> {
+    title: String,
+    sim: &'a Simulated,
+    j: usize,
+}
+
+/// Writes the plot of `sims` (output names `outputs`) to `path`; `title` heads every panel.
+pub fn plot(
+    path: &Path,
+    title: &str,
+    outputs: &[String],
+    sims: &[Simulated],
+) -> anyhow::Result<()> {
+    font()?;
+    let mut panels = Vec::new();
+    for s in sims {
+        for (j, name) in outputs.iter().enumerate() {
+            let mut t = format!("{title}: {name}");
+            if sims.len() > 1 {
+                t.push_str(&format!(" — {}", s.part.label()));
+            }
+            panels.push(Panel {
+                title: t,
+                sim: s,
+                j,
+            });
+        }
+    }
+    panels.truncate(MAX_PANELS);
+    if panels.is_empty() {
+        return Err(anyhow!("nothing to plot"));
+    }
+    let height = PANEL_HEIGHT * panels.len() as u32;
+    draw(path, height, &panels).with_context(|| format!("cannot write the plot {}", path.display()))
+}
+
+fn draw(path: &Path, height: u32, panels: &[Panel<'_>]) -> anyhow::Result<()> {
+    let root = BitMapBackend::new(path, (WIDTH, height)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let areas = root.split_evenly((panels.len(), 1));
+    for (area, panel) in areas.iter().zip(panels) {
+        draw_panel(area, panel)?;
+    }
+    root.present().map_err(|e| anyhow!("{e}"))?;
+    Ok(())
+}
+
+fn draw_panel(
+    area: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
+    panel: &Panel<'_>,
+) -> anyhow::Result<()> {
+    let s = panel.sim;
+    let j = panel.j;
+    let start = s.sim.start;
+    let n = s.sim.mean.nrows();
+    let t: Vec<f64> = s.part.times[start..start + n].to_vec();
+    let mean: Vec<f64> = (0..n).map(|i| s.sim.mean[(i, j)]).collect();
+    let sd: Vec<f64> = (0..n).map(|i| s.sim.var[(i, j)].max(0.0).sqrt()).collect();
+    let measured: Vec<f64> = (0..n).map(|i| s.part.traj.y[(start + i, j)]).collect();
+    let lo: Vec<f64> = mean.iter().zip(&sd).map(|(m, d)| m - 2.0 * d).collect();
+    let hi: Vec<f64> = mean.iter().zip(&sd).map(|(m, d)| m + 2.0 * d).collect();
+    let (x0, x1) = bounds(&t);
+    let (y0, y1) = bounds(
+        lo.iter()
+            .chain(&hi)
+            .chain(&measured)
+            .copied()
+            .collect::<Vec<_>>()
+            .as_slice(),
+    );
+    let pad = 0.05 * (y1 - y0).max(1e-12);
+    let (rmse, coverage) = output_metrics(&measured, &mean, &sd);
+    let caption = format!(
+        "{} (RMSE {rmse:.4}, 2σ coverage {coverage:.2})",
+        panel.title
+    );
+    let e = |e: DrawingAreaErrorKind<_>| anyhow!("{e}");
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(36)
+        .y_label_area_size(64)
+        .build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))
+        .map_err(e)?;
+    chart
+        .configure_mesh()
+        .x_desc("t")
+        .x_label_formatter(&|x| tick(*x))
+        .y_label_formatter(&|y| tick(*y))
+        .label_style(("sans-serif", 13))
+        .light_line_style(WHITE.mix(0.0))
+        .draw()
+        .map_err(e)?;
+    let band = RGBColor(220, 60, 60);
+    let mut poly: Vec<(f64, f64)> = t.iter().copied().zip(hi.iter().copied()).collect();
+    poly.extend(t.iter().copied().zip(lo.iter().copied()).rev());
+    chart
+        .draw_series(std::iter::once(Polygon::new(poly, band.mix(0.2).filled())))
+        .map_err(e)?
+        .label("mean ± 2σ")
+        .legend(move |(x, y)| {
+            Rectangle::new([(x, y - 5), (x + 18, y + 5)], band.mix(0.2).filled())
+        });
+    chart
+        .draw_series(LineSeries::new(
+            t.iter().copied().zip(measured.iter().copied()),
+            BLACK.stroke_width(1),
+        ))
+        .map_err(e)?
+        .label("measured")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLACK));
+    chart
+        .draw_series(LineSeries::new(
+            t.iter().copied().zip(mean.iter().copied()),
+            band.stroke_width(2),
+        ))
+        .map_err(e)?
+        .label("predicted mean")
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], band.stroke_width(2)));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.3))
+        .label_font(("sans-serif", 13))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(e)?;
+    Ok(())
+}
+
+/// (min, max) of finite values, widened when degenerate.
+fn bounds(v: &[f64]) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for &x in v.iter().filter(|x| x.is_finite()) {
+        lo = lo.min(x);
+        hi = hi.max(x);
+    }
+    if !lo.is_finite() || !hi.is_finite() {
+        return (0.0, 1.0);
+    }
+    if hi - lo < 1e-12 {
+        return (lo - 0.5, hi + 0.5);
+    }
+    (lo, hi)
+}
+
+/// RMSE and 2σ coverage of one output.
+fn output_metrics(measured: &[f64], mean: &[f64], sd: &[f64]) -> (f64, f64) {
+    let n = measured.len().max(1) as f64;
+    let mut se = 0.0;
+    let mut inside = 0usize;
+    for ((y, m), d) in measured.iter().zip(mean).zip(sd) {
+        se += (y - m) * (y - m);
+        if (y - m).abs() <= 2.0 * d {
+            inside += 1;
+        }
+    }
+    ((se / n).sqrt(), inside as f64 / n)
+}
+
+/// A tick label: up to 6 significant decimals, trailing zeros dropped, no `-0`.
+fn tick(x: f64) -> String {
+    let s = format!("{x:.6}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" {
+        "0".to_string()
+    } else {
+        s.to_string()
+    }
+}

@@ -1,0 +1,579 @@
+//! End-to-end tests of the `msgp` binary in a temporary folder: fit → save → eval → simulate
+//! round trips, JSON output, CSV episodes, MCAP logs, and every bad-input case.
+
+use std::path::PathBuf;
+use std::process::{Command, Output, Stdio};
+
+use serde_json::Value;
+
+const BIN: &str = env!("CARGO_BIN_EXE_msgp");
+
+/// A scratch folder removed on drop.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new(tag: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("msgp-cli-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("create scratch folder");
+        Self(dir)
+    }
+
+    fn path(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+
+    fn write(&self, name: &str, text: &str) -> PathBuf {
+        let p = self.path(name);
+        std::fs::write(&p, text).expect("write test file");
+        p
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn run(dir: &Scratch, args: &[&str]) -> Output {
+    Command::new(BIN)
+        .args(args)
+        .current_dir(&dir.0)
+        .output()
+        .expect("run msgp")
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Runs and expects success.
+fn ok(dir: &Scratch, args: &[&str]) -> String {
+    let o = run(dir, args);
+    assert!(
+        o.status.success(),
+        "msgp {args:?} failed:\n{}\n{}",
+        stdout(&o),
+        stderr(&o)
+    );
+    stdout(&o)
+}
+
+/// Runs with `--json` and parses the one line of output.
+fn ok_json(dir: &Scratch, args: &[&str]) -> Value {
+    let text = ok(dir, args);
+    assert_eq!(text.lines().count(), 1, "one JSON line expected: {text}");
+    serde_json::from_str(&text).expect("stdout is JSON")
+}
+
+/// Runs, expects failure, and returns stderr, which must contain each of `needles`.
+fn fails(dir: &Scratch, args: &[&str], needles: &[&str]) -> String {
+    let o = run(dir, args);
+    let err = stderr(&o);
+    assert!(
+        !o.status.success(),
+        "msgp {args:?} should fail:\n{}",
+        stdout(&o)
+    );
+    assert!(!err.contains("panicked"), "panic for {args:?}: {err}");
+    assert!(err.starts_with("error: "), "{err}");
+    for n in needles {
+        assert!(err.contains(n), "msgp {args:?}: `{n}` not in:\n{err}");
+    }
+    err
+}
+
+/// A deterministic nonlinear SISO system with a little pseudo-random noise, as `t,u,y`.
+fn system_csv(n: usize, episode: Option<usize>) -> String {
+    let mut s = String::from(if episode.is_some() {
+        "t,u,y,episode\n"
+    } else {
+        "t,u,y\n"
+    });
+    let (mut y1, mut u1) = (0.0f64, 0.0f64);
+    for t in 0..n {
+        let tf = t as f64;
+        let u = (0.3 * tf).sin() + 0.5 * (0.11 * tf).sin();
+        let noise = 0.02 * ((tf * 12.9898).sin() * 43_758.545).fract();
+        let y = 0.6 * y1 + (1.5 * u1).sin() + noise;
+        match episode {
+            Some(len) => s.push_str(&format!("{t},{u},{y},{}\n", t / len)),
+            None => s.push_str(&format!("{t},{u},{y}\n")),
+        }
+        (y1, u1) = (y, u);
+    }
+    s
+}
+
+const FAST: [&str; 5] = ["--iters", "5", "--inducing", "10", "--quiet"];
+
+fn args<'a>(base: &[&'a str], extra: &[&'a str]) -> Vec<&'a str> {
+    base.iter().chain(extra).copied().collect()
+}
+
+#[test]
+fn fit_save_eval_simulate_round_trip_is_exact() {
+    let dir = Scratch::new("roundtrip");
+    dir.write("d.csv", &system_csv(160, None));
+    let fit = ok_json(
+        &dir,
+        &args(
+            &[
+                "fit", "--data", "d.csv", "--out", "m.json", "--plot", "fit.png", "--json",
+            ],
+            &FAST,
+        ),
+    );
+    for key in [
+        "method",
+        "rmse",
+        "nll",
+        "coverage_2sigma",
+        "train_seconds",
+        "n_train",
+        "n_test",
+        "history",
+        "inducing",
+        "seed",
+    ] {
+        assert!(fit.get(key).is_some(), "fit JSON lacks `{key}`: {fit}");
+    }
+    assert_eq!(fit["method"], "msgp");
+    assert_eq!(fit["n_train"], 80);
+    assert_eq!(fit["n_test"], 80);
+    assert_eq!(fit["history"], serde_json::json!([2, 2]));
+    assert_eq!(fit["inducing"], 10);
+    assert_eq!(fit["inputs"], serde_json::json!(["u"]));
+    assert_eq!(fit["outputs"], serde_json::json!(["y"]));
+    let png = std::fs::read(dir.path("fit.png")).expect("plot written");
+    assert!(png.starts_with(b"\x89PNG"), "not a PNG");
+
+    let eval = ok_json(
+        &dir,
+        &[
+            "eval", "--model", "m.json", "--data", "d.csv", "--from", "80", "--json",
+        ],
+    );
+    for key in ["rmse", "nll", "coverage_2sigma", "test_steps"] {
+        assert_eq!(eval[key], fit[key], "`{key}` differs between fit and eval");
+    }
+    assert!(eval["rmse"].as_f64().expect("rmse") > 0.0);
+
+    let sim = ok_json(
+        &dir,
+        &[
+            "simulate", "--model", "m.json", "--data", "d.csv", "--from", "80", "--out", "p.csv",
+            "--json",
+        ],
+    );
+    assert_eq!(sim["rmse"], fit["rmse"]);
+    assert_eq!(sim["rows"], 78);
+    let pred = std::fs::read_to_string(dir.path("p.csv")).expect("predictions");
+    let mut lines = pred.lines();
+    assert_eq!(lines.next(), Some("t,y_mean,y_std,y"));
+    let mut se = 0.0;
+    let mut n = 0usize;
+    let mut first_t = None;
+    for line in lines {
+        let v: Vec<f64> = line
+            .split(',')
+            .map(|c| c.parse().expect("number"))
+            .collect();
+        assert!(v[2] > 0.0, "std must be positive");
+        first_t.get_or_insert(v[0]);
+        se += (v[3] - v[1]).powi(2);
+        n += 1;
+    }
+    assert_eq!(n, 78);
+    assert_eq!(
+        first_t,
+        Some(82.0),
+        "first simulated step is from + max(l_y, l_u)"
+    );
+    let rmse = (se / n as f64).sqrt();
+    let want = eval["rmse"].as_f64().expect("rmse");
+    assert!((rmse - want).abs() <= 1e-12 * want, "{rmse} vs {want}");
+
+    // a second eval of the same file gives the same text, and text output mentions the model
+    let text = ok(
+        &dir,
+        &[
+            "eval", "--model", "m.json", "--data", "d.csv", "--from", "80",
+        ],
+    );
+    assert!(text.contains("RMSE"), "{text}");
+    assert_eq!(
+        text,
+        ok(
+            &dir,
+            &[
+                "eval", "--model", "m.json", "--data", "d.csv", "--from", "80"
+            ]
+        )
+    );
+}
+
+#[test]
+fn baselines_text_output_and_default_model_path() {
+    let dir = Scratch::new("baselines");
+    dir.write("dryer.csv", &system_csv(120, None));
+    let text = ok(
+        &dir,
+        &[
+            "fit",
+            "--data",
+            "dryer.csv",
+            "--method",
+            "gp-narx",
+            "--iters",
+            "20",
+            "--quiet",
+        ],
+    );
+    assert!(text.contains("model written to dryer.model.json"), "{text}");
+    assert!(text.contains("RMSE"), "{text}");
+    assert!(dir.path("dryer.model.json").exists());
+    let v = ok_json(
+        &dir,
+        &[
+            "fit",
+            "--data",
+            "dryer.csv",
+            "--method",
+            "pilco-narx",
+            "--iters",
+            "20",
+            "--train",
+            "70",
+            "--history",
+            "1,1",
+            "--json",
+            "--out",
+            "p.json",
+        ],
+    );
+    assert_eq!(v["method"], "pilco-narx");
+    assert_eq!(v["n_train"], 70);
+    assert_eq!(v["history"], serde_json::json!([1, 1]));
+    let model: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path("p.json")).expect("model file"))
+            .expect("model JSON");
+    assert_eq!(model["format"], "msgp-model");
+    assert_eq!(model["format_version"], "1.0");
+    assert_eq!(model["method"], "pilco-narx");
+}
+
+#[test]
+fn episodes_and_several_files_are_several_trajectories() {
+    let dir = Scratch::new("episodes");
+    dir.write("e.csv", &system_csv(200, Some(100)));
+    let v = ok_json(
+        &dir,
+        &args(
+            &["fit", "--data", "e.csv", "--json", "--out", "m.json"],
+            &FAST,
+        ),
+    );
+    assert_eq!(v["trajectories"], 2);
+    assert_eq!(v["n_train"], 100);
+    ok(
+        &dir,
+        &[
+            "simulate", "--model", "m.json", "--data", "e.csv", "--out", "p.csv",
+        ],
+    );
+    let pred = std::fs::read_to_string(dir.path("p.csv")).expect("predictions");
+    assert!(pred.starts_with("episode,t,y_mean,y_std,y\n"), "{pred}");
+    assert!(pred.contains("\n1,"), "second episode present");
+    dir.write("a.csv", &system_csv(100, None));
+    dir.write("b.csv", &system_csv(90, None));
+    let v = ok_json(
+        &dir,
+        &args(
+            &["fit", "--data", "a.csv", "--data", "b.csv", "--json"],
+            &FAST,
+        ),
+    );
+    assert_eq!(v["trajectories"], 2);
+    assert_eq!(v["n_train"], 95);
+}
+
+/// A pendulum log from the simulator (hanging pole: it never hits the stop limits).
+fn pendulum_log(dir: &Scratch, name: &str) {
+    ok(
+        dir,
+        &[
+            "sim",
+            "pendulum",
+            "--random",
+            "--gravity=-9.81",
+            "--seconds",
+            "3",
+            "--out",
+            name,
+        ],
+    );
+}
+
+#[test]
+fn mcap_logs_from_the_simulator() {
+    let dir = Scratch::new("mcap");
+    pendulum_log(&dir, "run.mcap");
+    let v = ok_json(
+        &dir,
+        &args(
+            &["fit", "--data", "run.mcap", "--json", "--out", "m.json"],
+            &FAST,
+        ),
+    );
+    assert_eq!(
+        v["inputs"],
+        serde_json::json!(["/pendulum/command:acceleration"])
+    );
+    assert_eq!(
+        v["outputs"],
+        serde_json::json!(["/pendulum/measurement:theta", "/pendulum/measurement:x"])
+    );
+    let n_train = v["n_train"].as_u64().expect("n_train");
+    assert!(
+        (70..=80).contains(&n_train),
+        "3 s at 50 Hz, half trains: {n_train}"
+    );
+    let e = ok_json(
+        &dir,
+        &["eval", "--model", "m.json", "--data", "run.mcap", "--json"],
+    );
+    assert!(e["rmse"].as_f64().expect("rmse").is_finite());
+    // explicit signals with a default topic
+    let v = ok_json(
+        &dir,
+        &args(
+            &[
+                "fit",
+                "--data",
+                "run.mcap",
+                "--topic",
+                "/pendulum/measurement",
+                "--input",
+                "/pendulum/command:acceleration",
+                "--output",
+                "theta",
+                "--json",
+            ],
+            &FAST,
+        ),
+    );
+    assert_eq!(
+        v["outputs"],
+        serde_json::json!(["/pendulum/measurement:theta"])
+    );
+    ok(
+        &dir,
+        &[
+            "simulate", "--model", "m.json", "--data", "run.mcap", "--out", "p.csv",
+        ],
+    );
+    let pred = std::fs::read_to_string(dir.path("p.csv")).expect("predictions");
+    assert!(
+        pred.starts_with("t,/pendulum/measurement:theta_mean,"),
+        "{pred}"
+    );
+    // the CSV log of the same simulator works with the same defaults
+    pendulum_log(&dir, "run.csv");
+    let v = ok_json(&dir, &args(&["fit", "--data", "run.csv", "--json"], &FAST));
+    assert_eq!(v["inputs"], serde_json::json!(["command"]));
+    assert_eq!(v["outputs"], serde_json::json!(["meas_theta", "meas_x"]));
+}
+
+#[test]
+fn bad_inputs_fail_with_clear_messages() {
+    let dir = Scratch::new("bad");
+    dir.write("d.csv", &system_csv(120, None));
+    let fit = |extra: &[&str], needles: &[&str]| {
+        let mut a = vec!["fit"];
+        a.extend_from_slice(extra);
+        a.extend_from_slice(&FAST);
+        fails(&dir, &a, needles)
+    };
+    fit(
+        &["--data", "d.csv", "--output", "nope"],
+        &["no column `nope`", "columns: t, u, y"],
+    );
+    dir.write("text.csv", "t,u,y\n0,1,2\n1,abc,3\n");
+    fit(
+        &["--data", "text.csv"],
+        &["text.csv:3:2:", "`abc` in column `u` is not a number"],
+    );
+    dir.write("nan.csv", "t,u,y\n0,1,2\n1,2,NaN\n");
+    fit(
+        &["--data", "nan.csv"],
+        &["nan.csv:3:3:", "non-finite value `NaN`"],
+    );
+    dir.write("inf.csv", "t,u,y\n0,1,2\n1,-inf,1\n");
+    fit(
+        &["--data", "inf.csv"],
+        &["inf.csv:3:2:", "non-finite value `-inf`"],
+    );
+    dir.write("short.csv", &system_csv(4, None));
+    fit(
+        &["--data", "short.csv"],
+        &["short.csv", "2 samples", "history needs more than 2"],
+    );
+    dir.write("few.csv", &system_csv(6, None));
+    fit(&["--data", "few.csv"], &["few.csv", "too few"]);
+    dir.write("empty.csv", "");
+    fit(&["--data", "empty.csv"], &["empty.csv", "empty file"]);
+    dir.write("header.csv", "t,u,y\n");
+    fit(&["--data", "header.csv"], &["header.csv", "no data rows"]);
+    dir.write("ragged.csv", "t,u,y\n0,1,2\n1,2\n");
+    fit(
+        &["--data", "ragged.csv"],
+        &["ragged.csv:3:", "2 fields, the header has 3"],
+    );
+    fit(&["--data", "missing.csv"], &["missing.csv"]);
+    fit(
+        &["--data", "d.csv", "--train-frac", "1.5"],
+        &["--train-frac must be in (0, 1]"],
+    );
+    fit(
+        &["--data", "d.csv", "--input", "y", "--output", "y"],
+        &["`y` is both an input and an output"],
+    );
+
+    pendulum_log(&dir, "run.mcap");
+    let bytes = std::fs::read(dir.path("run.mcap")).expect("log");
+    std::fs::write(dir.path("cut.mcap"), &bytes[..bytes.len() * 2 / 3]).expect("write");
+    fit(
+        &["--data", "cut.mcap"],
+        &["cut.mcap", "corrupt or truncated MCAP"],
+    );
+    std::fs::write(dir.path("fake.mcap"), b"t,u,y\n1,2,3\n").expect("write");
+    fit(&["--data", "fake.mcap"], &["fake.mcap", "not an MCAP file"]);
+    fit(
+        &[
+            "--data",
+            "run.mcap",
+            "--input",
+            "/nope:x",
+            "--output",
+            "/pendulum/measurement:x",
+        ],
+        &["run.mcap", "no topic `/nope`", "/pendulum/measurement"],
+    );
+    fit(
+        &[
+            "--data",
+            "run.mcap",
+            "--input",
+            "/pendulum/command:acceleration",
+            "--output",
+            "/pendulum/measurement:nope",
+        ],
+        &[
+            "run.mcap",
+            "no field `nope`",
+            "numeric fields: step, t, theta, x",
+        ],
+    );
+    fit(
+        &[
+            "--data",
+            "run.mcap",
+            "--input",
+            "acceleration",
+            "--output",
+            "theta",
+        ],
+        &["names no topic"],
+    );
+
+    // model files: another major version, wrong shapes, not a model
+    ok(
+        &dir,
+        &args(&["fit", "--data", "d.csv", "--out", "m.json"], &FAST),
+    );
+    let text = std::fs::read_to_string(dir.path("m.json")).expect("model");
+    let mut v: Value = serde_json::from_str(&text).expect("json");
+    v["format_version"] = Value::from("2.0");
+    dir.write("v2.json", &v.to_string());
+    let eval = |model: &str, needles: &[&str]| {
+        fails(
+            &dir,
+            &["eval", "--model", model, "--data", "d.csv"],
+            needles,
+        )
+    };
+    eval(
+        "v2.json",
+        &["v2.json", "format version 2.0 is not supported", "1.x"],
+    );
+    let mut v: Value = serde_json::from_str(&text).expect("json");
+    v["gp"]["log_lengthscales"][0] = serde_json::json!([0.0]);
+    dir.write("shape.json", &v.to_string());
+    eval(
+        "shape.json",
+        &["shape.json", "invalid model file", "`gp.log_lengthscales`"],
+    );
+    eval("d.csv", &["d.csv", "not valid JSON"]);
+    eval("nothing.json", &["nothing.json", "cannot read"]);
+    fails(
+        &dir,
+        &[
+            "eval", "--model", "m.json", "--data", "d.csv", "--output", "a,b",
+        ],
+        &["the model has 1 output(s) (y); --output names 2"],
+    );
+    fails(
+        &dir,
+        &[
+            "eval", "--model", "m.json", "--data", "d.csv", "--from", "500",
+        ],
+        &["--from 500 is past its 120 samples"],
+    );
+    fails(
+        &dir,
+        &["eval", "--model", "m.json", "--data", "run.mcap"],
+        &["run.mcap", "names no topic"],
+    );
+}
+
+#[test]
+fn closed_stdout_is_not_a_panic() {
+    let dir = Scratch::new("pipe");
+    dir.write("d.csv", &system_csv(120, None));
+    ok(
+        &dir,
+        &args(&["fit", "--data", "d.csv", "--out", "m.json"], &FAST),
+    );
+    for extra in [&[][..], &["--json"][..]] {
+        let mut child = Command::new(BIN)
+            .args(["eval", "--model", "m.json", "--data", "d.csv"])
+            .args(extra)
+            .current_dir(&dir.0)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawn");
+        drop(child.stdout.take()); // the reader goes away before anything is printed
+        let o = child.wait_with_output().expect("wait");
+        let err = stderr(&o);
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(o.status.success(), "{err}");
+    }
+}
+
+#[test]
+fn help_lists_the_commands() {
+    let dir = Scratch::new("help");
+    let text = ok(&dir, &["--help"]);
+    for cmd in ["fit", "eval", "simulate", "reproduce", "demo", "sim"] {
+        assert!(text.contains(cmd), "{cmd} missing from --help");
+    }
+    let text = ok(&dir, &["fit", "--help"]);
+    assert!(text.contains("--train-frac"), "{text}");
+}
