@@ -1,15 +1,19 @@
 //! `msgp`: the command-line front of msgp-core (a thin clap layer: commands parse their
 //! arguments and call library functions).
 
+mod cost_plot;
 mod dataset;
 mod demo;
 mod eval_cmd;
+mod figure4;
 mod fit_cmd;
+mod learn_cmd;
 mod output;
 mod plot;
 mod progress;
 mod report;
 mod reproduce;
+mod results_file;
 mod sim_cmd;
 
 use clap::{Parser, Subcommand};
@@ -30,6 +34,8 @@ enum Command {
     Eval(Box<eval_cmd::EvalArgs>),
     /// Free simulation with a saved model, written as CSV (mean, std, measured per step).
     Simulate(Box<eval_cmd::SimulateArgs>),
+    /// Learn a controller with PILCO on a simulated system (MSGP or GP-NARX models).
+    LearnPolicy(Box<learn_cmd::LearnArgs>),
     /// Reproduce the paper's results.
     #[command(subcommand)]
     Reproduce(reproduce::ReproduceCommand),
@@ -46,6 +52,7 @@ fn main() -> std::process::ExitCode {
         Command::Fit(args) => fit_cmd::run(args),
         Command::Eval(args) => eval_cmd::run_eval(args),
         Command::Simulate(args) => eval_cmd::run_simulate(args),
+        Command::LearnPolicy(args) => learn_cmd::run(args),
         Command::Reproduce(cmd) => reproduce::run(cmd),
         Command::Demo(args) => demo::run(args),
         Command::Sim(cmd) => sim_cmd::run(cmd),

@@ -19,7 +19,7 @@ const WIDTH: u32 = 1200;
 const PANEL_HEIGHT: u32 = 340;
 
 /// Registers the embedded font once.
-fn font() -> anyhow::Result<()> {
+pub(crate) fn font() -> anyhow::Result<()> {
     static DONE: OnceLock<bool> = OnceLock::new();
     let ok = DONE.get_or_init(|| {
         plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())

@@ -12,7 +12,6 @@ use msgp_core::data::real::{RealSeries, data_dir};
 use msgp_core::data::{Benchmark, NoiseScale, SyntheticSystem};
 use msgp_core::fit::{FitProgress, FitSettings, fit};
 use msgp_core::model::{Method, Metrics};
-use msgp_core::model_file::write_atomically;
 use serde_json::json;
 
 use crate::fit_cmd::MethodArg;
@@ -24,6 +23,9 @@ use crate::progress::FitBar;
 pub enum ReproduceCommand {
     /// Table 1 of the paper: GP-NARX, PILCO's GP-NARX and MSGP on the ten benchmarks.
     Table1(Table1Args),
+    /// Figure 4 of the paper: PILCO on the pendulum with MSGP and GP-NARX models, several
+    /// seeds; iterations and interaction time to the first stable policy.
+    Figure4(crate::figure4::Figure4Args),
 }
 
 /// Options of `msgp reproduce table1`.
@@ -164,6 +166,7 @@ struct Cell {
 pub fn run(cmd: &ReproduceCommand) -> anyhow::Result<()> {
     match cmd {
         ReproduceCommand::Table1(args) => table1(args),
+        ReproduceCommand::Figure4(args) => crate::figure4::run(args),
     }
 }
 
@@ -257,8 +260,7 @@ fn table1(args: &Table1Args) -> anyhow::Result<()> {
     }
     let seconds = started.elapsed().as_secs_f64();
     let markdown = render(args, &rows, &methods, seconds);
-    write_atomically(&args.out, markdown.as_bytes())
-        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    crate::results_file::update_section(&args.out, "table1", &markdown)?;
     if args.json {
         let list: Vec<_> = rows
             .iter()
@@ -415,7 +417,7 @@ fn render(
 }
 
 /// "2 CPUs (AMD EPYC …)" from the OS, best effort.
-fn machine() -> String {
+pub(crate) fn machine() -> String {
     let cpus = std::thread::available_parallelism().map_or(0, |n| n.get());
     let model = std::fs::read_to_string("/proc/cpuinfo")
         .ok()
@@ -430,7 +432,7 @@ fn machine() -> String {
 }
 
 /// Today's date `YYYY-MM-DD` (UTC) from the system clock.
-fn today() -> String {
+pub(crate) fn today() -> String {
     let secs = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_secs());

@@ -116,7 +116,7 @@ enum Preset {
 /// Plant parameter overrides (defaults: `msgp_sim::PendulumParams::default()`).
 #[derive(Debug, Args)]
 #[command(next_help_heading = "Plant")]
-struct PlantArgs {
+pub(crate) struct PlantArgs {
     /// JSON file with plant parameters (missing fields keep their defaults).
     #[arg(long, value_name = "PARAMS.json")]
     params: Option<PathBuf>,
@@ -175,7 +175,7 @@ struct PlantArgs {
 
 impl PlantArgs {
     /// Defaults ← `--params` file ← individual flags, then validated.
-    fn resolve(&self) -> anyhow::Result<PendulumParams> {
+    pub(crate) fn resolve(&self) -> anyhow::Result<PendulumParams> {
         let mut p = match &self.params {
             Some(path) => {
                 let text = std::fs::read_to_string(path)

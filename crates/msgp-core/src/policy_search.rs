@@ -94,8 +94,17 @@ pub struct PolicySearchSettings {
     pub restarts: usize,
     /// Relative size of the restart perturbations.
     pub restart_spread: f64,
-    /// Seed of the restarts.
+    /// Seed of the restarts and candidates.
     pub seed: u64,
+    /// Random candidates screened on the model before the gradient starts: each free gain is
+    /// drawn from `N(0, (candidate_spread · max(|g₀|, 1))²)` around zero (signs included, so
+    /// no sign of the gains is assumed), evaluated in f64, and the `candidate_starts` cheapest
+    /// become extra Adam starts. 0 switches the screening off.
+    pub candidates: usize,
+    /// Relative width of the candidate distribution.
+    pub candidate_spread: f64,
+    /// How many of the best candidates are refined by Adam.
+    pub candidate_starts: usize,
 }
 
 impl Default for PolicySearchSettings {
@@ -106,6 +115,9 @@ impl Default for PolicySearchSettings {
             restarts: 2,
             restart_spread: 0.3,
             seed: 0,
+            candidates: 0,
+            candidate_spread: 2.0,
+            candidate_starts: 2,
         }
     }
 }
@@ -232,8 +244,33 @@ pub fn optimise_pid(
                 .collect(),
         );
     }
-    let active: Vec<usize> = (0..x0.len()).collect();
     let scale: Vec<f64> = x0.iter().map(|g| g.abs().max(1.0)).collect();
+    if settings.candidates > 0 {
+        let mut screened: Vec<(f64, Vec<f64>)> = Vec::with_capacity(settings.candidates);
+        for _ in 0..settings.candidates {
+            let x: Vec<f64> = scale
+                .iter()
+                .map(|s| {
+                    let z: f64 = StandardNormal.sample(&mut rng);
+                    settings.candidate_spread * s * z
+                })
+                .collect();
+            // a candidate whose rollout fails numerically is simply not a start
+            if let Ok((value, _)) = problem.evaluate(&mask.unpack::<f64>(initial, &x))
+                && value.is_finite()
+            {
+                screened.push((value, x));
+            }
+        }
+        screened.sort_by(|a, b| a.0.total_cmp(&b.0));
+        starts.extend(
+            screened
+                .into_iter()
+                .take(settings.candidate_starts)
+                .map(|(_, x)| x),
+        );
+    }
+    let active: Vec<usize> = (0..x0.len()).collect();
     let mut best: Option<(f64, Vec<f64>)> = None;
     for start in starts {
         // optimise in scaled coordinates z = g / scale so one step size fits every gain

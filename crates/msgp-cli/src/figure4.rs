@@ -1,0 +1,201 @@
+//! `msgp reproduce figure4`: the paper's Figure 4 on the simulated pendulum — PILCO with MSGP
+//! and with one-step GP-NARX models, several seeds each; per run the iteration and interaction
+//! time of the first policy that passes the stability test, and the cost curves.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context;
+use clap::Args;
+use msgp_sim::PendulumParams;
+use msgp_sim::learn::{IterationReport, LearnSettings};
+
+use crate::cost_plot::plot_cost_bands;
+use crate::learn_cmd::{ModelArg, learn, model_name, summary_json, write_outputs};
+use crate::reproduce::{machine, today};
+
+/// Options of `msgp reproduce figure4`.
+#[derive(Debug, Args)]
+pub struct Figure4Args {
+    /// Markdown file whose `figure4` section is (re)written.
+    #[arg(long, value_name = "RESULTS.md", default_value = "RESULTS.md")]
+    pub out: PathBuf,
+    /// Folder for every run's artefacts and the cost-curve plot.
+    #[arg(long, value_name = "DIR", default_value = "results/figure4")]
+    pub dir: PathBuf,
+    /// Seeds 0..N per model.
+    #[arg(long, default_value_t = 5)]
+    pub seeds: u64,
+    /// Policy iterations per run.
+    #[arg(long, default_value_t = LearnSettings::default().iterations)]
+    pub iterations: usize,
+    /// Models to run (comma-separated).
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [ModelArg::Msgp, ModelArg::GpNarx])]
+    pub models: Vec<ModelArg>,
+    /// No progress lines on stderr.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// One finished run.
+struct Run {
+    model: ModelArg,
+    seed: u64,
+    iterations: Vec<IterationReport>,
+    seconds: f64,
+}
+
+impl Run {
+    fn first_stable(&self) -> Option<&IterationReport> {
+        self.iterations.iter().find(|r| r.stable)
+    }
+}
+
+/// Runs `msgp reproduce figure4`.
+pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
+    let started = Instant::now();
+    let params = PendulumParams::default();
+    let mut runs = Vec::new();
+    for &model in &args.models {
+        for seed in 0..args.seeds {
+            let settings = LearnSettings {
+                method: model.into(),
+                iterations: args.iterations,
+                seed,
+                ..LearnSettings::default()
+            };
+            if !args.quiet {
+                eprintln!("== {} seed {seed}", model_name(model));
+            }
+            let (outcome, seconds) = learn(&params, &settings, args.quiet)?;
+            let dir = args.dir.join(format!("{}-seed{seed}", model_name(model)));
+            let summary = summary_json(&outcome, &settings, model, seconds);
+            write_outputs(
+                &dir,
+                &outcome,
+                &settings,
+                &summary,
+                &format!("{} seed {seed}", model_name(model)),
+            )
+            .with_context(|| format!("writing {}", dir.display()))?;
+            runs.push(Run {
+                model,
+                seed,
+                iterations: outcome.iterations,
+                seconds,
+            });
+        }
+    }
+    let plot = args.dir.join("figure4.png");
+    let bands: Vec<(String, Vec<Vec<IterationReport>>)> = args
+        .models
+        .iter()
+        .map(|&m| {
+            (
+                model_name(m).to_string(),
+                runs.iter()
+                    .filter(|r| r.model == m)
+                    .map(|r| r.iterations.clone())
+                    .collect(),
+            )
+        })
+        .collect();
+    plot_cost_bands(&plot, &bands)?;
+    let markdown = render(args, &runs, started.elapsed().as_secs_f64(), &plot);
+    crate::results_file::update_section(&args.out, "figure4", &markdown)?;
+    crate::output::out(&markdown)
+}
+
+fn render(args: &Figure4Args, runs: &[Run], seconds: f64, plot: &std::path::Path) -> String {
+    let d = LearnSettings::default();
+    let models: Vec<&str> = args.models.iter().map(|&m| model_name(m)).collect();
+    let mut s = String::from("# PILCO on the simulated pendulum (the paper's Figure 4)\n\n");
+    s.push_str(&format!(
+        "Learning to balance the pole on the robot's end effector (`msgp-sim`, default plant: noise, one-step delay, 30 ms lag) from scratch: {} random-excitation rollouts, then per iteration fit the model on all data, optimise the PID + PD gains on it, run them for one {} s episode. After every iteration the simulator's stability test (5 starts, 10 s each; not interaction, not training data) judges the gains. Interaction seconds count every episode so far, random rollouts included. Models: {}; seeds 0–{}; {} iterations per run.\n\n",
+        d.random_rollouts,
+        d.episode_seconds,
+        models.join(", "),
+        args.seeds.saturating_sub(1),
+        args.iterations
+    ));
+    s.push_str(&format!(
+        "- Command: `cargo run --release --locked --bin msgp -- reproduce figure4 --seeds {} --iterations {} --out {} --dir {}`\n",
+        args.seeds,
+        args.iterations,
+        args.out.display(),
+        args.dir.display()
+    ));
+    s.push_str(&format!(
+        "- Wall time: {seconds:.0} s ({:.1} min), msgp {} on {}\n- Date (UTC): {}\n\n",
+        seconds / 60.0,
+        env!("CARGO_PKG_VERSION"),
+        machine(),
+        today()
+    ));
+    s.push_str("## Summary\n\n| model | stable within the budget | iterations to first stable policy (per seed) | interaction s to stable (median) |\n|---|---:|---|---:|\n");
+    for &m in &args.models {
+        let mine: Vec<&Run> = runs.iter().filter(|r| r.model == m).collect();
+        let firsts: Vec<Option<&IterationReport>> = mine.iter().map(|r| r.first_stable()).collect();
+        let ok = firsts.iter().filter(|f| f.is_some()).count();
+        let per_seed: Vec<String> = firsts
+            .iter()
+            .map(|f| f.map_or_else(|| "—".to_string(), |r| r.iteration.to_string()))
+            .collect();
+        let mut secs: Vec<f64> = firsts
+            .iter()
+            .flatten()
+            .map(|r| r.interaction_seconds)
+            .collect();
+        secs.sort_by(f64::total_cmp);
+        let median = if secs.is_empty() {
+            "—".to_string()
+        } else {
+            format!("{:.1}", secs[secs.len() / 2])
+        };
+        s.push_str(&format!(
+            "| {} | {ok}/{} | {} | {median} |\n",
+            model_name(m),
+            mine.len(),
+            per_seed.join(", ")
+        ));
+    }
+    s.push_str("\n## Runs\n\n| model | seed | first stable iteration | interaction s to stable | stable iterations | lowest actual cost | last actual cost | wall s |\n|---|---:|---:|---:|---|---:|---:|---:|\n");
+    for r in runs {
+        let first = r.first_stable();
+        let stable: Vec<String> = r
+            .iterations
+            .iter()
+            .filter(|i| i.stable)
+            .map(|i| i.iteration.to_string())
+            .collect();
+        let lowest = r
+            .iterations
+            .iter()
+            .map(|i| i.actual_cost)
+            .fold(f64::INFINITY, f64::min);
+        let last = r.iterations.last().map_or(f64::NAN, |i| i.actual_cost);
+        s.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {lowest:.2} | {last:.2} | {:.0} |\n",
+            model_name(r.model),
+            r.seed,
+            first.map_or_else(|| "—".to_string(), |i| i.iteration.to_string()),
+            first.map_or_else(
+                || "—".to_string(),
+                |i| format!("{:.1}", i.interaction_seconds)
+            ),
+            if stable.is_empty() {
+                "none".to_string()
+            } else {
+                stable.join(", ")
+            },
+            r.seconds
+        ));
+    }
+    s.push_str(&format!(
+        "\nCost over each {} s episode (150 steps; a step after an early stop counts 1): mean ± 1 standard deviation over the seeds, predicted by the model (left) and measured on the simulator (right). Per-run artefacts (policy, iterations.csv, episodes as MCAP, cost.png) are in `{}/<model>-seed<k>/`.\n\n![cost curves]({})\n",
+        d.episode_seconds,
+        args.dir.display(),
+        plot.display()
+    ));
+    s
+}

@@ -1,0 +1,324 @@
+//! `msgp learn-policy --sim pendulum`: PILCO policy search on the simulated pole, with MSGP or
+//! one-step GP-NARX models (paper section 4.2, Figure 4).
+//!
+//! Writes into `--out DIR`: `policy.json` (the last gains, runnable by `msgp sim pendulum
+//! --policy`), `iterations.csv` (one row per iteration), `episodes/NN-<kind>.mcap` (every
+//! interaction episode), `cost.png` (predicted and actual cost per iteration) and
+//! `summary.json` (what `--json` prints).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+use clap::{Args, ValueEnum};
+use msgp_core::model::Method;
+use msgp_sim::learn::{IterationReport, LearnOutcome, LearnSettings, learn_policy};
+use msgp_sim::{PendulumParams, write_run};
+use serde_json::{Value, json};
+
+use crate::cost_plot::{CostCurve, plot_costs};
+use crate::output::{out, out_json};
+use crate::sim_cmd::PlantArgs;
+
+/// Simulated systems the loop can learn on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SimArg {
+    /// The inverted pendulum on the robot's end effector (crate msgp-sim).
+    Pendulum,
+}
+
+/// Dynamics model of the loop.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ModelArg {
+    /// Multi-step GP trained on the trajectory likelihood (the paper's method).
+    Msgp,
+    /// One-step GP-NARX trained on the marginal likelihood (standard PILCO).
+    GpNarx,
+}
+
+impl From<ModelArg> for Method {
+    fn from(m: ModelArg) -> Self {
+        match m {
+            ModelArg::Msgp => Method::Msgp,
+            ModelArg::GpNarx => Method::GpNarx,
+        }
+    }
+}
+
+/// Options of `msgp learn-policy`.
+#[derive(Debug, Args)]
+pub struct LearnArgs {
+    /// The simulated system.
+    #[arg(long, value_enum)]
+    pub sim: SimArg,
+    /// Dynamics model.
+    #[arg(long, value_enum, default_value_t = ModelArg::Msgp)]
+    pub model: ModelArg,
+    /// Policy-learning iterations after the random rollouts.
+    #[arg(long, default_value_t = LearnSettings::default().iterations)]
+    pub iterations: usize,
+    /// Random-excitation episodes before the first policy.
+    #[arg(long, default_value_t = LearnSettings::default().random_rollouts)]
+    pub random_rollouts: usize,
+    /// Length of every interaction episode [s].
+    #[arg(long, default_value_t = LearnSettings::default().episode_seconds)]
+    pub episode_seconds: f64,
+    /// Seed of every random choice (episodes, excitation, fits, restarts).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Output folder [default: learn-<model>-seed<S>].
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// No progress lines on stderr.
+    #[arg(long)]
+    pub quiet: bool,
+    #[command(flatten)]
+    pub plant: PlantArgs,
+}
+
+/// The model's name in file names and tables.
+pub fn model_name(m: ModelArg) -> &'static str {
+    match m {
+        ModelArg::Msgp => "msgp",
+        ModelArg::GpNarx => "gp-narx",
+    }
+}
+
+/// One iteration as JSON.
+fn iteration_json(r: &IterationReport) -> Value {
+    json!({
+        "iteration": r.iteration,
+        "predicted_cost": r.predicted_cost,
+        "predicted_cost_std": r.predicted_cost_std,
+        "actual_cost": r.actual_cost,
+        "interaction_seconds": r.interaction_seconds,
+        "stable": r.stable,
+        "gains": {
+            "kp_x": r.gains.kp_x,
+            "ki_x": r.gains.ki_x,
+            "kd_x": r.gains.kd_x,
+            "kp_theta": r.gains.kp_theta,
+            "kd_theta": r.gains.kd_theta,
+        },
+    })
+}
+
+/// The summary `--json` prints and `summary.json` holds.
+pub fn summary_json(
+    outcome: &LearnOutcome,
+    settings: &LearnSettings,
+    model: ModelArg,
+    seconds: f64,
+) -> Value {
+    let first = outcome.first_stable_iteration();
+    let to_stable = first.and_then(|i| {
+        outcome
+            .iterations
+            .iter()
+            .find(|r| r.iteration == i)
+            .map(|r| r.interaction_seconds)
+    });
+    json!({
+        "sim": "pendulum",
+        "model": model_name(model),
+        "seed": settings.seed,
+        "random_rollouts": settings.random_rollouts,
+        "episode_seconds": settings.episode_seconds,
+        "iterations": outcome.iterations.iter().map(iteration_json).collect::<Vec<_>>(),
+        "first_stable_iteration": first,
+        "interaction_seconds_to_stable": to_stable,
+        "wall_seconds": seconds,
+    })
+}
+
+/// `iterations.csv`.
+fn iterations_csv(reports: &[IterationReport]) -> String {
+    let mut s = String::from(
+        "iteration,predicted_cost,predicted_cost_std,actual_cost,interaction_seconds,stable,kp_x,ki_x,kd_x,kp_theta,kd_theta\n",
+    );
+    for r in reports {
+        let g = r.gains;
+        s.push_str(&format!(
+            "{},{},{},{},{},{},{},{},{},{},{}\n",
+            r.iteration,
+            r.predicted_cost,
+            r.predicted_cost_std,
+            r.actual_cost,
+            r.interaction_seconds,
+            r.stable,
+            g.kp_x,
+            g.ki_x,
+            g.kd_x,
+            g.kp_theta,
+            g.kd_theta
+        ));
+    }
+    s
+}
+
+/// The cost curve of one run.
+pub fn curve(label: &str, reports: &[IterationReport]) -> CostCurve {
+    CostCurve {
+        label: label.to_string(),
+        points: reports
+            .iter()
+            .map(|r| {
+                (
+                    r.iteration,
+                    r.predicted_cost,
+                    r.predicted_cost_std,
+                    r.actual_cost,
+                    r.stable,
+                )
+            })
+            .collect(),
+    }
+}
+
+/// Writes every artefact of a run into `dir`.
+pub fn write_outputs(
+    dir: &Path,
+    outcome: &LearnOutcome,
+    settings: &LearnSettings,
+    summary: &Value,
+    label: &str,
+) -> anyhow::Result<()> {
+    let episodes = dir.join("episodes");
+    std::fs::create_dir_all(&episodes)
+        .with_context(|| format!("cannot create {}", episodes.display()))?;
+    let policy = serde_json::to_string_pretty(&outcome.final_gains)?;
+    msgp_core::model_file::write_atomically(&dir.join("policy.json"), policy.as_bytes())?;
+    msgp_core::model_file::write_atomically(
+        &dir.join("iterations.csv"),
+        iterations_csv(&outcome.iterations).as_bytes(),
+    )?;
+    for (k, ep) in outcome.episodes.iter().enumerate() {
+        let kind = if k < settings.random_rollouts {
+            "random".to_string()
+        } else {
+            format!("policy-it{}", k + 1 - settings.random_rollouts)
+        };
+        let path = episodes.join(format!("{k:02}-{kind}.mcap"));
+        write_run(&path, ep).with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    msgp_core::model_file::write_atomically(
+        &dir.join("summary.json"),
+        serde_json::to_string_pretty(summary)?.as_bytes(),
+    )?;
+    if !outcome.iterations.is_empty() {
+        plot_costs(
+            &dir.join("cost.png"),
+            &format!("PILCO on the pendulum, {label}"),
+            &[curve(label, &outcome.iterations)],
+        )?;
+    }
+    Ok(())
+}
+
+/// The loop's settings from the command line.
+pub fn settings(model: ModelArg, args: &LearnArgs) -> anyhow::Result<LearnSettings> {
+    if !(args.episode_seconds.is_finite() && args.episode_seconds > 0.0) {
+        anyhow::bail!(
+            "--episode-seconds must be positive, got {}",
+            args.episode_seconds
+        );
+    }
+    if args.random_rollouts == 0 {
+        anyhow::bail!("--random-rollouts must be at least 1 (the first model needs data)");
+    }
+    Ok(LearnSettings {
+        method: model.into(),
+        iterations: args.iterations,
+        random_rollouts: args.random_rollouts,
+        episode_seconds: args.episode_seconds,
+        seed: args.seed,
+        ..LearnSettings::default()
+    })
+}
+
+/// A progress line for one iteration.
+pub fn progress_line(r: &IterationReport, started: Instant) -> String {
+    format!(
+        "iteration {:>2}: predicted cost {:7.2} ± {:5.2} (2σ), actual {:7.2}, interaction {:5.1} s, stable {:<3}  [{:.0} s]",
+        r.iteration,
+        r.predicted_cost,
+        2.0 * r.predicted_cost_std,
+        r.actual_cost,
+        r.interaction_seconds,
+        if r.stable { "yes" } else { "no" },
+        started.elapsed().as_secs_f64()
+    )
+}
+
+/// Runs one learning loop on `params`, printing progress unless `quiet`.
+pub fn learn(
+    params: &PendulumParams,
+    settings: &LearnSettings,
+    quiet: bool,
+) -> anyhow::Result<(LearnOutcome, f64)> {
+    let started = Instant::now();
+    let outcome = learn_policy(params, settings, &mut |r| {
+        if !quiet {
+            eprintln!("{}", progress_line(r, started));
+        }
+    })
+    .context("policy learning failed")?;
+    Ok((outcome, started.elapsed().as_secs_f64()))
+}
+
+/// Runs `msgp learn-policy`.
+pub fn run(args: &LearnArgs) -> anyhow::Result<()> {
+    let SimArg::Pendulum = args.sim;
+    let params = args.plant.resolve()?;
+    let settings = settings(args.model, args)?;
+    let dir = args.out.clone().unwrap_or_else(|| {
+        PathBuf::from(format!(
+            "learn-{}-seed{}",
+            model_name(args.model),
+            args.seed
+        ))
+    });
+    let quiet = args.quiet || args.json;
+    if !quiet {
+        eprintln!(
+            "learning to balance the pendulum with {} models: {} random rollouts, then {} iterations of {} s episodes (seed {})",
+            model_name(args.model),
+            settings.random_rollouts,
+            settings.iterations,
+            settings.episode_seconds,
+            settings.seed
+        );
+    }
+    let (outcome, seconds) = learn(&params, &settings, quiet)?;
+    let summary = summary_json(&outcome, &settings, args.model, seconds);
+    write_outputs(&dir, &outcome, &settings, &summary, model_name(args.model))?;
+    if args.json {
+        return out_json(&summary);
+    }
+    let first = outcome.first_stable_iteration();
+    out(&match first {
+        Some(i) => format!(
+            "first stable policy at iteration {i} after {:.1} s of interaction",
+            summary["interaction_seconds_to_stable"]
+                .as_f64()
+                .unwrap_or(f64::NAN)
+        ),
+        None => "no iteration passed the stability test".to_string(),
+    })?;
+    out(&format!(
+        "final gains kp_x {:.4}, ki_x {:.4}, kd_x {:.4}, kp_theta {:.4}, kd_theta {:.4}",
+        outcome.final_gains.kp_x,
+        outcome.final_gains.ki_x,
+        outcome.final_gains.kd_x,
+        outcome.final_gains.kp_theta,
+        outcome.final_gains.kd_theta
+    ))?;
+    out(&format!(
+        "wrote {}/policy.json, iterations.csv, cost.png, summary.json and {} episodes (MCAP) in {seconds:.0} s",
+        dir.display(),
+        outcome.episodes.len()
+    ))
+}
