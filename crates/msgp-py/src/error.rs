@@ -90,6 +90,9 @@ pub enum Error {
     /// From msgp-sim.
     #[error(transparent)]
     Sim(#[from] SimError),
+    /// The object is borrowed elsewhere (cannot happen under the GIL; reported, not panicked).
+    #[error("this Msgp model is in use by another call: {0}")]
+    Busy(String),
     /// A panic in Rust code: a bug, reported instead of crashing the interpreter.
     #[error("internal error (a bug in msgp, please report it): {0}")]
     Panic(String),
@@ -149,7 +152,7 @@ impl Error {
             Error::Sim(SimError::NonFiniteCommand { .. } | SimError::NonFiniteState { .. }) => {
                 Kind::Numerical
             }
-            Error::Sim(_) | Error::Panic(_) => Kind::Other,
+            Error::Sim(_) | Error::Busy(_) | Error::Panic(_) => Kind::Other,
         }
     }
 

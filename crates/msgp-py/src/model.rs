@@ -4,6 +4,7 @@
 //! numbers for the same data, options and seed.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use msgp_core::fit::{FitOptions, FitReport, FitSettings, fit};
 use msgp_core::model::{Method, Metrics, Model, pool, score};
@@ -72,12 +73,19 @@ pub struct Msgp {
     options: FitOptions,
     /// Other `FitSettings` fields given by the user (a JSON object), applied after `options`.
     overrides: Option<serde_json::Value>,
-    fitted: Option<Fitted>,
+    /// Shared so that long calls hold no borrow of the object while the GIL is released.
+    fitted: Option<Arc<Fitted>>,
 }
 
 impl Msgp {
     fn fitted(&self) -> Result<&Fitted> {
-        self.fitted.as_ref().ok_or(Error::NotFitted)
+        self.fitted.as_deref().ok_or(Error::NotFitted)
+    }
+
+    /// The fitted model, borrowing the object only for the moment it takes to share it.
+    fn shared(slf: &Bound<'_, Self>) -> PyResult<Arc<Fitted>> {
+        let me = slf.try_borrow().map_err(|e| Error::Busy(e.to_string()))?;
+        Ok(me.fitted.clone().ok_or(Error::NotFitted)?)
     }
 
     /// Settings for `train`: exactly `msgp fit`'s, then the user's other settings.
@@ -112,11 +120,11 @@ impl Msgp {
                 seed: file.training.seed,
             },
             overrides: None,
-            fitted: Some(Fitted {
+            fitted: Some(Arc::new(Fitted {
                 file,
                 model,
                 report,
-            }),
+            })),
         }
     }
 
@@ -300,7 +308,7 @@ impl Msgp {
     ) -> PyResult<Bound<'py, Self>> {
         let py = slf.py();
         let (options, overrides) = {
-            let me = slf.borrow();
+            let me = slf.try_borrow().map_err(|e| Error::Busy(e.to_string()))?;
             (me.options, me.overrides.clone())
         };
         let train = trajectories(u, y)?;
@@ -331,7 +339,9 @@ impl Msgp {
                 report: Some(report),
             })
         })?;
-        slf.borrow_mut().fitted = Some(fitted);
+        slf.try_borrow_mut()
+            .map_err(|e| Error::Busy(e.to_string()))?
+            .fitted = Some(Arc::new(fitted));
         Ok(slf)
     }
 
@@ -340,15 +350,14 @@ impl Msgp {
     /// `(mean, var)`, each of shape (T − max(l_y, l_u), d_y): row `i` predicts sample
     /// `max(l_y, l_u) + i`, variance including observation noise, original units.
     fn simulate<'py>(
-        &self,
-        py: Python<'py>,
+        slf: &Bound<'py, Self>,
         u: &Bound<'py, PyAny>,
         y_init: &Bound<'py, PyAny>,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
-        let fitted = self.fitted()?;
+        let py = slf.py();
+        let fitted = Msgp::shared(slf)?;
         let traj = Msgp::simulation_input(&fitted.model, u, y_init)?;
-        let model = fitted.model.clone();
-        let sim = detached(py, move || Ok(model.simulate(&traj)?))?;
+        let sim = detached(py, move || Ok(fitted.model.simulate(&traj)?))?;
         Ok((
             array2(py, &sim.mean).into_any(),
             array2(py, &sim.var).into_any(),
@@ -359,12 +368,12 @@ impl Msgp {
     /// scored against `y`: dict of `rmse`, `nll` (mean per step), `coverage_2sigma`, `steps`,
     /// pooled over all trajectories like `msgp eval`.
     fn score<'py>(
-        &self,
-        py: Python<'py>,
+        slf: &Bound<'py, Self>,
         u: &Bound<'py, PyAny>,
         y: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let fitted = self.fitted()?;
+        let py = slf.py();
+        let fitted = Msgp::shared(slf)?;
         let trajs = trajectories(u, y)?;
         let spec = fitted.model.spec;
         let several = trajs.len() > 1;
@@ -386,8 +395,8 @@ impl Msgp {
                 .into());
             }
         }
-        let model = fitted.model.clone();
         let metrics = detached(py, move || {
+            let model = &fitted.model;
             let each = trajs
                 .iter()
                 .map(|t| Ok(score(&model.simulate(t)?, t)?))
@@ -398,9 +407,9 @@ impl Msgp {
     }
 
     /// Writes the model file (the JSON format of `msgp fit`, atomically).
-    fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
-        let file = self.fitted()?.file.clone();
-        detached(py, move || Ok(file.write(&path)?))?;
+    fn save(slf: &Bound<'_, Self>, path: PathBuf) -> PyResult<()> {
+        let fitted = Msgp::shared(slf)?;
+        detached(slf.py(), move || Ok(fitted.file.write(&path)?))?;
         Ok(())
     }
 
@@ -571,7 +580,7 @@ impl Msgp {
     /// Pickling goes through the model-file JSON (an unfitted model through its arguments).
     fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
         let py = slf.py();
-        let me = slf.borrow();
+        let me = slf.try_borrow().map_err(|e| Error::Busy(e.to_string()))?;
         let cls = slf.get_type();
         match &me.fitted {
             Some(f) => {
