@@ -171,14 +171,6 @@ pub fn array1<'py>(py: Python<'py>, v: &[f64]) -> Bound<'py, PyArray1<f64>> {
     PyArray1::from_slice(py, v)
 }
 
-/// Rows of equal length as a 2-D numpy array (`ncols` for zero rows).
-pub fn rows2<'py>(py: Python<'py>, rows: &[Vec<f64>], ncols: usize) -> Bound<'py, PyArray2<f64>> {
-    let n = rows.len();
-    let d = rows.first().map_or(ncols, Vec::len);
-    Array2::from_shape_fn((n, d), |(i, j)| rows[i].get(j).copied().unwrap_or(f64::NAN))
-        .into_pyarray(py)
-}
-
 /// A Python value (None, bool, int, float, str, list, tuple, dict with str keys, numpy
 /// scalars and arrays) as JSON; `path` names it in messages.
 pub fn to_json(obj: &Bound<'_, PyAny>, path: &str) -> Result<Value> {

@@ -1,6 +1,8 @@
 """Bad input raises ValueError (msgp.InvalidInputError) with a message that says what is
 wrong; other failures raise msgp.MsgpError subclasses; nothing panics."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -103,6 +105,15 @@ def test_model_file_errors(tmp_path, small):
         msgp.Msgp.load(bad)
     with pytest.raises(msgp.ModelFileError, match="cannot create a temporary file"):
         small.save(tmp_path / "no" / "such" / "folder" / "m.json")
+
+
+def test_numerical_failure_is_a_numerical_error(small):
+    """A model file whose signal variance overflows: it loads, but predicting fails cleanly."""
+    doc = json.loads(small.to_json())
+    doc["gp"]["log_signal_var"] = [800.0]
+    model = msgp.Msgp.from_json(json.dumps(doc))
+    with pytest.raises(msgp.NumericalError, match="not positive definite"):
+        model.score(U, Y)
 
 
 def test_bad_experiment_arguments():
