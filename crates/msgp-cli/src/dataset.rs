@@ -334,41 +334,7 @@ pub fn check_lengths(parts: &[Part], warmup: usize, what: &str) -> anyhow::Resul
     Ok(())
 }
 
-/// Metrics of several simulations pooled over all steps.
-pub fn pool(metrics: &[Metrics], dy: usize) -> Option<Metrics> {
-    let steps: usize = metrics.iter().map(|m| m.steps).sum();
-    if steps == 0 {
-        return None;
-    }
-    let w = |m: &Metrics| m.steps as f64;
-    let n = steps as f64;
-    let se: f64 = metrics
-        .iter()
-        .map(|m| m.rmse * m.rmse * w(m) * dy as f64)
-        .sum();
-    Some(Metrics {
-        rmse: if metrics.len() == 1 {
-            metrics[0].rmse
-        } else {
-            (se / (n * dy as f64)).sqrt()
-        },
-        nll: if metrics.len() == 1 {
-            metrics[0].nll
-        } else {
-            metrics.iter().map(|m| m.nll * w(m)).sum::<f64>() / n
-        },
-        coverage_2sigma: if metrics.len() == 1 {
-            metrics[0].coverage_2sigma
-        } else {
-            metrics
-                .iter()
-                .map(|m| m.coverage_2sigma * w(m))
-                .sum::<f64>()
-                / n
-        },
-        steps,
-    })
-}
+pub use msgp_core::model::pool;
 
 /// A simulated part, ready for metrics, plots and CSV.
 #[derive(Clone, Debug)]
@@ -419,27 +385,5 @@ mod tests {
         let (i, o) = default_columns(&c, &[], &names(&["u1"])).expect("output given");
         assert_eq!((i, o), (names(&["u2"]), names(&["u1"])));
         assert!(default_columns(&names(&["y"]), &[], &[]).is_err());
-    }
-
-    #[test]
-    fn pooled_metrics_weight_by_steps() {
-        let a = Metrics {
-            rmse: 1.0,
-            nll: 1.0,
-            coverage_2sigma: 1.0,
-            steps: 1,
-        };
-        let b = Metrics {
-            rmse: 2.0,
-            nll: 4.0,
-            coverage_2sigma: 0.0,
-            steps: 3,
-        };
-        let p = pool(&[a, b], 1).expect("steps");
-        assert!((p.rmse - (13.0f64 / 4.0).sqrt()).abs() < 1e-15);
-        assert!((p.nll - 13.0 / 4.0).abs() < 1e-15);
-        assert!((p.coverage_2sigma - 0.25).abs() < 1e-15);
-        assert_eq!(pool(&[a], 1), Some(a));
-        assert_eq!(pool(&[], 1), None);
     }
 }

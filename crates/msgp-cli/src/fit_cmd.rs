@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
-use msgp_core::fit::{FitProgress, FitSettings, fit};
+use msgp_core::fit::{FitOptions, FitProgress, fit};
 use msgp_core::model::Method;
 use msgp_core::model_file::{FitRecord, ModelFile};
 use msgp_core::trajectory::Trajectory;
@@ -21,8 +21,6 @@ use crate::report::{metrics_json, metrics_line, trajectories};
 
 /// Default training fraction of each trajectory.
 pub const DEFAULT_TRAIN_FRAC: f64 = 0.5;
-/// Upper bound of the default number of pseudo-inputs.
-pub const DEFAULT_MAX_INDUCING: usize = 100;
 
 /// Training method on the command line.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -151,29 +149,19 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let warmup = ly.max(lu);
     check_lengths(&train, warmup, "training")?;
     check_lengths(&test, warmup, "test")?;
-    let windows: usize = train.iter().map(|p| p.traj.len() - warmup).sum();
-    let inducing = args
-        .inducing
-        .unwrap_or_else(|| DEFAULT_MAX_INDUCING.min((windows / 2).max(1)));
     let method = Method::from(args.method);
-    let defaults = FitSettings::default();
-    let settings = FitSettings {
+    let trajs: Vec<Trajectory> = train.iter().map(|p| p.traj.clone()).collect();
+    // the same settings as the Python `msgp.Msgp` for the same options
+    let settings = FitOptions {
         method,
         ly,
         lu,
-        inducing,
-        iterations: match (method, args.iters) {
-            (Method::Msgp, Some(n)) => n,
-            _ => defaults.iterations,
-        },
-        one_step_iterations: match (method, args.iters) {
-            (Method::Msgp, _) | (_, None) => defaults.one_step_iterations,
-            (_, Some(n)) => n,
-        },
+        inducing: args.inducing,
+        iterations: args.iters,
         seed: args.seed,
-        ..defaults
-    };
-    let trajs: Vec<Trajectory> = train.iter().map(|p| p.traj.clone()).collect();
+    }
+    .settings(&trajs)?;
+    let inducing = settings.inducing;
     let n_train: usize = trajs.iter().map(Trajectory::len).sum();
     let label = format!(
         "{} on {}",

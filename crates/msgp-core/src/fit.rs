@@ -88,6 +88,88 @@ impl Default for FitSettings {
     }
 }
 
+/// Upper bound of the default number of pseudo-inputs ([`FitOptions::inducing`]).
+pub const DEFAULT_MAX_INDUCING: usize = 100;
+
+/// The choices a user makes for a fit: what `msgp fit` and the Python `msgp.Msgp` take. Turned
+/// into [`FitSettings`] by [`FitOptions::settings`], so both front ends fit with identical
+/// settings (and give identical numbers) for the same data, options and seed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FitOptions {
+    /// Training method.
+    pub method: Method,
+    /// `l_y`.
+    pub ly: usize,
+    /// `l_u`.
+    pub lu: usize,
+    /// Number of pseudo-inputs; `None`: `min(100, training windows / 2)` (at least 1), where a
+    /// trajectory of `T` samples has `T − max(l_y, l_u)` windows.
+    pub inducing: Option<usize>,
+    /// Adam iterations of the method's own optimisation: on the trajectory likelihood for MSGP
+    /// ([`FitSettings::iterations`]), on the one-step marginal likelihood for the baselines
+    /// ([`FitSettings::one_step_iterations`]); `None`: the defaults (400 and 300). The MSGP
+    /// initialisation always runs the default one-step iterations.
+    pub iterations: Option<usize>,
+    /// Seed of every random choice.
+    pub seed: u64,
+}
+
+impl FitOptions {
+    /// The full settings for fitting `train`, every other field at its default. Checks that
+    /// there is training data and that every trajectory is longer than the history.
+    pub fn settings(&self, train: &[Trajectory]) -> Result<FitSettings> {
+        let first = train
+            .first()
+            .ok_or_else(|| MsgpError::Data("no training trajectories".into()))?;
+        let spec = NarxSpec {
+            ly: self.ly,
+            lu: self.lu,
+            dy: first.y.ncols(),
+            du: first.u.ncols(),
+        };
+        spec.validate()?;
+        let warmup = spec.warmup();
+        for (k, t) in train.iter().enumerate() {
+            if t.len() <= warmup {
+                return Err(MsgpError::Data(format!(
+                    "training trajectory {k} has {} samples; the history (l_y={}, l_u={}) needs \
+                     more than {warmup}",
+                    t.len(),
+                    self.ly,
+                    self.lu
+                )));
+            }
+        }
+        if self.inducing == Some(0) {
+            return Err(MsgpError::InvalidSetting {
+                name: "inducing",
+                reason: "need at least one pseudo-input".into(),
+            });
+        }
+        let windows: usize = train.iter().map(|t| t.len() - warmup).sum();
+        let inducing = self
+            .inducing
+            .unwrap_or_else(|| DEFAULT_MAX_INDUCING.min((windows / 2).max(1)));
+        let defaults = FitSettings::default();
+        Ok(FitSettings {
+            method: self.method,
+            ly: self.ly,
+            lu: self.lu,
+            inducing,
+            iterations: match (self.method, self.iterations) {
+                (Method::Msgp, Some(n)) => n,
+                _ => defaults.iterations,
+            },
+            one_step_iterations: match (self.method, self.iterations) {
+                (Method::Msgp, _) | (_, None) => defaults.one_step_iterations,
+                (_, Some(n)) => n,
+            },
+            seed: self.seed,
+            ..defaults
+        })
+    }
+}
+
 /// One line of fit progress.
 #[derive(Clone, Copy, Debug)]
 pub struct FitProgress {
@@ -459,5 +541,83 @@ impl Stage<'_, '_> {
             (best.1, best.2)
         };
         Ok((GpParams::from_flat(shape, &x)?, it))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn traj(n: usize) -> Trajectory {
+        let u: Vec<f64> = (0..n).map(|i| (i as f64 * 0.3).sin()).collect();
+        let y: Vec<f64> = (0..n).map(|i| (i as f64 * 0.2).cos()).collect();
+        Trajectory::siso(&u, &y).expect("finite")
+    }
+
+    fn options(method: Method, inducing: Option<usize>, iterations: Option<usize>) -> FitOptions {
+        FitOptions {
+            method,
+            ly: 2,
+            lu: 3,
+            inducing,
+            iterations,
+            seed: 7,
+        }
+    }
+
+    #[test]
+    fn options_default_inducing_and_iterations() {
+        // 2 × (50 − 3) = 94 windows → 47 pseudo-inputs; 1000 − 3 windows → capped at 100
+        let s = options(Method::Msgp, None, Some(30))
+            .settings(&[traj(50), traj(50)])
+            .expect("settings");
+        assert_eq!(
+            (s.inducing, s.iterations, s.one_step_iterations),
+            (47, 30, 300)
+        );
+        assert_eq!((s.ly, s.lu, s.seed), (2, 3, 7));
+        let s = options(Method::GpNarx, None, Some(30))
+            .settings(&[traj(1000)])
+            .expect("settings");
+        assert_eq!(
+            (s.inducing, s.iterations, s.one_step_iterations),
+            (100, 400, 30)
+        );
+        let s = options(Method::PilcoNarx, Some(5), None)
+            .settings(&[traj(4)])
+            .expect("settings");
+        assert_eq!((s.inducing, s.one_step_iterations), (5, 300));
+        let d = FitSettings::default();
+        assert_eq!(
+            (s.learning_rate, s.frozen.clone()),
+            (d.learning_rate, d.frozen)
+        );
+    }
+
+    #[test]
+    fn options_refuse_bad_input_clearly() {
+        let e = options(Method::Msgp, None, None)
+            .settings(&[traj(10), traj(3)])
+            .expect_err("short");
+        assert!(
+            e.to_string()
+                .contains("training trajectory 1 has 3 samples"),
+            "{e}"
+        );
+        let e = options(Method::Msgp, None, None)
+            .settings(&[])
+            .expect_err("empty");
+        assert!(e.to_string().contains("no training trajectories"), "{e}");
+        let e = options(Method::Msgp, Some(0), None)
+            .settings(&[traj(10)])
+            .expect_err("m = 0");
+        assert!(e.to_string().contains("inducing"), "{e}");
+        let e = FitOptions {
+            ly: 0,
+            ..options(Method::Msgp, None, None)
+        }
+        .settings(&[traj(10)])
+        .expect_err("l_y = 0");
+        assert!(e.to_string().contains("l_y"), "{e}");
     }
 }

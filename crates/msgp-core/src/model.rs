@@ -32,6 +32,14 @@ impl Method {
             Method::Msgp => "msgp",
         }
     }
+
+    /// Every method, the paper's first.
+    pub const ALL: [Method; 3] = [Method::Msgp, Method::GpNarx, Method::PilcoNarx];
+
+    /// The method called `name` (see [`name`](Self::name)).
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == name)
+    }
 }
 
 /// A model ready to simulate.
@@ -142,4 +150,67 @@ pub fn score(sim: &Simulation, traj: &Trajectory) -> Result<Metrics> {
         coverage_2sigma: inside as f64 / (n * dy) as f64,
         steps: n,
     })
+}
+
+/// Metrics of several simulations pooled over all steps.
+pub fn pool(metrics: &[Metrics], dy: usize) -> Option<Metrics> {
+    let steps: usize = metrics.iter().map(|m| m.steps).sum();
+    if steps == 0 {
+        return None;
+    }
+    let w = |m: &Metrics| m.steps as f64;
+    let n = steps as f64;
+    let se: f64 = metrics
+        .iter()
+        .map(|m| m.rmse * m.rmse * w(m) * dy as f64)
+        .sum();
+    Some(Metrics {
+        rmse: if metrics.len() == 1 {
+            metrics[0].rmse
+        } else {
+            (se / (n * dy as f64)).sqrt()
+        },
+        nll: if metrics.len() == 1 {
+            metrics[0].nll
+        } else {
+            metrics.iter().map(|m| m.nll * w(m)).sum::<f64>() / n
+        },
+        coverage_2sigma: if metrics.len() == 1 {
+            metrics[0].coverage_2sigma
+        } else {
+            metrics
+                .iter()
+                .map(|m| m.coverage_2sigma * w(m))
+                .sum::<f64>()
+                / n
+        },
+        steps,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pooled_metrics_weight_by_steps() {
+        let a = Metrics {
+            rmse: 1.0,
+            nll: 1.0,
+            coverage_2sigma: 1.0,
+            steps: 1,
+        };
+        let b = Metrics {
+            rmse: 2.0,
+            nll: 4.0,
+            coverage_2sigma: 0.0,
+            steps: 3,
+        };
+        let p = pool(&[a, b], 1).expect("steps");
+        assert!((p.rmse - (13.0f64 / 4.0).sqrt()).abs() < 1e-15);
+        assert!((p.nll - 13.0 / 4.0).abs() < 1e-15);
+        assert!((p.coverage_2sigma - 0.25).abs() < 1e-15);
+        assert_eq!(pool(&[a], 1), Some(a));
+        assert_eq!(pool(&[], 1), None);
+    }
 }

@@ -1,5 +1,45 @@
-"""msgp: Gaussian-process dynamics models optimised for long-term predictions (MSGP)."""
+"""msgp: Gaussian-process dynamics models optimised for long-term predictions (MSGP).
 
-from ._msgp import __version__, fit_synthetic, synthetic_system
+A numpy-native front of the Rust library (Doerr et al., "Optimizing Long-term Predictions for
+Model-based Policy Search", CoRL 2017)::
 
-__all__ = ["__version__", "fit_synthetic", "synthetic_system"]
+    import msgp
+    data = msgp.synthetic_system(4, seed=0)
+    model = msgp.Msgp(history=data["history"], seed=0).fit(data["u_train"], data["y_train"])
+    mean, var = model.simulate(data["u_test"], data["y_test"])
+    print(model.score(data["u_test"], data["y_test"]))
+    model.save("sys4.model.json")  # the model file of `msgp fit`
+
+Every number is computed in Rust; long calls release the GIL. Errors derive from
+``MsgpError``; bad input raises ``InvalidInputError``, which is also a ``ValueError``.
+"""
+
+from ._msgp import (
+    InvalidInputError,
+    ModelFileError,
+    Msgp,
+    MsgpError,
+    NotFittedError,
+    NumericalError,
+    __version__,
+    defaults,
+    learn_policy,
+    run_episode,
+    stability_test,
+    synthetic_system,
+)
+
+__all__ = [
+    "InvalidInputError",
+    "ModelFileError",
+    "Msgp",
+    "MsgpError",
+    "NotFittedError",
+    "NumericalError",
+    "__version__",
+    "defaults",
+    "learn_policy",
+    "run_episode",
+    "stability_test",
+    "synthetic_system",
+]

@@ -1,0 +1,148 @@
+"""Type stubs of the compiled module `msgp._msgp` (re-exported by `msgp`)."""
+
+import os
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+# One trajectory: an array (n, d) or (n,) (anything numpy turns into floats); several: a list
+# of such arrays.
+ArrayLike = npt.ArrayLike
+Data = Union[ArrayLike, Sequence[np.ndarray]]
+Array = npt.NDArray[np.float64]
+PathLike = Union[str, "os.PathLike[str]"]
+Gains = Union[str, Dict[str, Any], Sequence[float]]
+
+class MsgpError(Exception):
+    """Base class of every error raised by msgp."""
+
+class InvalidInputError(MsgpError, ValueError):
+    """Bad input: wrong shapes, non-finite values, too few samples for the history, unknown
+    names or settings. Also a ValueError."""
+
+class NumericalError(MsgpError):
+    """A matrix indefinite even with the largest allowed jitter, or a non-finite value."""
+
+class ModelFileError(MsgpError):
+    """A model file that cannot be read, parsed, checked or written."""
+
+class NotFittedError(MsgpError):
+    """The model has neither been fitted nor loaded."""
+
+class Msgp:
+    """Gaussian-process dynamics model trained for long-term predictions (MSGP), or the
+    one-step GP-NARX baselines ("gp-narx", "pilco-narx").
+
+    history: (l_y, l_u), past outputs and inputs in the GP input.
+    inducing: pseudo-inputs; None: min(100, training windows / 2).
+    iterations: Adam iterations (MSGP: trajectory likelihood, default 400; baselines:
+        one-step marginal likelihood, default 300) — `msgp fit --iters`.
+    seed: seed of every random choice.
+    settings: other fields of `defaults("fit")` to override (advanced).
+    """
+
+    def __init__(
+        self,
+        history: Tuple[int, int] = (2, 2),
+        inducing: Optional[int] = None,
+        method: str = "msgp",
+        seed: int = 0,
+        iterations: Optional[int] = None,
+        settings: Optional[Dict[str, Any]] = None,
+    ) -> None: ...
+    def fit(
+        self,
+        u: Data,
+        y: Data,
+        *,
+        input_names: Optional[Sequence[str]] = None,
+        output_names: Optional[Sequence[str]] = None,
+    ) -> "Msgp":
+        """Fits on inputs `u` and outputs `y` (arrays (n, d) or (n,), or lists of arrays for
+        several trajectories); returns self. Releases the GIL."""
+    def simulate(self, u: ArrayLike, y_init: ArrayLike) -> Tuple[Array, Array]:
+        """Free simulation driven by `u` (T samples) from the first max(l_y, l_u) rows of
+        `y_init`; returns (mean, var), each (T − max(l_y, l_u), d_y), original units."""
+    def score(self, u: Data, y: Data) -> Dict[str, float]:
+        """Free-simulation metrics: rmse, nll (mean per step), coverage_2sigma, steps."""
+    def save(self, path: PathLike) -> None:
+        """Writes the model file of `msgp fit` (JSON, atomically)."""
+    @staticmethod
+    def load(path: PathLike) -> "Msgp":
+        """Reads a model file written by `msgp fit` or `save`."""
+    def to_json(self) -> str: ...
+    @staticmethod
+    def from_json(text: str) -> "Msgp": ...
+    @property
+    def is_fitted(self) -> bool: ...
+    @property
+    def method(self) -> str: ...
+    @property
+    def history(self) -> Tuple[int, int]: ...
+    @property
+    def inducing(self) -> Optional[int]: ...
+    @property
+    def iterations(self) -> Optional[int]: ...
+    @property
+    def seed(self) -> int: ...
+    @property
+    def warmup(self) -> int:
+        """max(l_y, l_u): predictions start at this sample."""
+    @property
+    def input_names(self) -> List[str]: ...
+    @property
+    def output_names(self) -> List[str]: ...
+    @property
+    def params(self) -> Dict[str, Union[Array, float]]:
+        """pseudo_inputs, pseudo_targets, log_lengthscales, log_signal_var,
+        log_process_noise, log_obs_noise, u_mean, u_std, y_mean, y_std (arrays) and
+        noise_floor (float); names and units as in the model file."""
+    @property
+    def training(self) -> Dict[str, Any]: ...
+    @property
+    def report(self) -> Optional[Dict[str, Any]]: ...
+    @property
+    def reference(self) -> Optional[Dict[str, Array]]: ...
+
+def synthetic_system(k: int, seed: int = 0, noise: str = "std") -> Dict[str, Any]:
+    """Synthetic system k (1–5) of the paper's Table 2: u_train, y_train, u_test, y_test
+    (1-D arrays) and history (l_y, l_u)."""
+
+def defaults(what: str) -> Dict[str, Any]:
+    """Defaults of "pendulum", "stability", "learn" or "fit" settings."""
+
+def run_episode(
+    controller: Optional[Gains] = None,
+    *,
+    seconds: float = 10.0,
+    seed: int = 0,
+    theta0: Optional[float] = None,
+    excitation_rms: float = 1.0,
+    params: Optional[Dict[str, Any]] = None,
+) -> Dict[str, Any]:
+    """One seeded pendulum episode (as `msgp sim pendulum`): arrays t, command, meas_theta,
+    meas_x, latent_*, u (n, 1), y (n, 2) and the dict info. controller: "hand-tuned"
+    (default), "apollo-lqr", "zero", "random", a dict of gains or 5 gains."""
+
+def stability_test(
+    gains: Gains,
+    *,
+    seed: int = 0,
+    params: Optional[Dict[str, Any]] = None,
+    criteria: Optional[Dict[str, Any]] = None,
+) -> Dict[str, Any]:
+    """The stability test (as `msgp sim stability`): passed, gains, seed, starts."""
+
+def learn_policy(
+    method: str = "msgp",
+    iterations: int = 8,
+    seed: int = 0,
+    *,
+    params: Optional[Dict[str, Any]] = None,
+    settings: Optional[Dict[str, Any]] = None,
+) -> List[Dict[str, Any]]:
+    """PILCO with MSGP (or GP-NARX) models on the simulated pendulum; one report per
+    iteration. Releases the GIL; takes minutes with the defaults."""

@@ -1,0 +1,615 @@
+//! `msgp.Msgp`: fit, simulate, score, save and load, through the same library calls as
+//! `msgp fit` / `msgp eval` (settings from [`FitOptions::settings`], the model file from
+//! [`ModelFile::from_fit`], predictions from the model as saved), so both give the same
+//! numbers for the same data, options and seed.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use msgp_core::fit::{FitOptions, FitReport, FitSettings, fit};
+use msgp_core::model::{Method, Metrics, Model, pool, score};
+use msgp_core::model_file::{FitRecord, ModelFile};
+use msgp_core::trajectory::Trajectory;
+use nalgebra::DMatrix;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList, PyTuple};
+
+use crate::convert::{array1, array2, matrix, to_python, trajectories, with_overrides};
+use crate::error::{Error, Result, detached, input};
+
+/// Settings that the constructor's own arguments set.
+const OWN_SETTINGS: [(&str, &str); 6] = [
+    ("method", "method"),
+    ("ly", "history"),
+    ("lu", "history"),
+    ("inducing", "inducing"),
+    ("iterations", "iterations"),
+    ("seed", "seed"),
+];
+
+/// A non-negative integer argument.
+pub fn uint(v: i128, name: &str) -> Result<u64> {
+    u64::try_from(v).map_err(|_| {
+        if v < 0 {
+            input(format!("{name} must be a non-negative integer, got {v}"))
+        } else {
+            input(format!("{name} is too large ({v})"))
+        }
+    })
+}
+
+/// A non-negative integer argument that counts something.
+pub fn count(v: i128, name: &str) -> Result<usize> {
+    usize::try_from(uint(v, name)?).map_err(|_| input(format!("{name} is too large ({v})")))
+}
+
+/// A method name (`msgp`, `gp-narx`, `pilco-narx`).
+pub fn method(name: &str) -> Result<Method> {
+    Method::from_name(name).ok_or_else(|| {
+        input(format!(
+            "unknown method {name:?}: expected one of {}",
+            Method::ALL
+                .iter()
+                .map(|m| format!("{:?}", m.name()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ))
+    })
+}
+
+/// A fitted or loaded model: the file as `msgp fit` writes it and the model it describes.
+#[derive(Debug)]
+struct Fitted {
+    file: ModelFile,
+    model: Model,
+    report: Option<FitReport>,
+}
+
+/// Gaussian-process dynamics model trained for long-term predictions (MSGP, Doerr et al.,
+/// CoRL 2017), or the one-step GP-NARX baselines.
+#[pyclass(module = "msgp", name = "Msgp")]
+#[derive(Debug)]
+pub struct Msgp {
+    options: FitOptions,
+    /// Other `FitSettings` fields given by the user (a JSON object), applied after `options`.
+    overrides: Option<serde_json::Value>,
+    /// Shared so that long calls hold no borrow of the object while the GIL is released.
+    fitted: Option<Arc<Fitted>>,
+}
+
+impl Msgp {
+    fn fitted(&self) -> Result<&Fitted> {
+        self.fitted.as_deref().ok_or(Error::NotFitted)
+    }
+
+    /// The fitted model, borrowing the object only for the moment it takes to share it.
+    fn shared(slf: &Bound<'_, Self>) -> PyResult<Arc<Fitted>> {
+        let me = slf.try_borrow().map_err(|e| Error::Busy(e.to_string()))?;
+        Ok(me.fitted.clone().ok_or(Error::NotFitted)?)
+    }
+
+    /// Settings for `train`: exactly `msgp fit`'s, then the user's other settings.
+    fn settings(
+        options: &FitOptions,
+        overrides: Option<&serde_json::Value>,
+        train: &[Trajectory],
+    ) -> Result<FitSettings> {
+        let settings = options.settings(train)?;
+        let Some(user) = overrides else {
+            return Ok(settings);
+        };
+        let value = serde_json::to_value(&settings)
+            .map_err(|e| Error::Panic(format!("cannot describe the settings: {e}")))?;
+        crate::convert::merged(&value, user, "settings")
+    }
+
+    fn from_file(file: ModelFile, model: Model, report: Option<FitReport>) -> Self {
+        let iterations = match model.method {
+            Method::Msgp => file.training.settings.get("iterations"),
+            _ => file.training.settings.get("one_step_iterations"),
+        }
+        .and_then(serde_json::Value::as_u64)
+        .and_then(|n| usize::try_from(n).ok());
+        Self {
+            options: FitOptions {
+                method: model.method,
+                ly: model.spec.ly,
+                lu: model.spec.lu,
+                inducing: Some(model.params.pseudo_inputs.nrows()),
+                iterations,
+                seed: file.training.seed,
+            },
+            overrides: None,
+            fitted: Some(Arc::new(Fitted {
+                file,
+                model,
+                report,
+            })),
+        }
+    }
+
+    /// One trajectory for simulation: `u` (T × d_u) and the first `max(l_y, l_u)` rows of
+    /// `y_init`; the outputs after them are not used (feed-forward rollout) and set to 0.
+    fn simulation_input(
+        model: &Model,
+        u: &Bound<'_, PyAny>,
+        y_init: &Bound<'_, PyAny>,
+    ) -> Result<Trajectory> {
+        let spec = model.spec;
+        let u = matrix(u, "u")?;
+        let y0 = matrix(y_init, "y_init")?;
+        check_columns(model, u.ncols(), y0.ncols(), "")?;
+        let w = spec.warmup();
+        if u.nrows() <= w {
+            return Err(input(format!(
+                "u has {} samples; the history (l_y={}, l_u={}) needs more than {w} to predict anything",
+                u.nrows(),
+                spec.ly,
+                spec.lu
+            )));
+        }
+        if y0.nrows() < w {
+            return Err(input(format!(
+                "y_init has {} samples; the simulation starts from the first {w} outputs \
+                 (max(l_y, l_u) with l_y={}, l_u={})",
+                y0.nrows(),
+                spec.ly,
+                spec.lu
+            )));
+        }
+        if y0.nrows() > u.nrows() {
+            return Err(input(format!(
+                "y_init has {} samples, more than the {} of u",
+                y0.nrows(),
+                u.nrows()
+            )));
+        }
+        let y = DMatrix::from_fn(
+            u.nrows(),
+            spec.dy,
+            |i, j| if i < w { y0[(i, j)] } else { 0.0 },
+        );
+        Ok(Trajectory::new(u, y)?)
+    }
+}
+
+/// Checks `du`, `dy` against the model; `prefix` names the trajectory.
+fn check_columns(model: &Model, du: usize, dy: usize, prefix: &str) -> Result<()> {
+    let spec = model.spec;
+    if du != spec.du || dy != spec.dy {
+        return Err(input(format!(
+            "{prefix}data with {du} input and {dy} output columns; the model has {} and {}",
+            spec.du, spec.dy
+        )));
+    }
+    Ok(())
+}
+
+fn default_names(prefix: &str, n: usize) -> Vec<String> {
+    if n == 1 {
+        vec![prefix.to_string()]
+    } else {
+        (0..n).map(|i| format!("{prefix}{i}")).collect()
+    }
+}
+
+fn names(given: Option<Vec<String>>, prefix: &str, n: usize, what: &str) -> Result<Vec<String>> {
+    let Some(v) = given else {
+        return Ok(default_names(prefix, n));
+    };
+    if v.len() != n {
+        return Err(input(format!(
+            "{what} has {} names for {n} columns",
+            v.len()
+        )));
+    }
+    if v.iter().any(String::is_empty) {
+        return Err(input(format!("{what}: names must not be empty")));
+    }
+    Ok(v)
+}
+
+fn metrics_dict<'py>(py: Python<'py>, m: &Metrics) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("rmse", m.rmse)?;
+    d.set_item("nll", m.nll)?;
+    d.set_item("coverage_2sigma", m.coverage_2sigma)?;
+    d.set_item("steps", m.steps)?;
+    Ok(d)
+}
+
+#[pymethods]
+impl Msgp {
+    #[new]
+    #[pyo3(
+        signature = (history = None, inducing = None, method = "msgp", seed = 0, iterations = None, settings = None),
+        text_signature = "(history=(2, 2), inducing=None, method='msgp', seed=0, iterations=None, settings=None)"
+    )]
+    fn new(
+        history: Option<&Bound<'_, PyAny>>,
+        inducing: Option<i128>,
+        method: &str,
+        seed: i128,
+        iterations: Option<i128>,
+        settings: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
+        let m = crate::model::method(method)?;
+        let (ly, lu) = match history.filter(|h| !h.is_none()) {
+            None => (2, 2),
+            Some(h) => {
+                let pair: Option<(i128, i128)> =
+                    if h.cast::<PyTuple>().is_ok() || h.cast::<PyList>().is_ok() {
+                        h.extract().ok()
+                    } else {
+                        None
+                    };
+                let Some((ly, lu)) = pair else {
+                    return Err(input(format!(
+                        "history must be a pair (l_y, l_u) of past outputs and inputs, got {h}"
+                    ))
+                    .into());
+                };
+                (count(ly, "history l_y")?, count(lu, "history l_u")?)
+            }
+        };
+        if ly == 0 {
+            return Err(input("history l_y must be at least 1").into());
+        }
+        let inducing = inducing.map(|x| count(x, "inducing")).transpose()?;
+        if inducing == Some(0) {
+            return Err(input("inducing must be at least 1").into());
+        }
+        let iterations = iterations.map(|x| count(x, "iterations")).transpose()?;
+        let seed = uint(seed, "seed")?;
+        let options = FitOptions {
+            method: m,
+            ly,
+            lu,
+            inducing,
+            iterations,
+            seed,
+        };
+        let overrides = match settings.filter(|s| !s.is_none()) {
+            None => None,
+            Some(s) => {
+                let user = crate::convert::to_json(s, "settings")?;
+                let Some(obj) = user.as_object() else {
+                    return Err(input(format!("settings must be a dict, got {s}")).into());
+                };
+                for (key, arg) in OWN_SETTINGS {
+                    if obj.contains_key(key) {
+                        return Err(input(format!(
+                            "settings[{key:?}]: set it with the Msgp({arg}=...) argument"
+                        ))
+                        .into());
+                    }
+                }
+                // checked now against the defaults, so mistakes show at construction
+                let _: FitSettings = with_overrides(&FitSettings::default(), Some(s), "settings")?;
+                Some(user)
+            }
+        };
+        Ok(Self {
+            options,
+            overrides,
+            fitted: None,
+        })
+    }
+
+    /// Fits the model on `u`, `y` (arrays (n, d) or (n,), or lists of such arrays for several
+    /// trajectories); returns self. Releases the GIL while fitting.
+    #[pyo3(signature = (u, y, *, input_names = None, output_names = None))]
+    fn fit<'py>(
+        slf: Bound<'py, Self>,
+        u: &Bound<'py, PyAny>,
+        y: &Bound<'py, PyAny>,
+        input_names: Option<Vec<String>>,
+        output_names: Option<Vec<String>>,
+    ) -> PyResult<Bound<'py, Self>> {
+        let py = slf.py();
+        let (options, overrides) = {
+            let me = slf.try_borrow().map_err(|e| Error::Busy(e.to_string()))?;
+            (me.options, me.overrides.clone())
+        };
+        let train = trajectories(u, y)?;
+        let (du, dy) = train.first().map_or((0, 0), |t| (t.u.ncols(), t.y.ncols()));
+        let inputs = names(input_names, "u", du, "input_names")?;
+        let outputs = names(output_names, "y", dy, "output_names")?;
+        if let Some(n) = inputs.iter().find(|n| outputs.contains(n)) {
+            return Err(input(format!("{n:?} is both an input and an output name")).into());
+        }
+        let fitted = detached(py, move || -> Result<Fitted> {
+            let settings = Msgp::settings(&options, overrides.as_ref(), &train)?;
+            let (model, report) = fit(&train, &settings, &mut |_| {})?;
+            let file = ModelFile::from_fit(
+                &model,
+                &FitRecord {
+                    inputs: &inputs,
+                    outputs: &outputs,
+                    settings: &settings,
+                    report: &report,
+                    train: &train,
+                },
+            )?;
+            // predict with the model as saved, like `msgp fit`
+            let model = file.to_model()?;
+            Ok(Fitted {
+                file,
+                model,
+                report: Some(report),
+            })
+        })?;
+        slf.try_borrow_mut()
+            .map_err(|e| Error::Busy(e.to_string()))?
+            .fitted = Some(Arc::new(fitted));
+        Ok(slf)
+    }
+
+    /// Free simulation driven by the inputs `u` (T samples) from the first
+    /// `max(l_y, l_u)` measured outputs in `y_init` (further rows are ignored). Returns
+    /// `(mean, var)`, each of shape (T − max(l_y, l_u), d_y): row `i` predicts sample
+    /// `max(l_y, l_u) + i`, variance including observation noise, original units.
+    fn simulate<'py>(
+        slf: &Bound<'py, Self>,
+        u: &Bound<'py, PyAny>,
+        y_init: &Bound<'py, PyAny>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        let py = slf.py();
+        let fitted = Msgp::shared(slf)?;
+        let traj = Msgp::simulation_input(&fitted.model, u, y_init)?;
+        let sim = detached(py, move || Ok(fitted.model.simulate(&traj)?))?;
+        Ok((
+            array2(py, &sim.mean).into_any(),
+            array2(py, &sim.var).into_any(),
+        ))
+    }
+
+    /// Free simulation of each trajectory of `u`, `y` from its first `max(l_y, l_u)` samples,
+    /// scored against `y`: dict of `rmse`, `nll` (mean per step), `coverage_2sigma`, `steps`,
+    /// pooled over all trajectories like `msgp eval`.
+    fn score<'py>(
+        slf: &Bound<'py, Self>,
+        u: &Bound<'py, PyAny>,
+        y: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let py = slf.py();
+        let fitted = Msgp::shared(slf)?;
+        let trajs = trajectories(u, y)?;
+        let spec = fitted.model.spec;
+        let several = trajs.len() > 1;
+        for (k, t) in trajs.iter().enumerate() {
+            let prefix = if several {
+                format!("trajectory {k}: ")
+            } else {
+                String::new()
+            };
+            check_columns(&fitted.model, t.u.ncols(), t.y.ncols(), &prefix)?;
+            if t.len() <= spec.warmup() {
+                return Err(input(format!(
+                    "{prefix}{} samples; the history (l_y={}, l_u={}) needs more than {}",
+                    t.len(),
+                    spec.ly,
+                    spec.lu,
+                    spec.warmup()
+                ))
+                .into());
+            }
+        }
+        let metrics = detached(py, move || {
+            let model = &fitted.model;
+            let each = trajs
+                .iter()
+                .map(|t| Ok(score(&model.simulate(t)?, t)?))
+                .collect::<Result<Vec<Metrics>>>()?;
+            pool(&each, model.spec.dy).ok_or_else(|| input("nothing to score"))
+        })?;
+        metrics_dict(py, &metrics)
+    }
+
+    /// Writes the model file (the JSON format of `msgp fit`, atomically).
+    fn save(slf: &Bound<'_, Self>, path: PathBuf) -> PyResult<()> {
+        let fitted = Msgp::shared(slf)?;
+        detached(slf.py(), move || Ok(fitted.file.write(&path)?))?;
+        Ok(())
+    }
+
+    /// Reads a model file written by `msgp fit` or `Msgp.save`.
+    #[staticmethod]
+    fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        let (file, model) = detached(py, move || {
+            let file = ModelFile::read(&path)?;
+            let model = file.to_model_at(&path)?;
+            Ok((file, model))
+        })?;
+        Ok(Self::from_file(file, model, None))
+    }
+
+    /// The model file as JSON text (what `save` writes).
+    fn to_json(&self) -> PyResult<String> {
+        Ok(self.fitted()?.file.to_json().map_err(Error::from)?)
+    }
+
+    /// A model from model-file JSON text.
+    #[staticmethod]
+    fn from_json(text: &str) -> PyResult<Self> {
+        let path = std::path::Path::new("<json>");
+        let file = ModelFile::from_json(text.as_bytes(), path).map_err(Error::from)?;
+        let model = file.to_model_at(path).map_err(Error::from)?;
+        Ok(Self::from_file(file, model, None))
+    }
+
+    /// True once fitted or loaded.
+    #[getter]
+    fn is_fitted(&self) -> bool {
+        self.fitted.is_some()
+    }
+
+    /// Training method: "msgp", "gp-narx" or "pilco-narx".
+    #[getter]
+    fn method(&self) -> &'static str {
+        self.options.method.name()
+    }
+
+    /// `(l_y, l_u)`.
+    #[getter]
+    fn history(&self) -> (usize, usize) {
+        (self.options.ly, self.options.lu)
+    }
+
+    /// Number of pseudo-inputs (None before fitting with the default).
+    #[getter]
+    fn inducing(&self) -> Option<usize> {
+        match &self.fitted {
+            Some(f) => Some(f.model.params.pseudo_inputs.nrows()),
+            None => self.options.inducing,
+        }
+    }
+
+    /// Adam iterations (None: the method's default).
+    #[getter]
+    fn iterations(&self) -> Option<usize> {
+        self.options.iterations
+    }
+
+    /// Seed of every random choice of the fit.
+    #[getter]
+    fn seed(&self) -> u64 {
+        self.options.seed
+    }
+
+    /// `max(l_y, l_u)`: samples that start a simulation; predictions begin at this index.
+    #[getter]
+    fn warmup(&self) -> usize {
+        self.options.ly.max(self.options.lu)
+    }
+
+    /// Input column names of the fitted model.
+    #[getter]
+    fn input_names(&self) -> PyResult<Vec<String>> {
+        Ok(self.fitted()?.file.inputs.clone())
+    }
+
+    /// Output column names of the fitted model.
+    #[getter]
+    fn output_names(&self) -> PyResult<Vec<String>> {
+        Ok(self.fitted()?.file.outputs.clone())
+    }
+
+    /// The fitted parameters as numpy arrays, named as in the model file (normalised units):
+    /// `pseudo_inputs` (m, D), `pseudo_targets` (m, d_y), `log_lengthscales` (d_y, D),
+    /// `log_signal_var`, `log_process_noise`, `log_obs_noise` (d_y,), `u_mean`, `u_std` (d_u,),
+    /// `y_mean`, `y_std` (d_y,), and the float `noise_floor`.
+    #[getter]
+    fn params<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let f = self.fitted()?;
+        let p = &f.model.params;
+        let n = &f.model.normalizer;
+        let d = PyDict::new(py);
+        d.set_item("pseudo_inputs", array2(py, &p.pseudo_inputs))?;
+        d.set_item("pseudo_targets", array2(py, &p.pseudo_targets))?;
+        d.set_item("log_lengthscales", array2(py, &p.log_lengthscales))?;
+        d.set_item("log_signal_var", array1(py, p.log_signal_var.as_slice()))?;
+        d.set_item(
+            "log_process_noise",
+            array1(py, p.log_process_noise.as_slice()),
+        )?;
+        d.set_item("log_obs_noise", array1(py, p.log_obs_noise.as_slice()))?;
+        d.set_item("u_mean", array1(py, &n.u_mean))?;
+        d.set_item("u_std", array1(py, &n.u_std))?;
+        d.set_item("y_mean", array1(py, &n.y_mean))?;
+        d.set_item("y_std", array1(py, &n.y_std))?;
+        d.set_item("noise_floor", f.model.config.noise_floor)?;
+        Ok(d)
+    }
+
+    /// Provenance from the model file: seed, data_hash, trajectories, samples,
+    /// train_seconds, iterations_run, best_iteration, settings.
+    #[getter]
+    fn training<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_python(py, &self.fitted()?.file.training)
+    }
+
+    /// The fit's report (iterations_run, best_iteration, history of (iteration, training loss,
+    /// validation NLL), train_seconds, jitter); None for a loaded model.
+    #[getter]
+    fn report<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        self.fitted()?
+            .report
+            .as_ref()
+            .map(|r| to_python(py, r))
+            .transpose()
+    }
+
+    /// The one-step check value of the model file (window, mean, var; normalised units), if any.
+    #[getter]
+    fn reference<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(r) = &self.fitted()?.file.reference else {
+            return Ok(None);
+        };
+        let d = PyDict::new(py);
+        d.set_item("window", array1(py, &r.window))?;
+        d.set_item("mean", array1(py, &r.mean))?;
+        d.set_item("var", array1(py, &r.var))?;
+        Ok(Some(d))
+    }
+
+    fn __repr__(&self) -> String {
+        let o = &self.options;
+        let opt = |v: Option<usize>| v.map_or_else(|| "None".to_string(), |n| n.to_string());
+        let mut s = format!(
+            "Msgp(history=({}, {}), inducing={}, method='{}', seed={}, iterations={})",
+            o.ly,
+            o.lu,
+            opt(self.inducing()),
+            o.method.name(),
+            o.seed,
+            opt(o.iterations)
+        );
+        if let Some(f) = &self.fitted {
+            let t = &f.file.training;
+            s.push_str(&format!(
+                " fitted on {} trajector{}, {} samples",
+                t.trajectories,
+                if t.trajectories == 1 { "y" } else { "ies" },
+                t.samples
+            ));
+        }
+        s
+    }
+
+    /// Pickling goes through the model-file JSON (an unfitted model through its arguments).
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
+        let py = slf.py();
+        let me = slf.try_borrow().map_err(|e| Error::Busy(e.to_string()))?;
+        let cls = slf.get_type();
+        match &me.fitted {
+            Some(f) => {
+                let text = f.file.to_json().map_err(Error::from)?;
+                PyTuple::new(
+                    py,
+                    [
+                        cls.getattr("from_json")?,
+                        PyTuple::new(py, [text])?.into_any(),
+                    ],
+                )
+            }
+            None => {
+                let o = &me.options;
+                let settings = match &me.overrides {
+                    Some(v) => crate::convert::from_json(py, v)?,
+                    None => py.None().into_bound(py),
+                };
+                let args = (
+                    (o.ly, o.lu),
+                    o.inducing,
+                    o.method.name(),
+                    o.seed,
+                    o.iterations,
+                    settings,
+                )
+                    .into_pyobject(py)?;
+                PyTuple::new(py, [cls.into_any(), args.into_any()])
+            }
+        }
+    }
+}

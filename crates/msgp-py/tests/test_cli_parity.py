@@ -1,0 +1,136 @@
+"""Python and the `msgp` command line give the same numbers for the same data, settings and
+seed, and read each other's model files."""
+
+import json
+
+import numpy as np
+import pytest
+from conftest import max_diff, write_csv
+
+import msgp
+
+TOL = 1e-12
+METRICS = ("rmse", "nll", "coverage_2sigma")
+
+
+def cli_fit(cli, csv, out, train, history, method="msgp", iters=20, inducing=None):
+    """Starts `msgp fit` in the background (it runs while Python fits); call the result to wait."""
+    args = [
+        "fit", "--data", csv, "--train", train, "--history", f"{history[0]},{history[1]}",
+        "--method", method, "--iters", iters, "--seed", 0, "--json", "--quiet", "--out", out,
+    ]
+    if inducing is not None:
+        args += ["--inducing", inducing]
+    return cli.start(*args)
+
+
+def assert_same_fit(report, model, metrics, out):
+    """The CLI's report and model file against the Python model and its score."""
+    diffs = {k: abs(report[k] - metrics[k]) for k in METRICS}
+    print("CLI − Python metric differences:", diffs)
+    assert all(d <= TOL for d in diffs.values()), (report, metrics)
+    assert report["test_steps"] == metrics["steps"]
+    assert report["inducing"] == model.inducing
+    assert report["data_hash"] == model.training["data_hash"]
+    saved = json.loads(out.read_text())
+    mine = json.loads(model.to_json())
+    for key in ("gp", "normalization", "reference", "history", "inputs", "outputs", "method"):
+        assert saved[key] == mine[key], key
+    # every setting agrees (train_seconds aside)
+    assert saved["training"]["settings"] == mine["training"]["settings"]
+    p = model.params
+    assert max_diff(p["pseudo_targets"], saved["gp"]["pseudo_targets"]) == 0.0
+
+
+@pytest.fixture(scope="module")
+def sys4_fit(sys4, cli, tmp_path_factory):
+    csv, data = sys4
+    out = tmp_path_factory.mktemp("cli") / "sys4.model.json"
+    report = cli_fit(cli, csv, out, 500, data["history"], inducing=20)
+    model = msgp.Msgp(history=data["history"], inducing=20, iterations=20, seed=0)
+    model.fit(data["u_train"], data["y_train"])
+    return report(), model, out
+
+
+def test_synthetic_msgp_matches_cli(sys4, sys4_fit):
+    _, data = sys4
+    report, model, out = sys4_fit
+    metrics = model.score(data["u_test"], data["y_test"])
+    assert_same_fit(report, model, metrics, out)
+    assert report["iterations_run"] == model.training["iterations_run"]
+    assert report["best_iteration"] == model.training["best_iteration"]
+
+
+def test_dryer_msgp_matches_cli(dryer, cli, tmp_path):
+    path, u, y = dryer
+    out = tmp_path / "dryer.model.json"
+    report = cli_fit(cli, path, out, 500, (2, 2), inducing=20)
+    model = msgp.Msgp(history=(2, 2), inducing=20, iterations=20, seed=0).fit(u[:500], y[:500])
+    report = report()
+    assert_same_fit(report, model, model.score(u[500:], y[500:]), out)
+
+
+def test_dryer_gp_narx_default_inducing_matches_cli(dryer, cli, tmp_path):
+    """No --inducing: both take min(100, training windows / 2) = 100 pseudo-inputs."""
+    path, u, y = dryer
+    out = tmp_path / "dryer.model.json"
+    report = cli_fit(cli, path, out, 500, (2, 2), method="gp-narx", iters=30)
+    model = msgp.Msgp(method="gp-narx", iterations=30, seed=0).fit(u[:500], y[:500])
+    report = report()
+    assert model.inducing == report["inducing"] == 100
+    assert_same_fit(report, model, model.score(u[500:], y[500:]), out)
+
+
+def test_several_trajectories_match_cli(sys4, cli, tmp_path):
+    """Two files for the CLI, a list of two arrays for Python; pooled test metrics."""
+    _, data = sys4
+    u = np.concatenate([data["u_train"], data["u_test"]])
+    y = np.concatenate([data["y_train"], data["y_test"]])
+    halves = [(u[:500], y[:500]), (u[500:], y[500:])]
+    files = []
+    for k, (uk, yk) in enumerate(halves):
+        files.append(tmp_path / f"part{k}.csv")
+        write_csv(files[-1], uk, yk)
+    out = tmp_path / "parts.model.json"
+    report = cli(
+        "fit", "--data", files[0], "--data", files[1], "--train", 300, "--history", "2,1",
+        "--method", "pilco-narx", "--iters", 20, "--seed", 0, "--json", "--quiet", "--out", out,
+    )
+    model = msgp.Msgp(history=(2, 1), method="pilco-narx", iterations=20, seed=0)
+    model.fit([uk[:300] for uk, _ in halves], [yk[:300] for _, yk in halves])
+    metrics = model.score([uk[300:] for uk, _ in halves], [yk[300:] for _, yk in halves])
+    assert model.training["trajectories"] == 2
+    assert_same_fit(report, model, metrics, out)
+
+
+def test_cli_model_loads_in_python(sys4, sys4_fit):
+    """The CLI's model file predicts in Python exactly what the Python-fitted model does."""
+    _, data = sys4
+    _, model, out = sys4_fit
+    loaded = msgp.Msgp.load(out)
+    assert loaded.method == "msgp" and loaded.history == (2, 1) and loaded.inducing == 20
+    assert loaded.iterations == 20 and loaded.seed == 0
+    a = loaded.simulate(data["u_test"], data["y_test"])
+    b = model.simulate(data["u_test"], data["y_test"])
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+def test_python_model_evaluates_in_cli(sys4, sys4_fit, cli, tmp_path):
+    """`msgp eval` on a model saved by Python reproduces Python's score."""
+    csv, data = sys4
+    _, model, _ = sys4_fit
+    path = tmp_path / "py.model.json"
+    model.save(path)
+    test_csv = tmp_path / "test.csv"
+    write_csv(test_csv, data["u_test"], data["y_test"])
+    report = cli("eval", "--model", path, "--data", test_csv, "--json")
+    metrics = model.score(data["u_test"], data["y_test"])
+    for k in METRICS:
+        assert abs(report[k] - metrics[k]) <= TOL, k
+    # `msgp simulate` writes the same mean and standard deviation
+    pred = tmp_path / "pred.csv"
+    cli("simulate", "--model", path, "--data", test_csv, "--out", pred, "--json")
+    table = np.genfromtxt(pred, delimiter=",", names=True)
+    mean, var = model.simulate(data["u_test"], data["y_test"])
+    assert max_diff(table["y_mean"], mean[:, 0]) == 0.0
+    assert max_diff(table["y_std"], np.sqrt(var[:, 0])) == 0.0

@@ -1,0 +1,141 @@
+"""Bad input raises ValueError (msgp.InvalidInputError) with a message that says what is
+wrong; other failures raise msgp.MsgpError subclasses; nothing panics."""
+
+import json
+
+import numpy as np
+import pytest
+
+import msgp
+
+U = np.linspace(-1, 1, 60)
+Y = np.sin(3 * U)
+
+
+def test_exception_hierarchy():
+    assert issubclass(msgp.InvalidInputError, ValueError)
+    for cls in (msgp.InvalidInputError, msgp.NumericalError, msgp.ModelFileError, msgp.NotFittedError):
+        assert issubclass(cls, msgp.MsgpError), cls
+    assert issubclass(msgp.MsgpError, Exception)
+    assert msgp.InvalidInputError.__module__ == "msgp"
+
+
+@pytest.mark.parametrize(
+    "u, y, message",
+    [
+        (U, Y[:-1], "u has 60 samples but y has 59"),
+        (U.reshape(2, 3, 10), Y, r"u must be 1-D \(n,\) or 2-D \(n, d\), got shape \(2, 3, 10\)"),
+        (np.where(U > 0.5, np.nan, U), Y, r"u has a non-finite value \(NaN\) at sample 45, column 0"),
+        (U, np.where(U > 0, np.inf, Y), r"y has a non-finite value \(inf\) at sample 30"),
+        (U[:2], Y[:2], "has 2 samples; the history \\(l_y=2, l_u=2\\) needs more than 2"),
+        (np.zeros(0), np.zeros(0), "u has no samples"),
+        (["a", "b"], Y[:2], "u must be an array of numbers"),
+        ([U, U], Y, "u is a list of 2 arrays .* but y is not"),
+        ([U, U], [Y], "u holds 2 trajectories but y holds 1"),
+        ([U, U.reshape(-1, 1).repeat(2, axis=1)], [Y, Y], "trajectory 1 has 2 input and 1 output columns; trajectory 0 has 1 and 1"),
+    ],
+)
+def test_bad_fit_data(u, y, message):
+    with pytest.raises(ValueError, match=message):
+        msgp.Msgp(inducing=5, iterations=1).fit(u, y)
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(method="magic"), 'unknown method "magic": expected one of "msgp", "gp-narx", "pilco-narx"'),
+        (dict(history=(0, 2)), "l_y must be at least 1"),
+        (dict(history=3), r"history must be a pair \(l_y, l_u\)"),
+        (dict(history=(1, 2, 3)), r"history must be a pair"),
+        (dict(inducing=0), "inducing must be at least 1"),
+        (dict(inducing=-4), "inducing must be a non-negative integer, got -4"),
+        (dict(seed=-1), "seed must be a non-negative integer, got -1"),
+        (dict(settings={"learning_rat": 0.1}), "unknown setting `learning_rat`"),
+        (dict(settings={"seed": 3}), r"Msgp\(seed=...\)"),
+        (dict(settings={"learning_rate": "fast"}), "settings.learning_rate: invalid type: string \"fast\", expected f64"),
+        (dict(settings={"learning_rate": float("nan")}), "not finite"),
+    ],
+)
+def test_bad_constructor_arguments(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        msgp.Msgp(**kwargs)
+
+
+def test_bad_names():
+    with pytest.raises(ValueError, match="input_names has 2 names for 1 columns"):
+        msgp.Msgp(inducing=5, iterations=1).fit(U, Y, input_names=["a", "b"])
+    with pytest.raises(ValueError, match='"x" is both an input and an output name'):
+        msgp.Msgp(inducing=5, iterations=1).fit(U, Y, input_names=["x"], output_names=["x"])
+
+
+@pytest.fixture(scope="module")
+def small():
+    return msgp.Msgp(history=(2, 2), method="gp-narx", inducing=5, iterations=5).fit(U, Y)
+
+
+def test_bad_prediction_inputs(small):
+    with pytest.raises(ValueError, match="data with 2 input and 1 output columns; the model has 1 and 1"):
+        small.score(np.ones((10, 2)), np.ones(10))
+    with pytest.raises(ValueError, match=r"y_init has 1 samples; the simulation starts from the first 2 outputs"):
+        small.simulate(U, Y[:1])
+    with pytest.raises(ValueError, match="u has 2 samples; the history"):
+        small.simulate(U[:2], Y[:2])
+    with pytest.raises(ValueError, match="y_init has 61 samples, more than the 60 of u"):
+        small.simulate(U, np.ones(61))
+    with pytest.raises(ValueError, match="trajectory 1: 2 samples"):
+        small.score([U, U[:2]], [Y, Y[:2]])
+
+
+def test_not_fitted():
+    with pytest.raises(msgp.NotFittedError, match="not fitted yet"):
+        msgp.Msgp().simulate(U, Y)
+    with pytest.raises(msgp.NotFittedError):
+        msgp.Msgp().params
+
+
+def test_model_file_errors(tmp_path, small):
+    with pytest.raises(msgp.ModelFileError, match="cannot read the model"):
+        msgp.Msgp.load(tmp_path / "missing.json")
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"format": "msgp-model", "format_version": "2.0"}')
+    with pytest.raises(msgp.ModelFileError, match="version 2.0 is not supported"):
+        msgp.Msgp.load(bad)
+    bad.write_text(small.to_json().replace('"log_signal_var": [', '"log_signal_var": [1.0, '))
+    with pytest.raises(msgp.ModelFileError, match="`gp.log_signal_var` has 2 entries, expected 1"):
+        msgp.Msgp.load(bad)
+    with pytest.raises(msgp.ModelFileError, match="cannot create a temporary file"):
+        small.save(tmp_path / "no" / "such" / "folder" / "m.json")
+
+
+def test_numerical_failure_is_a_numerical_error(small):
+    """A model file whose signal variance overflows: it loads, but predicting fails cleanly."""
+    doc = json.loads(small.to_json())
+    doc["gp"]["log_signal_var"] = [800.0]
+    model = msgp.Msgp.from_json(json.dumps(doc))
+    with pytest.raises(msgp.NumericalError, match="not positive definite"):
+        model.score(U, Y)
+
+
+def test_bad_experiment_arguments():
+    with pytest.raises(ValueError, match="`synthetic system`: 9 is not one of 1–5"):
+        msgp.synthetic_system(9)
+    with pytest.raises(ValueError, match="noise must be"):
+        msgp.synthetic_system(4, noise="loud")
+    with pytest.raises(ValueError, match='unknown controller "wobbly"'):
+        msgp.run_episode("wobbly")
+    with pytest.raises(ValueError, match="gains need 5 numbers"):
+        msgp.stability_test([1.0, 2.0])
+    with pytest.raises(ValueError, match="missing field `kd_theta`"):
+        msgp.stability_test({"kp_x": 1, "ki_x": 0, "kd_x": 1, "kp_theta": 30})
+    with pytest.raises(ValueError, match="invalid pole_mass = -1"):
+        msgp.run_episode("zero", seconds=0.1, params={"pole_mass": -1.0})
+    with pytest.raises(ValueError, match="unknown setting `pole_mas`"):
+        msgp.run_episode("zero", seconds=0.1, params={"pole_mas": 1.0})
+    with pytest.raises(ValueError, match="seconds"):
+        msgp.run_episode("zero", seconds=-1.0)
+    with pytest.raises(ValueError, match="unknown setting `fit.iteratons`"):
+        msgp.learn_policy(iterations=1, settings={"fit": {"iteratons": 3}})
+    with pytest.raises(ValueError, match='unknown method "pilco"'):
+        msgp.learn_policy(method="pilco")
+    with pytest.raises(ValueError, match="no defaults for"):
+        msgp.defaults("robot")

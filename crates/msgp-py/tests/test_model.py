@@ -1,0 +1,149 @@
+"""The Msgp API: shapes, save/load, pickling, and checks against independent numpy
+computations of the documented equations (docs/model-format.md)."""
+
+import json
+import math
+import pickle
+
+import numpy as np
+import pytest
+
+import msgp
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    data = msgp.synthetic_system(3, seed=3)
+    model = msgp.Msgp(history=data["history"], method="gp-narx", iterations=40, seed=1)
+    return model.fit(data["u_train"], data["y_train"]), data
+
+
+def test_fit_returns_self_and_describes_itself(fitted):
+    model, data = fitted
+    assert model.is_fitted
+    assert model.method == "gp-narx" and model.history == (1, 1) and model.seed == 1
+    assert model.inducing == 100  # min(100, 299 windows / 2)
+    assert model.warmup == 1
+    assert model.input_names == ["u"] and model.output_names == ["y"]
+    assert "fitted on 1 trajectory, 300 samples" in repr(model)
+    t = model.training
+    assert t["samples"] == 300 and t["trajectories"] == 1 and t["seed"] == 1
+    assert t["data_hash"].startswith("fnv1a64:")
+    assert model.report["iterations_run"] == 0
+
+
+def test_params_are_numpy_arrays_of_the_documented_shapes(fitted):
+    model, _ = fitted
+    p = model.params
+    m, D = 100, 2
+    assert p["pseudo_inputs"].shape == (m, D)
+    assert p["pseudo_targets"].shape == (m, 1)
+    assert p["log_lengthscales"].shape == (1, D)
+    for k in ("log_signal_var", "log_process_noise", "log_obs_noise", "u_mean", "u_std", "y_mean", "y_std"):
+        assert p[k].shape == (1,) and p[k].dtype == np.float64, k
+    assert p["noise_floor"] >= 0.0
+
+
+def test_reference_prediction_matches_numpy_gp(fitted):
+    """Eq. (13) of the model-format doc in numpy, from `params`, at the reference window."""
+    model, _ = fitted
+    p, ref = model.params, model.reference
+    X, ybar = p["pseudo_inputs"], p["pseudo_targets"][:, 0]
+    ell = np.exp(p["log_lengthscales"][0])
+    sf2 = math.exp(p["log_signal_var"][0])
+    sx2 = p["noise_floor"] + math.exp(p["log_process_noise"][0])
+
+    def k(a, b):
+        d = (a[:, None, :] - b[None, :, :]) / ell
+        return sf2 * np.exp(-0.5 * np.sum(d * d, axis=2))
+
+    Kt = k(X, X) + sx2 * np.eye(len(X))
+    kx = k(X, ref["window"][None, :])[:, 0]
+    mean = kx @ np.linalg.solve(Kt, ybar)
+    var = sf2 - kx @ np.linalg.solve(Kt, kx)
+    assert abs(mean - ref["mean"][0]) < 1e-9
+    assert abs(var - ref["var"][0]) < 1e-9
+
+
+def test_score_matches_numpy_metrics_of_simulate(fitted):
+    """RMSE, NLL and coverage recomputed in numpy from `simulate`'s mean and variance."""
+    model, data = fitted
+    u, y = data["u_test"], data["y_test"]
+    mean, var = model.simulate(u, y[: model.warmup])
+    assert mean.shape == var.shape == (len(u) - model.warmup, 1)
+    assert np.all(var > 0)
+    r = y[model.warmup:] - mean[:, 0]
+    v = var[:, 0]
+    s = model.score(u, y)
+    assert s["steps"] == len(r)
+    assert abs(s["rmse"] - math.sqrt(np.mean(r * r))) < 1e-12
+    nll = np.mean(0.5 * (r * r / v + np.log(v) + math.log(2 * math.pi)))
+    assert abs(s["nll"] - nll) < 1e-10
+    assert s["coverage_2sigma"] == np.mean(np.abs(r) <= 2 * np.sqrt(v))
+
+
+def test_simulate_uses_only_the_first_outputs(fitted):
+    model, data = fitted
+    u, y = data["u_test"], data["y_test"]
+    a = model.simulate(u, y)
+    b = model.simulate(u, y[: model.warmup])
+    c = model.simulate(u.reshape(-1, 1), y[: model.warmup].reshape(-1, 1).tolist())
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[0], c[0])
+    assert np.array_equal(a[1], b[1])
+
+
+def test_save_load_round_trip_is_exact(fitted, tmp_path):
+    model, data = fitted
+    path = tmp_path / "m.json"
+    model.save(path)
+    assert not [p for p in tmp_path.iterdir() if p.name != "m.json"], "no temporary file left"
+    loaded = msgp.Msgp.load(str(path))
+    assert loaded.report is None and loaded.training == model.training
+    for k, v in model.params.items():
+        assert np.array_equal(v, loaded.params[k]), k
+    a = model.simulate(data["u_test"], data["y_test"])
+    b = loaded.simulate(data["u_test"], data["y_test"])
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    assert model.score(data["u_test"], data["y_test"]) == loaded.score(data["u_test"], data["y_test"])
+    doc = json.loads(path.read_text())
+    assert doc["format"] == "msgp-model" and doc["format_version"] == "1.0"
+    assert msgp.Msgp.from_json(model.to_json()).to_json() == model.to_json()
+
+
+def test_pickle_round_trip(fitted):
+    model, data = fitted
+    back = pickle.loads(pickle.dumps(model))
+    assert back.to_json() == model.to_json()
+    fresh = pickle.loads(pickle.dumps(msgp.Msgp(history=(3, 1), inducing=7, seed=5)))
+    assert (fresh.history, fresh.inducing, fresh.seed, fresh.is_fitted) == ((3, 1), 7, 5, False)
+
+
+def test_several_outputs_and_names(tmp_path):
+    """Two inputs, two outputs, two trajectories; names go into the model file."""
+    rng = np.random.default_rng(0)
+    trajs = []
+    for _ in range(2):
+        u = rng.uniform(-1, 1, size=(120, 2))
+        y = np.zeros((120, 2))
+        for t in range(1, 120):
+            y[t, 0] = 0.7 * y[t - 1, 0] + np.sin(2 * u[t - 1, 0])
+            y[t, 1] = 0.5 * y[t - 1, 1] + 0.3 * y[t - 1, 0] + u[t - 1, 1]
+        trajs.append((u, y + 0.01 * rng.standard_normal(y.shape)))
+    model = msgp.Msgp(history=(1, 1), method="gp-narx", inducing=15, iterations=20)
+    model.fit([u for u, _ in trajs], [y for _, y in trajs], input_names=["a", "b"], output_names=["p", "q"])
+    assert model.params["pseudo_inputs"].shape == (15, 4)
+    assert model.input_names == ["a", "b"] and model.output_names == ["p", "q"]
+    mean, var = model.simulate(*trajs[0])
+    assert mean.shape == var.shape == (119, 2)
+    s = model.score([u for u, _ in trajs], [y for _, y in trajs])
+    assert s["steps"] == 2 * 119
+
+
+def test_settings_reach_the_fit():
+    data = msgp.synthetic_system(3, seed=0)
+    model = msgp.Msgp(
+        history=(1, 1), inducing=10, iterations=5, settings={"learning_rate": 0.01, "one_step_iterations": 20}
+    ).fit(data["u_train"], data["y_train"])
+    s = model.training["settings"]
+    assert s["learning_rate"] == 0.01 and s["one_step_iterations"] == 20 and s["iterations"] == 5
+    assert msgp.defaults("fit")["learning_rate"] == 0.002

@@ -1,0 +1,72 @@
+"""The pendulum simulator, its stability test and the policy-learning loop from Python."""
+
+import numpy as np
+
+import msgp
+
+
+def test_episode_matches_cli_run_log(cli, tmp_path):
+    """Same controller, seed and plant: the CLI's CSV log holds the same numbers."""
+    kwargs = dict(seconds=2.0, seed=7, excitation_rms=0.5, params={"sigma_x": 1e-3})
+    ep = msgp.run_episode("random", **kwargs)
+    out = tmp_path / "run.csv"
+    summary = cli("sim", "pendulum", "--random", "--seconds", 2, "--seed", 7, "--excitation-rms", 0.5,
+                  "--sigma-x", 1e-3, "--json", "--out", out)
+    log = np.genfromtxt(out, delimiter=",", names=True)
+    n = len(ep["t"])
+    assert n == len(log) == summary["samples"] > 10
+    assert ep["info"]["termination"] == summary["termination"]
+    assert ep["info"]["initial_theta"] == summary["initial_theta"]
+    for name in log.dtype.names:
+        assert np.array_equal(ep[name], log[name]), name
+    assert ep["u"].shape == (n, 1) and ep["y"].shape == (n, 2)
+    assert np.array_equal(ep["y"][:, 0], ep["meas_theta"]) and np.array_equal(ep["y"][:, 1], ep["meas_x"])
+    assert np.array_equal(ep["u"][:, 0], ep["command"])
+    assert ep["info"]["seed"] == 7
+    assert np.array_equal(msgp.run_episode("random", **kwargs)["y"], ep["y"])
+
+
+def test_gain_forms_agree():
+    a = msgp.run_episode("hand-tuned", seconds=1.0, seed=1)
+    g = {"kp_x": 0.99, "ki_x": 0.15, "kd_x": 1.865, "kp_theta": 34.55, "kd_theta": 7.03}
+    b = msgp.run_episode(g, seconds=1.0, seed=1)
+    c = msgp.run_episode([0.99, 0.15, 1.865, 34.55, 7.03], seconds=1.0, seed=1)
+    assert np.array_equal(a["command"], b["command"]) and np.array_equal(a["command"], c["command"])
+
+
+def test_stability_test():
+    good = msgp.stability_test("hand-tuned", seed=0)
+    assert good["passed"] and len(good["starts"]) == 5
+    bad = msgp.stability_test("zero", seed=0)
+    assert not bad["passed"]
+    assert any("theta" in (s["failure"] or "") for s in bad["starts"])
+    short = msgp.stability_test("hand-tuned", criteria={"initial_thetas": [0.01], "seconds": 6.0})
+    assert len(short["starts"]) == 1
+
+
+def test_pendulum_data_fits():
+    """An episode of random excitation is ready for Msgp.fit: u (n, 1), y (n, 2)."""
+    ep = msgp.run_episode("random", seconds=4.0, seed=3)
+    model = msgp.Msgp(history=(2, 2), method="gp-narx", inducing=15, iterations=20).fit(ep["u"], ep["y"])
+    assert model.output_names == ["y0", "y1"]
+    mean, var = model.simulate(ep["u"], ep["y"])
+    assert mean.shape == (len(ep["t"]) - 2, 2)
+
+
+def test_learn_policy_runs_and_reports():
+    """A tiny seeded learning loop: one iteration, reports as dicts, deterministic."""
+    settings = {
+        "random_rollouts": 1,
+        "episode_seconds": 1.0,
+        "fit": {"inducing": 10, "iterations": 3, "one_step_iterations": 10},
+        "search": {"iterations": 2},
+    }
+    reports = msgp.learn_policy(method="msgp", iterations=1, seed=2, settings=settings)
+    assert len(reports) == 1
+    r = reports[0]
+    assert r["iteration"] == 1 and isinstance(r["stable"], bool)
+    assert set(r["gains"]) >= {"kp_x", "ki_x", "kd_x", "kp_theta", "kd_theta"}
+    assert 0.0 < r["interaction_seconds"] <= 2.0
+    assert np.isfinite(r["predicted_cost"]) and np.isfinite(r["actual_cost"])
+    assert msgp.learn_policy(method="msgp", iterations=1, seed=2, settings=settings) == reports
+    assert msgp.defaults("learn")["iterations"] == 8
