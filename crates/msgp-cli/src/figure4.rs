@@ -11,7 +11,9 @@ use msgp_sim::PendulumParams;
 use msgp_sim::learn::{IterationReport, LearnSettings};
 
 use crate::cost_plot::plot_cost_bands;
-use crate::learn_cmd::{ModelArg, learn, model_name, summary_json, write_outputs};
+use crate::learn_cmd::{
+    BudgetArgs, ModelArg, learn, model_name, settings, summary_json, write_outputs,
+};
 use crate::reproduce::{machine, today};
 
 /// Options of `msgp reproduce figure4`.
@@ -35,6 +37,8 @@ pub struct Figure4Args {
     /// No progress lines on stderr.
     #[arg(long)]
     pub quiet: bool,
+    #[command(flatten)]
+    pub budget: BudgetArgs,
 }
 
 /// One finished run.
@@ -58,12 +62,7 @@ pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
     let mut runs = Vec::new();
     for &model in &args.models {
         for seed in 0..args.seeds {
-            let settings = LearnSettings {
-                method: model.into(),
-                iterations: args.iterations,
-                seed,
-                ..LearnSettings::default()
-            };
+            let settings = settings(model, seed, args.iterations, &args.budget)?;
             if !args.quiet {
                 eprintln!("== {} seed {seed}", model_name(model));
             }
@@ -107,7 +106,7 @@ pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
 }
 
 fn render(args: &Figure4Args, runs: &[Run], seconds: f64, plot: &std::path::Path) -> String {
-    let d = LearnSettings::default();
+    let d = &args.budget;
     let models: Vec<&str> = args.models.iter().map(|&m| model_name(m)).collect();
     let mut s = String::from("# PILCO on the simulated pendulum (the paper's Figure 4)\n\n");
     s.push_str(&format!(
@@ -124,6 +123,13 @@ fn render(args: &Figure4Args, runs: &[Run], seconds: f64, plot: &std::path::Path
         args.iterations,
         args.out.display(),
         args.dir.display()
+    ));
+    s.push_str(&format!(
+        "- Budget per iteration: model fit {} Adam iterations (m = {}), policy search: {} random gain candidates screened, {} Adam steps per start\n",
+        d.fit_iters.map_or_else(|| "default".to_string(), |n| n.to_string()),
+        d.inducing,
+        d.candidates,
+        d.search_iters
     ));
     s.push_str(&format!(
         "- Wall time: {seconds:.0} s ({:.1} min), msgp {} on {}\n- Date (UTC): {}\n\n",
@@ -192,7 +198,7 @@ fn render(args: &Figure4Args, runs: &[Run], seconds: f64, plot: &std::path::Path
         ));
     }
     s.push_str(&format!(
-        "\nCost over each {} s episode (150 steps; a step after an early stop counts 1): mean ± 1 standard deviation over the seeds, predicted by the model (left) and measured on the simulator (right). Per-run artefacts (policy, iterations.csv, episodes as MCAP, cost.png) are in `{}/<model>-seed<k>/`.\n\n![cost curves]({})\n",
+        "\nCost over each {} s episode (a step after an early stop counts 1): mean ± 1 standard deviation over the seeds, predicted by the model (left) and measured on the simulator (right). Per-run artefacts (policy, iterations.csv, episodes as MCAP, cost.png) are in `{}/<model>-seed<k>/`.\n\n![cost curves]({})\n",
         d.episode_seconds,
         args.dir.display(),
         plot.display()

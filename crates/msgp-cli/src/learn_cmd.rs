@@ -45,6 +45,31 @@ impl From<ModelArg> for Method {
     }
 }
 
+/// Sizes of the loop: data, model, policy search.
+#[derive(Debug, Args)]
+#[command(next_help_heading = "Budget")]
+pub struct BudgetArgs {
+    /// Random-excitation episodes before the first policy.
+    #[arg(long, default_value_t = LearnSettings::default().random_rollouts)]
+    pub random_rollouts: usize,
+    /// Length of every interaction episode [s].
+    #[arg(long, default_value_t = LearnSettings::default().episode_seconds)]
+    pub episode_seconds: f64,
+    /// Adam iterations of each model fit [default: 300 for msgp; the one-step fit's 300 for
+    /// gp-narx].
+    #[arg(long, value_name = "N")]
+    pub fit_iters: Option<usize>,
+    /// Pseudo-inputs of the model.
+    #[arg(long, value_name = "M", default_value_t = LearnSettings::default().fit.inducing)]
+    pub inducing: usize,
+    /// Adam steps of each policy optimisation start.
+    #[arg(long, value_name = "N", default_value_t = LearnSettings::default().search.iterations)]
+    pub search_iters: usize,
+    /// Random gain candidates screened on the model before each policy optimisation.
+    #[arg(long, value_name = "N", default_value_t = LearnSettings::default().search.candidates)]
+    pub candidates: usize,
+}
+
 /// Options of `msgp learn-policy`.
 #[derive(Debug, Args)]
 pub struct LearnArgs {
@@ -57,12 +82,8 @@ pub struct LearnArgs {
     /// Policy-learning iterations after the random rollouts.
     #[arg(long, default_value_t = LearnSettings::default().iterations)]
     pub iterations: usize,
-    /// Random-excitation episodes before the first policy.
-    #[arg(long, default_value_t = LearnSettings::default().random_rollouts)]
-    pub random_rollouts: usize,
-    /// Length of every interaction episode [s].
-    #[arg(long, default_value_t = LearnSettings::default().episode_seconds)]
-    pub episode_seconds: f64,
+    #[command(flatten)]
+    pub budget: BudgetArgs,
     /// Seed of every random choice (episodes, excitation, fits, restarts).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -219,7 +240,12 @@ pub fn write_outputs(
 }
 
 /// The loop's settings from the command line.
-pub fn settings(model: ModelArg, args: &LearnArgs) -> anyhow::Result<LearnSettings> {
+pub fn settings(
+    model: ModelArg,
+    seed: u64,
+    iterations: usize,
+    args: &BudgetArgs,
+) -> anyhow::Result<LearnSettings> {
     if !(args.episode_seconds.is_finite() && args.episode_seconds > 0.0) {
         anyhow::bail!(
             "--episode-seconds must be positive, got {}",
@@ -229,13 +255,35 @@ pub fn settings(model: ModelArg, args: &LearnArgs) -> anyhow::Result<LearnSettin
     if args.random_rollouts == 0 {
         anyhow::bail!("--random-rollouts must be at least 1 (the first model needs data)");
     }
+    if args.inducing == 0 {
+        anyhow::bail!("--inducing must be at least 1");
+    }
+    let d = LearnSettings::default();
+    let method: Method = model.into();
     Ok(LearnSettings {
-        method: model.into(),
-        iterations: args.iterations,
+        method,
+        iterations,
         random_rollouts: args.random_rollouts,
         episode_seconds: args.episode_seconds,
-        seed: args.seed,
-        ..LearnSettings::default()
+        seed,
+        fit: msgp_core::fit::FitSettings {
+            inducing: args.inducing,
+            iterations: match (method, args.fit_iters) {
+                (Method::Msgp, Some(n)) => n,
+                _ => d.fit.iterations,
+            },
+            one_step_iterations: match (method, args.fit_iters) {
+                (Method::Msgp, _) | (_, None) => d.fit.one_step_iterations,
+                (_, Some(n)) => n,
+            },
+            ..d.fit.clone()
+        },
+        search: msgp_core::policy_search::PolicySearchSettings {
+            iterations: args.search_iters,
+            candidates: args.candidates,
+            ..d.search
+        },
+        ..d
     })
 }
 
@@ -273,7 +321,7 @@ pub fn learn(
 pub fn run(args: &LearnArgs) -> anyhow::Result<()> {
     let SimArg::Pendulum = args.sim;
     let params = args.plant.resolve()?;
-    let settings = settings(args.model, args)?;
+    let settings = settings(args.model, args.seed, args.iterations, &args.budget)?;
     let dir = args.out.clone().unwrap_or_else(|| {
         PathBuf::from(format!(
             "learn-{}-seed{}",

@@ -1,0 +1,210 @@
+//! `msgp learn-policy` and `msgp reproduce figure4` end to end on a tiny budget: the JSON keys
+//! the issue asks for, the files written, the policy file running in `msgp sim`, bad options.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+const BIN: &str = env!("CARGO_BIN_EXE_msgp");
+
+fn scratch(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("msgp-learn-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("create scratch folder");
+    dir
+}
+
+fn run(dir: &PathBuf, args: &[&str]) -> Output {
+    Command::new(BIN)
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run msgp")
+}
+
+/// A budget small enough for a test: 2 random rollouts, tiny model and search.
+const TINY: [&str; 12] = [
+    "--random-rollouts",
+    "2",
+    "--fit-iters",
+    "3",
+    "--inducing",
+    "10",
+    "--search-iters",
+    "2",
+    "--candidates",
+    "4",
+    "--episode-seconds",
+    "1",
+];
+
+#[test]
+fn learn_policy_writes_policy_table_episodes_plot_and_json() {
+    let dir = scratch("run");
+    let mut args = vec![
+        "learn-policy",
+        "--sim",
+        "pendulum",
+        "--iterations",
+        "2",
+        "--seed",
+        "3",
+        "--out",
+        "out",
+        "--json",
+    ];
+    args.extend(TINY);
+    let o = run(&dir, &args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    let its = v["iterations"].as_array().expect("iterations");
+    assert_eq!(its.len(), 2);
+    for (k, it) in its.iter().enumerate() {
+        assert_eq!(it["iteration"].as_u64(), Some(k as u64 + 1));
+        for key in [
+            "predicted_cost",
+            "predicted_cost_std",
+            "actual_cost",
+            "interaction_seconds",
+        ] {
+            assert!(it[key].as_f64().is_some_and(f64::is_finite), "{key}: {it}");
+        }
+        assert!(it["stable"].is_boolean());
+    }
+    assert!(v.get("first_stable_iteration").is_some());
+    assert!(v.get("interaction_seconds_to_stable").is_some());
+    // interaction grows by at most one episode per iteration
+    let s0 = its[0]["interaction_seconds"].as_f64().unwrap_or(0.0);
+    let s1 = its[1]["interaction_seconds"].as_f64().unwrap_or(0.0);
+    assert!(s1 > s0 && s1 - s0 <= 1.0 + 1e-9, "{s0} → {s1}");
+
+    let out = dir.join("out");
+    for f in ["policy.json", "iterations.csv", "summary.json", "cost.png"] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let csv = std::fs::read_to_string(out.join("iterations.csv")).expect("csv");
+    assert_eq!(csv.lines().count(), 3, "header + 2 rows:\n{csv}");
+    let episodes: Vec<_> = std::fs::read_dir(out.join("episodes"))
+        .expect("episodes")
+        .filter_map(Result::ok)
+        .collect();
+    assert_eq!(episodes.len(), 4, "2 random + 2 policy episodes");
+    let summary: Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).expect("summary"))
+            .expect("summary JSON");
+    assert_eq!(summary["iterations"], v["iterations"]);
+
+    // the policy file runs in the simulator, with the sine saturation it was learned with
+    let policy: Value =
+        serde_json::from_slice(&std::fs::read(out.join("policy.json")).expect("policy"))
+            .expect("policy JSON");
+    assert_eq!(policy["saturation"], "sine");
+    let o = run(
+        &dir,
+        &[
+            "sim",
+            "pendulum",
+            "--policy",
+            "out/policy.json",
+            "--seconds",
+            "1",
+            "--out",
+            "replay.csv",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    // the same seed gives the same numbers
+    let mut again = args.clone();
+    again[8] = "out2";
+    let o2 = run(&dir, &again);
+    assert!(o2.status.success());
+    let v2: Value = serde_json::from_slice(&o2.stdout).expect("JSON");
+    assert_eq!(v["iterations"], v2["iterations"]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn figure4_writes_its_section_and_keeps_the_others() {
+    let dir = scratch("fig4");
+    std::fs::write(
+        dir.join("RESULTS.md"),
+        "<!-- msgp:table1:begin -->\nTABLE ONE\n<!-- msgp:table1:end -->\n",
+    )
+    .expect("write");
+    let o = run(
+        &dir,
+        &[
+            "reproduce",
+            "figure4",
+            "--seeds",
+            "1",
+            "--iterations",
+            "1",
+            "--models",
+            "msgp,gp-narx",
+            "--dir",
+            "fig",
+            "--quiet",
+            "--random-rollouts",
+            "2",
+            "--fit-iters",
+            "2",
+            "--inducing",
+            "8",
+            "--search-iters",
+            "1",
+            "--candidates",
+            "2",
+            "--episode-seconds",
+            "1",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let md = std::fs::read_to_string(dir.join("RESULTS.md")).expect("results");
+    assert!(md.contains("TABLE ONE"), "table 1 kept");
+    assert!(md.contains("msgp:figure4:begin") && md.contains("| msgp | 0 |"));
+    assert!(md.contains("| gp-narx | 0 |"));
+    assert!(dir.join("fig/figure4.png").is_file());
+    assert!(dir.join("fig/msgp-seed0/policy.json").is_file());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_learning_options_fail_with_a_message() {
+    let dir = scratch("bad");
+    for (args, needle) in [
+        (
+            vec![
+                "learn-policy",
+                "--sim",
+                "pendulum",
+                "--episode-seconds",
+                "0",
+            ],
+            "--episode-seconds",
+        ),
+        (
+            vec![
+                "learn-policy",
+                "--sim",
+                "pendulum",
+                "--random-rollouts",
+                "0",
+            ],
+            "--random-rollouts",
+        ),
+        (vec!["learn-policy", "--sim", "cartpole"], "cartpole"),
+        (
+            vec!["learn-policy", "--sim", "pendulum", "--pole-length=-1"],
+            "pole",
+        ),
+    ] {
+        let o = run(&dir, &args);
+        assert!(!o.status.success(), "{args:?} should fail");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
