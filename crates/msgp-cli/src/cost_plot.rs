@@ -148,6 +148,9 @@ fn draw(path: &Path, title: &str, curves: &[CostCurve]) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Which cost of an iteration a panel shows.
+type Pick = fn(&IterationReport) -> f64;
+
 /// Mean and standard deviation across runs of `f` at each iteration (runs may differ in length).
 fn band(
     runs: &[Vec<IterationReport>],
@@ -183,7 +186,7 @@ fn draw_bands(path: &Path, models: &[(String, Vec<Vec<IterationReport>>)]) -> an
     let root = BitMapBackend::new(path, (WIDTH + 200, HEIGHT)).into_drawing_area();
     root.fill(&WHITE).map_err(e)?;
     let panels = root.split_evenly((1, 2));
-    let pick: [(&str, fn(&IterationReport) -> f64); 2] = [
+    let pick: [(&str, Pick); 2] = [
         ("predicted cost (model)", |r| r.predicted_cost),
         ("actual cost (system)", |r| r.actual_cost),
     ];

@@ -3,7 +3,6 @@
 //! time of the first policy that passes the stability test, and the cost curves.
 
 use std::path::PathBuf;
-use std::time::Instant;
 
 use anyhow::Context;
 use clap::Args;
@@ -55,19 +54,55 @@ impl Run {
     }
 }
 
+/// A run already in `dir` (its `summary.json`, written last, as `msgp learn-policy --out DIR`
+/// writes it) with the same model, seed, episode length and number of iterations; runs can so
+/// be split over several processes and collected afterwards.
+fn finished_run(
+    dir: &std::path::Path,
+    model: ModelArg,
+    seed: u64,
+    settings: &LearnSettings,
+) -> Option<Run> {
+    let text = std::fs::read_to_string(dir.join("summary.json")).ok()?;
+    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
+    let iterations: Vec<IterationReport> =
+        serde_json::from_value(v.get("iterations")?.clone()).ok()?;
+    let same = v["model"] == model_name(model)
+        && v["seed"].as_u64() == Some(seed)
+        && v["episode_seconds"].as_f64() == Some(settings.episode_seconds)
+        && v["random_rollouts"].as_u64() == Some(settings.random_rollouts as u64)
+        && iterations.len() == settings.iterations;
+    same.then(|| Run {
+        model,
+        seed,
+        iterations,
+        seconds: v["wall_seconds"].as_f64().unwrap_or(f64::NAN),
+    })
+}
+
 /// Runs `msgp reproduce figure4`.
 pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
-    let started = Instant::now();
     let params = PendulumParams::default();
     let mut runs = Vec::new();
     for &model in &args.models {
         for seed in 0..args.seeds {
             let settings = settings(model, seed, args.iterations, &args.budget)?;
+            let dir = args.dir.join(format!("{}-seed{seed}", model_name(model)));
+            if let Some(done) = finished_run(&dir, model, seed, &settings) {
+                if !args.quiet {
+                    eprintln!(
+                        "== {} seed {seed}: reusing {}",
+                        model_name(model),
+                        dir.join("summary.json").display()
+                    );
+                }
+                runs.push(done);
+                continue;
+            }
             if !args.quiet {
                 eprintln!("== {} seed {seed}", model_name(model));
             }
             let (outcome, seconds) = learn(&params, &settings, args.quiet)?;
-            let dir = args.dir.join(format!("{}-seed{seed}", model_name(model)));
             let summary = summary_json(&outcome, &settings, model, seconds);
             write_outputs(
                 &dir,
@@ -100,7 +135,12 @@ pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
         })
         .collect();
     plot_cost_bands(&plot, &bands)?;
-    let markdown = render(args, &runs, started.elapsed().as_secs_f64(), &plot);
+    let total: f64 = runs
+        .iter()
+        .map(|r| r.seconds)
+        .filter(|s| s.is_finite())
+        .sum();
+    let markdown = render(args, &runs, total, &plot);
     crate::results_file::update_section(&args.out, "figure4", &markdown)?;
     crate::output::out(&markdown)
 }
@@ -132,8 +172,9 @@ fn render(args: &Figure4Args, runs: &[Run], seconds: f64, plot: &std::path::Path
         d.search_iters
     ));
     s.push_str(&format!(
-        "- Wall time: {seconds:.0} s ({:.1} min), msgp {} on {}\n- Date (UTC): {}\n\n",
+        "- Wall time: {seconds:.0} s ({:.1} min) summed over the runs (runs may be split over processes: `msgp learn-policy --out {}/<model>-seed<k>` writes a run this command then collects), msgp {} on {}\n- Date (UTC): {}\n\n",
         seconds / 60.0,
+        args.dir.display(),
         env!("CARGO_PKG_VERSION"),
         machine(),
         today()

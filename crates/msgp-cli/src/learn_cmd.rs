@@ -108,23 +108,9 @@ pub fn model_name(m: ModelArg) -> &'static str {
     }
 }
 
-/// One iteration as JSON.
+/// One iteration as JSON (the fields of [`IterationReport`]).
 fn iteration_json(r: &IterationReport) -> Value {
-    json!({
-        "iteration": r.iteration,
-        "predicted_cost": r.predicted_cost,
-        "predicted_cost_std": r.predicted_cost_std,
-        "actual_cost": r.actual_cost,
-        "interaction_seconds": r.interaction_seconds,
-        "stable": r.stable,
-        "gains": {
-            "kp_x": r.gains.kp_x,
-            "ki_x": r.gains.ki_x,
-            "kd_x": r.gains.kd_x,
-            "kp_theta": r.gains.kp_theta,
-            "kd_theta": r.gains.kd_theta,
-        },
-    })
+    serde_json::to_value(r).unwrap_or(Value::Null)
 }
 
 /// The summary `--json` prints and `summary.json` holds.
@@ -290,13 +276,20 @@ pub fn settings(
 /// A progress line for one iteration.
 pub fn progress_line(r: &IterationReport, started: Instant) -> String {
     format!(
-        "iteration {:>2}: predicted cost {:7.2} ± {:5.2} (2σ), actual {:7.2}, interaction {:5.1} s, stable {:<3}  [{:.0} s]",
+        "iteration {:>2}: predicted cost {:7.2} ± {:5.2} (2σ), actual {:7.2}, interaction {:5.1} s, stable {:<3} gains [{:.3}, {:.3}, {:.3}, {:.2}, {:.3}]  [fit {:.0} s, search {:.0} s, total {:.0} s]",
         r.iteration,
         r.predicted_cost,
         2.0 * r.predicted_cost_std,
         r.actual_cost,
         r.interaction_seconds,
         if r.stable { "yes" } else { "no" },
+        r.gains.kp_x,
+        r.gains.ki_x,
+        r.gains.kd_x,
+        r.gains.kp_theta,
+        r.gains.kd_theta,
+        r.fit_seconds,
+        r.search_seconds,
         started.elapsed().as_secs_f64()
     )
 }

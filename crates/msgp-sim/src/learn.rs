@@ -41,6 +41,10 @@ pub struct LearnSettings {
     pub random_rollouts: usize,
     /// Length of every interaction episode \[s\].
     pub episode_seconds: f64,
+    /// Horizon of the predicted rollouts the gains are optimised on \[s\]. Longer than an
+    /// episode, so that the policy search sees the slow drift of the end effector that a
+    /// 3 s episode hides but the 10 s stability test does not.
+    pub policy_horizon_seconds: f64,
     /// Seed of everything random (episodes, excitation, fits, restarts).
     pub seed: u64,
     /// Model fit settings (history, inducing points, iterations).
@@ -67,6 +71,7 @@ impl Default for LearnSettings {
             iterations: 8,
             random_rollouts: 4,
             episode_seconds: 3.0,
+            policy_horizon_seconds: 5.0,
             seed: 0,
             fit: FitSettings {
                 ly: 2,
@@ -78,12 +83,12 @@ impl Default for LearnSettings {
                 ..FitSettings::default()
             },
             search: PolicySearchSettings {
-                iterations: 30,
+                iterations: 20,
                 learning_rate: 0.1,
                 restarts: 1,
                 restart_spread: 0.5,
                 seed: 0,
-                candidates: 200,
+                candidates: 150,
                 candidate_spread: 2.0,
                 candidate_starts: 2,
             },
@@ -99,7 +104,8 @@ impl Default for LearnSettings {
 pub struct IterationReport {
     /// 1-based iteration.
     pub iteration: usize,
-    /// Expected total cost on the model, from rest.
+    /// Expected total cost on the model, from rest, over the episode's length (the policy is
+    /// optimised over the longer `policy_horizon_seconds`).
     pub predicted_cost: f64,
     /// Its standard deviation (per-step variances summed; correlations over time ignored).
     pub predicted_cost_std: f64,
@@ -109,6 +115,12 @@ pub struct IterationReport {
     pub interaction_seconds: f64,
     /// Whether the gains passed the simulator's stability test.
     pub stable: bool,
+    /// Wall-clock seconds of the model fit.
+    #[serde(default)]
+    pub fit_seconds: f64,
+    /// Wall-clock seconds of the policy optimisation.
+    #[serde(default)]
+    pub search_seconds: f64,
     /// The gains run in this iteration.
     pub gains: PidPdGains,
 }
@@ -267,6 +279,17 @@ pub fn learn_policy(
     }
     let cost = SaturatingCost::with_widths(DVector::from_element(2, 0.0), &settings.cost_widths)?;
     let horizon = (settings.episode_seconds * params.control_rate_hz).round() as usize;
+    let policy_horizon =
+        (settings.policy_horizon_seconds * params.control_rate_hz).round() as usize;
+    if policy_horizon == 0 || horizon == 0 {
+        return Err(SimError::invalid(
+            "policy_horizon_seconds",
+            settings
+                .policy_horizon_seconds
+                .min(settings.episode_seconds),
+            "the episode and the policy horizon need at least one control step",
+        ));
+    }
     let s = settings.gain_scale;
     let mut gains = PidPdGains {
         kp_x: s[0],
@@ -288,14 +311,16 @@ pub fn learn_policy(
             seed: settings.seed.wrapping_add(it as u64),
             ..settings.fit.clone()
         };
+        let clock = std::time::Instant::now();
         let (model, _) = fit_episodes(&training, &fit_settings, &mut |_| {})?;
+        let fit_seconds = clock.elapsed().as_secs_f64();
         let problem = PolicyProblem {
             model: &model,
             y0_mean: vec![0.0, 0.0],
             y0_var: vec![params.initial_theta_std.powi(2), 1e-8],
             u0: vec![0.0],
             cost: cost.clone(),
-            horizon,
+            horizon: policy_horizon,
         };
         let search = PolicySearchSettings {
             seed: settings
@@ -305,9 +330,14 @@ pub fn learn_policy(
                 .wrapping_add(it as u64),
             ..settings.search
         };
+        let clock = std::time::Instant::now();
         let result = optimise_pid(&problem, &modelled_policy(&gains, params)?, &mask, &search)?;
+        let search_seconds = clock.elapsed().as_secs_f64();
         gains = gains_from(&result.policy);
-        let var: f64 = result.steps.iter().map(|(_, v)| v).sum();
+        // reported over the episode's length, comparable with the cost measured on the system
+        let episode_steps = &result.steps[..horizon.min(result.steps.len())];
+        let predicted: f64 = episode_steps.iter().map(|(m, _)| m).sum();
+        let var: f64 = episode_steps.iter().map(|(_, v)| v).sum();
 
         let seed = settings
             .seed
@@ -332,11 +362,13 @@ pub fn learn_policy(
             stability_test(params, &gains, settings.seed, &StabilityCriteria::default())?.passed;
         let report = IterationReport {
             iteration: it,
-            predicted_cost: result.expected_cost,
+            predicted_cost: predicted,
             predicted_cost_std: var.sqrt(),
             actual_cost: actual,
             interaction_seconds: seconds,
             stable,
+            fit_seconds,
+            search_seconds,
             gains,
         };
         progress(&report);
