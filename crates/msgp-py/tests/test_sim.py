@@ -59,7 +59,7 @@ def test_learn_policy_runs_and_reports():
         "random_rollouts": 1,
         "episode_seconds": 1.0,
         "fit": {"inducing": 10, "iterations": 3, "one_step_iterations": 10},
-        "search": {"iterations": 2},
+        "search": {"iterations": 2, "candidates": 4},
     }
     reports = msgp.learn_policy(method="msgp", iterations=1, seed=2, settings=settings)
     assert len(reports) == 1
@@ -68,5 +68,11 @@ def test_learn_policy_runs_and_reports():
     assert set(r["gains"]) >= {"kp_x", "ki_x", "kd_x", "kp_theta", "kd_theta"}
     assert 0.0 < r["interaction_seconds"] <= 2.0
     assert np.isfinite(r["predicted_cost"]) and np.isfinite(r["actual_cost"])
-    assert msgp.learn_policy(method="msgp", iterations=1, seed=2, settings=settings) == reports
+    assert r["fit_seconds"] > 0.0 and r["search_seconds"] > 0.0
+
+    def untimed(rs):
+        return [{k: v for k, v in x.items() if k not in ("fit_seconds", "search_seconds")} for x in rs]
+
+    again = msgp.learn_policy(method="msgp", iterations=1, seed=2, settings=settings)
+    assert untimed(again) == untimed(reports)
     assert msgp.defaults("learn")["iterations"] == 8
