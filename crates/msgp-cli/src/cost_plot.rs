@@ -8,7 +8,7 @@ use anyhow::{Context, anyhow};
 use msgp_sim::learn::IterationReport;
 use plotters::prelude::*;
 
-use crate::plot::font;
+use crate::plot::{font, legend};
 
 const WIDTH: u32 = 1000;
 const HEIGHT: u32 = 560;
@@ -130,14 +130,7 @@ fn draw(path: &Path, title: &str, curves: &[CostCurve]) -> anyhow::Result<()> {
             }))
             .map_err(e)?;
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.3))
-        .label_font(("sans-serif", 13))
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(e)?;
+    legend(&mut chart)?;
     root.draw(&Text::new(
         "filled marker: the policy passed the stability test",
         (70, HEIGHT as i32 - 18),
@@ -243,14 +236,7 @@ fn draw_bands(path: &Path, models: &[(String, Vec<Vec<IterationReport>>)]) -> an
                     PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
                 });
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK.mix(0.3))
-            .label_font(("sans-serif", 13))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(e)?;
+        legend(&mut chart)?;
     }
     root.present().map_err(e)?;
     Ok(())

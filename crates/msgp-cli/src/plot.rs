@@ -32,6 +32,22 @@ pub(crate) fn font() -> anyhow::Result<()> {
     }
 }
 
+/// The series legend in the upper right corner, as every plot of the CLI draws it.
+pub(crate) fn legend<'a, DB, CT>(chart: &mut ChartContext<'a, DB, CT>) -> anyhow::Result<()>
+where
+    DB: DrawingBackend + 'a,
+    CT: plotters::coord::CoordTranslate,
+{
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.3))
+        .label_font(("sans-serif", 13))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(|e| anyhow!("{e}"))
+}
+
 /// One panel: a trajectory's output `j`.
 struct Panel<'a> {
     title: String,
@@ -152,14 +168,7 @@ fn draw_panel(
         .map_err(e)?
         .label("predicted mean")
         .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], band.stroke_width(2)));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.3))
-        .label_font(("sans-serif", 13))
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(e)?;
+    legend(&mut chart)?;
     Ok(())
 }
 
