@@ -69,8 +69,8 @@ pub struct BudgetArgs {
     /// Random gain candidates screened on the model before each policy optimisation.
     #[arg(long, value_name = "N", default_value_t = LearnSettings::default().search.candidates)]
     pub candidates: usize,
-    /// Prior mean of the GP model.
-    #[arg(long, value_enum, default_value_t = MeanArg::Linear)]
+    /// Prior mean of the GP model (linear: an ARX map under the GP; see docs/design.md).
+    #[arg(long, value_enum, default_value_t = MeanArg::Zero)]
     pub mean: MeanArg,
     /// Highest frequency of the random excitation [Hz].
     #[arg(long, value_name = "HZ", default_value_t = LearnSettings::default().excitation.max_hz)]
@@ -291,7 +291,16 @@ pub fn settings(
 
 /// A progress line for one iteration.
 pub fn progress_line(r: &IterationReport, started: Instant) -> String {
-    format!(
+    let mut notes = String::new();
+    if let Some(stop) = &r.fit_numerical_stop {
+        notes.push_str(&format!("\n  fit stopped early: {stop}"));
+    }
+    if let Some(why) = &r.search_failure {
+        notes.push_str(&format!(
+            "\n  policy search failed ({why}): the previous gains ran again"
+        ));
+    }
+    let line = format!(
         "iteration {:>2}: predicted cost {:7.2} ± {:5.2} (2σ), actual {:7.2}, interaction {:5.1} s, stable {:<3} gains [{:.3}, {:.3}, {:.3}, {:.2}, {:.3}]  [fit {:.0} s, search {:.0} s, total {:.0} s]",
         r.iteration,
         r.predicted_cost,
@@ -307,7 +316,8 @@ pub fn progress_line(r: &IterationReport, started: Instant) -> String {
         r.fit_seconds,
         r.search_seconds,
         started.elapsed().as_secs_f64()
-    )
+    );
+    line + &notes
 }
 
 /// Runs one learning loop on `params`, printing progress unless `quiet`.

@@ -89,7 +89,7 @@ impl Default for LearnSettings {
                 iterations: 300,
                 learning_rate: 0.01,
                 validation_fraction: 0.0,
-                mean: MeanFunction::Linear,
+                mean: MeanFunction::Zero,
                 ..FitSettings::default()
             },
             search: PolicySearchSettings {
@@ -145,6 +145,10 @@ pub struct IterationReport {
     /// keeps the last parameters that evaluated).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fit_numerical_stop: Option<String>,
+    /// Set when every policy-search start diverged on the model: the previous gains ran again
+    /// and the predicted cost is the episode's maximum (every step 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub search_failure: Option<String>,
     /// The gains run in this iteration.
     pub gains: PidPdGains,
 }
@@ -355,13 +359,26 @@ pub fn learn_policy(
             ..settings.search
         };
         let clock = std::time::Instant::now();
-        let result = optimise_pid(&problem, &modelled_policy(&gains, params)?, &mask, &search)?;
+        let searched = optimise_pid(&problem, &modelled_policy(&gains, params)?, &mask, &search);
         let search_seconds = clock.elapsed().as_secs_f64();
-        gains = gains_from(&result.policy);
-        // reported over the episode's length, comparable with the cost measured on the system
-        let episode_steps = &result.steps[..horizon.min(result.steps.len())];
-        let predicted: f64 = episode_steps.iter().map(|(m, _)| m).sum();
-        let var: f64 = episode_steps.iter().map(|(_, v)| v).sum();
+        let (predicted, var, search_failure) = match searched {
+            Ok(result) => {
+                gains = gains_from(&result.policy);
+                // reported over the episode's length, comparable with the cost measured on the
+                // system
+                let episode_steps = &result.steps[..horizon.min(result.steps.len())];
+                let predicted: f64 = episode_steps.iter().map(|(m, _)| m).sum();
+                let var: f64 = episode_steps.iter().map(|(_, v)| v).sum();
+                (predicted, var, None)
+            }
+            // the model's rollouts diverge for every start: it predicts failure whatever the
+            // gains (every step costs 1); the gains stay and the episode adds data
+            Err(
+                e @ (msgp_core::MsgpError::NonFinite(_)
+                | msgp_core::MsgpError::NotPositiveDefinite { .. }),
+            ) => (horizon as f64, 0.0, Some(e.to_string())),
+            Err(e) => return Err(e.into()),
+        };
 
         let seed = settings
             .seed
@@ -394,6 +411,7 @@ pub fn learn_policy(
             fit_seconds,
             search_seconds,
             fit_numerical_stop: fit_report.numerical_stop,
+            search_failure,
             gains,
         };
         progress(&report);
