@@ -72,6 +72,9 @@ pub struct BudgetArgs {
     /// Prior mean of the GP model (linear: an ARX map under the GP; see docs/design.md).
     #[arg(long, value_enum, default_value_t = MeanArg::Zero)]
     pub mean: MeanArg,
+    /// Horizon of the predicted rollouts the gains are optimised on [s].
+    #[arg(long, value_name = "S", default_value_t = LearnSettings::default().policy_horizon_seconds)]
+    pub policy_horizon: f64,
     /// Highest frequency of the random excitation [Hz].
     #[arg(long, value_name = "HZ", default_value_t = LearnSettings::default().excitation.max_hz)]
     pub excitation_max_hz: f64,
@@ -245,6 +248,15 @@ pub fn settings(
             args.episode_seconds
         );
     }
+    if !(args.policy_horizon.is_finite()
+        && args.policy_horizon > 0.0
+        && args.policy_horizon <= 600.0)
+    {
+        anyhow::bail!(
+            "--policy-horizon must be in (0, 600] seconds, got {}",
+            args.policy_horizon
+        );
+    }
     if args.random_rollouts == 0 {
         anyhow::bail!("--random-rollouts must be at least 1 (the first model needs data)");
     }
@@ -265,6 +277,7 @@ pub fn settings(
         iterations,
         random_rollouts: args.random_rollouts,
         episode_seconds: args.episode_seconds,
+        policy_horizon_seconds: args.policy_horizon,
         excitation,
         seed,
         fit: msgp_core::fit::FitSettings {

@@ -629,7 +629,8 @@ mod tests {
             mean: MeanFunction::Linear,
             ..FitSettings::default()
         };
-        let (model, report) = fit(&[traj.clone()], &settings, &mut |_| {}).expect("fit survives");
+        let (model, report) =
+            fit(std::slice::from_ref(&traj), &settings, &mut |_| {}).expect("fit survives");
         let stop = report
             .numerical_stop
             .expect("the step size is absurd enough to fail");
