@@ -25,6 +25,7 @@ pub mod kernel;
 pub mod kmeans;
 pub mod linalg;
 pub mod loss;
+pub(crate) mod mm_f64;
 pub mod model;
 pub mod model_file;
 pub mod moments;
@@ -36,6 +37,7 @@ pub mod policy_search;
 pub mod rollout;
 pub mod saturation;
 pub mod scalar;
+mod simd;
 pub mod trajectory;
 
 pub use error::{MsgpError, Result};
