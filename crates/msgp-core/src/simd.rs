@@ -211,6 +211,144 @@ pub(crate) fn solve_upper_rows<const F: bool>(
     }
 }
 
+/// `(L Lᵀ)⁻¹` (symmetrised) from a lower Cholesky factor, as a dense `d × d` matrix.
+#[inline(always)]
+pub(crate) fn chol_inverse<const F: bool>(l: &DMatrix<f64>) -> DMatrix<f64> {
+    let d = l.nrows();
+    let mut x = vec![0.0; d * d];
+    for i in 0..d {
+        x[i * d + i] = 1.0;
+    }
+    solve_lower_rows::<F>(l, &mut x, d, d);
+    solve_upper_rows::<F>(l, &mut x, d, d);
+    // x holds rows of A⁻¹ (row i at x[i d..]); A⁻¹ is symmetric up to rounding
+    DMatrix::from_fn(d, d, |i, j| 0.5 * (x[i * d + j] + x[j * d + i]))
+}
+
+/// `out[k, :] = Σ_j c[k, j] · mat[:, j]` for `k < d`, `j < n`: `c` and `out` are `d` rows of
+/// stride `mp`, `mat` holds `n` columns of `mp` entries (column `j` at `j·mp`). Four rows of
+/// `out` and eight entries of a row are accumulated in registers over `j` (a GEMM micro-kernel
+/// for the `D × m · m × m` products of the adjoint).
+#[inline(always)]
+pub(crate) fn gemm_rows<const F: bool>(
+    c: &[f64],
+    mat: &[f64],
+    out: &mut [f64],
+    d: usize,
+    n: usize,
+    mp: usize,
+) {
+    let mut k0 = 0;
+    while k0 < d {
+        match d - k0 {
+            1 => gemm_block::<F, 1>(c, mat, out, k0, n, mp),
+            2 => gemm_block::<F, 2>(c, mat, out, k0, n, mp),
+            3 => gemm_block::<F, 3>(c, mat, out, k0, n, mp),
+            _ => gemm_block::<F, 4>(c, mat, out, k0, n, mp),
+        }
+        k0 += 4;
+    }
+}
+
+#[inline(always)]
+fn gemm_block<const F: bool, const KB: usize>(
+    c: &[f64],
+    mat: &[f64],
+    out: &mut [f64],
+    k0: usize,
+    n: usize,
+    mp: usize,
+) {
+    let mut i0 = 0;
+    while i0 < mp {
+        let mut acc = [[0.0f64; CHUNK]; KB];
+        for j in 0..n {
+            let col = &mat[j * mp + i0..j * mp + i0 + CHUNK];
+            for kk in 0..KB {
+                let cv = c[(k0 + kk) * mp + j];
+                for l in 0..CHUNK {
+                    acc[kk][l] = madd::<F>(col[l], cv, acc[kk][l]);
+                }
+            }
+        }
+        for kk in 0..KB {
+            out[(k0 + kk) * mp + i0..(k0 + kk) * mp + i0 + CHUNK].copy_from_slice(&acc[kk]);
+        }
+        i0 += CHUNK;
+    }
+}
+
+/// `out[(r, s)] += α Σ_i x[r, i] y[s, i]` for `d` rows of stride `mp` (a multiple of
+/// [`CHUNK`]; `out` is `d × d`). The sum runs over all `mp` entries, so the padding of `x` or of
+/// `y` must be zero. Two rows of `x` against four of `y` at a time, four lanes each.
+#[inline(always)]
+pub(crate) fn gram_add<const F: bool>(
+    x: &[f64],
+    y: &[f64],
+    alpha: f64,
+    out: &mut DMatrix<f64>,
+    d: usize,
+    mp: usize,
+) {
+    let mut r0 = 0;
+    while r0 + 2 <= d {
+        let mut s0 = 0;
+        while s0 + 4 <= d {
+            gram_block::<F, 2, 4>(x, y, alpha, out, r0, s0, mp);
+            s0 += 4;
+        }
+        while s0 < d {
+            gram_block::<F, 2, 1>(x, y, alpha, out, r0, s0, mp);
+            s0 += 1;
+        }
+        r0 += 2;
+    }
+    if r0 < d {
+        let mut s0 = 0;
+        while s0 + 4 <= d {
+            gram_block::<F, 1, 4>(x, y, alpha, out, r0, s0, mp);
+            s0 += 4;
+        }
+        while s0 < d {
+            gram_block::<F, 1, 1>(x, y, alpha, out, r0, s0, mp);
+            s0 += 1;
+        }
+    }
+}
+
+#[inline(always)]
+fn gram_block<const F: bool, const RB: usize, const SB: usize>(
+    x: &[f64],
+    y: &[f64],
+    alpha: f64,
+    out: &mut DMatrix<f64>,
+    r0: usize,
+    s0: usize,
+    mp: usize,
+) {
+    const W: usize = 4;
+    let mut acc = [[[0.0f64; W]; SB]; RB];
+    let mut i0 = 0;
+    while i0 < mp {
+        for rr in 0..RB {
+            let xv = &x[(r0 + rr) * mp + i0..(r0 + rr) * mp + i0 + W];
+            for ss in 0..SB {
+                let yv = &y[(s0 + ss) * mp + i0..(s0 + ss) * mp + i0 + W];
+                for l in 0..W {
+                    acc[rr][ss][l] = madd::<F>(xv[l], yv[l], acc[rr][ss][l]);
+                }
+            }
+        }
+        i0 += W;
+    }
+    for rr in 0..RB {
+        for ss in 0..SB {
+            let a = &acc[rr][ss];
+            out[(r0 + rr, s0 + ss)] += alpha * ((a[0] + a[2]) + (a[1] + a[3]));
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -321,6 +459,8 @@ mod tests {
     fn row_solves_and_sums() {
         let a = DMatrix::from_row_slice(3, 3, &[4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0]);
         let l = a.clone().cholesky().expect("spd").l();
+        let inv = chol_inverse::<false>(&l);
+        assert!((&a * &inv - DMatrix::identity(3, 3)).abs().max() < 1e-14);
         // two right-hand sides stored as rows of stride 8
         let b = DMatrix::from_row_slice(3, 2, &[1.0, -2.0, 0.5, 3.0, -1.0, 0.25]);
         let mut x = vec![0.0; 3 * 8];
@@ -335,6 +475,38 @@ mod tests {
         for i in 0..3 {
             for j in 0..2 {
                 assert!((x[i * 8 + j] - want[(i, j)]).abs() < 1e-14);
+            }
+        }
+        // gemm_rows: out = C Mᵀ-style products against a naive loop (d = 6, n = 5, mp = 8)
+        let (d, n, mp) = (6, 5, 8);
+        let cm: Vec<f64> = (0..d * mp).map(|i| ((i * 7) % 11) as f64 - 5.0).collect();
+        let mat: Vec<f64> = (0..n * mp).map(|i| ((i * 5) % 13) as f64 * 0.25).collect();
+        let mut out = vec![0.0; d * mp];
+        gemm_rows::<true>(&cm, &mat, &mut out, d, n, mp);
+        for k in 0..d {
+            for i in 0..mp {
+                let want: f64 = (0..n).map(|j| cm[k * mp + j] * mat[j * mp + i]).sum();
+                assert!((out[k * mp + i] - want).abs() < 1e-12);
+            }
+        }
+        // gram_add against naive dots (d = 5 rows of stride 8, the last 2 entries zero)
+        let (d, mp) = (5, 8);
+        let xs: Vec<f64> = (0..d * mp)
+            .map(|i| {
+                if i % mp < 6 {
+                    ((i * 3) % 7) as f64 - 3.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let ys: Vec<f64> = (0..d * mp).map(|i| ((i * 5) % 9) as f64 * 0.5).collect();
+        let mut g = DMatrix::zeros(d, d);
+        gram_add::<true>(&xs, &ys, 2.0, &mut g, d, mp);
+        for r in 0..d {
+            for c in 0..d {
+                let want: f64 = (0..mp).map(|i| 2.0 * xs[r * mp + i] * ys[c * mp + i]).sum();
+                assert!((g[(r, c)] - want).abs() < 1e-12);
             }
         }
         let v: Vec<f64> = (0..21).map(|i| i as f64 * 0.5).collect();
