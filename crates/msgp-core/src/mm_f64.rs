@@ -9,7 +9,8 @@
 //!   four columns at a time, the product `Ãᵀ (N B̃)` is accumulated in registers (a small GEMM
 //!   micro-kernel), the exponent written to a buffer of `4·mp`, exponentiated by the vectorised
 //!   polynomial [`crate::simd::exp1`], and reduced at once into `β_aᵀ Q β_b` and `tr(K̃⁻¹Q)`.
-//!   The adjoint asks for `Q` to be kept ([`MmState::forward`] with `keep_q`).
+//!   The adjoint recomputes `Q` column by column with the same code ([`q_block`] with an
+//!   output buffer) instead of storing it for every step.
 //! - Buffers live in an [`MmState`] that is reused from step to step (thread-local for the
 //!   rollout path), so a step allocates only its small outputs.
 //!
@@ -67,8 +68,6 @@ pub(crate) struct PairBufs {
     /// `u^a_i`, `u^b_j` (mp).
     pub ua: Vec<f64>,
     pub ub: Vec<f64>,
-    /// `Q` (m × m, column-major), only when kept for the adjoint.
-    pub q: Vec<f64>,
 }
 
 /// Workspace and, after [`MmState::forward`], the intermediates of one moment-matching step.
@@ -109,7 +108,6 @@ struct Forward<'a> {
     mu: &'a DVector<f64>,
     sigma: &'a DMatrix<f64>,
     log: &'a mut JitterLog,
-    keep_q: bool,
 }
 
 impl Kernel for Forward<'_> {
@@ -117,20 +115,18 @@ impl Kernel for Forward<'_> {
     #[inline(always)]
     fn run<const F: bool>(self) -> Result<()> {
         self.st
-            .forward_impl::<F>(self.gp, self.mu, self.sigma, self.log, self.keep_q)
+            .forward_impl::<F>(self.gp, self.mu, self.sigma, self.log)
     }
 }
 
 impl MmState {
-    /// Moment matching of `N(mu, sigma)` through `gp`; the intermediates stay in `self` (with
-    /// every `Q` block when `keep_q`).
+    /// Moment matching of `N(mu, sigma)` through `gp`; the intermediates stay in `self`.
     pub fn forward(
         &mut self,
         gp: &PreparedGp<f64>,
         mu: &DVector<f64>,
         sigma: &DMatrix<f64>,
         log: &mut JitterLog,
-        keep_q: bool,
     ) -> Result<()> {
         dispatch(Forward {
             st: self,
@@ -138,7 +134,6 @@ impl MmState {
             mu,
             sigma,
             log,
-            keep_q,
         })
     }
 
@@ -161,7 +156,6 @@ impl MmState {
         mu: &DVector<f64>,
         sigma: &DMatrix<f64>,
         log: &mut JitterLog,
-        keep_q: bool,
     ) -> Result<()> {
         let x = &gp.pseudo_inputs;
         let (m, d) = (x.nrows(), x.ncols());
@@ -303,11 +297,6 @@ impl MmState {
                         pb.ub[i] = lkb[i] + pb.ub[i] * 0.5 - logdet_r * 0.5;
                     }
                 }
-                if keep_q {
-                    resize(&mut pb.q, m * m);
-                } else {
-                    pb.q.clear();
-                }
                 let kinv = if diag { Some(oa.kinv.as_slice()) } else { None };
                 let (ebb, tr) = q_block::<F>(
                     m,
@@ -321,7 +310,7 @@ impl MmState {
                     obp.beta.as_slice(),
                     kinv,
                     &mut self.ebuf,
-                    if keep_q { Some(&mut pb.q) } else { None },
+                    None,
                 );
                 let mut v = ebb - self.mean[a] * self.mean[b];
                 if diag {
@@ -473,13 +462,13 @@ pub(crate) fn moment_match_f64(
 ) -> Result<Moments<f64>> {
     STATE.with(|cell| match cell.try_borrow_mut() {
         Ok(mut st) => {
-            st.forward(gp, mu, sigma, log, false)?;
+            st.forward(gp, mu, sigma, log)?;
             Ok(st.moments(sigma))
         }
         // re-entrant use (not expected): a fresh workspace
         Err(_) => {
             let mut st = MmState::default();
-            st.forward(gp, mu, sigma, log, false)?;
+            st.forward(gp, mu, sigma, log)?;
             Ok(st.moments(sigma))
         }
     })

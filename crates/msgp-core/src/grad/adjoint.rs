@@ -20,7 +20,7 @@ use crate::grad::dual::{Dual, gradient};
 use crate::kernel::kernel_matrix;
 use crate::linalg::{JitterLog, cholesky, symmetrize};
 use crate::loss::{Complexity, LossValue, complexity_term, gaussian_nll};
-use crate::mm_f64::MmState;
+use crate::mm_f64::{MmState, q_block};
 use crate::narx::NarxSpec;
 use crate::policy::{FeedbackPolicy, PolicyMoments, PolicySpec};
 use crate::rollout::{Layout, gather, initial_window, noisy_covariances};
@@ -83,6 +83,8 @@ fn zero(v: &mut Vec<f64>, n: usize) {
 /// Reused buffers of the backward moment-matching pass.
 #[derive(Default)]
 struct BackWork {
+    q: Vec<f64>,
+    ebuf: Vec<f64>,
     ebar: Vec<f64>,
     ebar_t: Vec<f64>,
     qb: Vec<f64>,
@@ -197,6 +199,24 @@ fn mm_backward_impl<const F: bool>(bw: Backward<'_>) -> (DVector<f64>, DMatrix<f
         if diag {
             adj.sf2[a] += vb;
         }
+        // Q again, by the forward's own code (bit-identical to what the forward used): cheaper
+        // than keeping 8·m² bytes per step and pair
+        zero(&mut w.q, m * m);
+        zero(&mut w.ebuf, 4 * mp);
+        q_block::<F>(
+            m,
+            mp,
+            d,
+            &pc.at,
+            &pc.nb,
+            &pc.ua,
+            &pc.ub,
+            beta_a,
+            beta_b,
+            if diag { Some(oa.kinv.as_slice()) } else { None },
+            &mut w.ebuf,
+            Some(&mut w.q),
+        );
         // Ē as m columns of stride mp (zero padding)
         zero(&mut w.ebar, m * mp);
         zero(&mut w.qb, m);
@@ -207,7 +227,7 @@ fn mm_backward_impl<const F: bool>(bw: Backward<'_>) -> (DVector<f64>, DMatrix<f
             let adj_kinv = adj.kinv[a].as_mut_slice();
             let adj_beta_b = adj.beta[b].as_mut_slice();
             for j in 0..m {
-                let qcol = &pc.q[j * m..(j + 1) * m];
+                let qcol = &w.q[j * m..(j + 1) * m];
                 adj_beta_b[j] += vb * dot::<F>(beta_a, qcol);
                 axpy::<F>(beta_b[j], qcol, &mut w.qb);
                 let ecol = &mut w.ebar[j * mp..j * mp + m];
@@ -439,7 +459,8 @@ fn mm_backward_impl<const F: bool>(bw: Backward<'_>) -> (DVector<f64>, DMatrix<f
 /// What the forward rollout records per step.
 struct StepRecord {
     sigma: DMatrix<f64>,
-    /// The moment-matching intermediates (kept, not recomputed: ≈ 8·m²·pairs bytes per step).
+    /// The moment-matching intermediates (O(m·D) per step; `Q` is recomputed in the backward
+    /// pass).
     cache: MmState,
     ycov: DMatrix<f64>,
     resid: DVector<f64>,
@@ -527,7 +548,7 @@ fn episode_adjoint(
     for t in t0..horizon {
         let wsig = sigma.view((0, 0), (d, d)).into_owned();
         let mut mm = MmState::default();
-        mm.forward(gp, &mu.rows(0, d).into_owned(), &wsig, log, true)?;
+        mm.forward(gp, &mu.rows(0, d).into_owned(), &wsig, log)?;
         let (xcov, ycov) = noisy_covariances(gp, &mm.cov);
         let yrow: Vec<f64> = (0..dy).map(|j| traj.y[(t, j)]).collect();
         nll += gaussian_nll(&yrow, &mm.mean, &ycov, &gp.jitter, &mut nll_log)?;
