@@ -201,8 +201,9 @@ fn mm_backward_impl<const F: bool>(bw: Backward<'_>) -> (DVector<f64>, DMatrix<f
         }
         // Q again, by the forward's own code (bit-identical to what the forward used): cheaper
         // than keeping 8·m² bytes per step and pair
-        zero(&mut w.q, m * m);
-        zero(&mut w.ebuf, 4 * mp);
+        // (q_block overwrites every entry it reads: no zero fill)
+        w.q.resize(m * m, 0.0);
+        w.ebuf.resize(4 * mp, 0.0);
         q_block::<F>(
             m,
             mp,
@@ -217,8 +218,11 @@ fn mm_backward_impl<const F: bool>(bw: Backward<'_>) -> (DVector<f64>, DMatrix<f
             &mut w.ebuf,
             Some(&mut w.q),
         );
-        // Ē as m columns of stride mp (zero padding)
-        zero(&mut w.ebar, m * mp);
+        // Ē as m columns of stride mp: rows < m are written below, the padding is zeroed here
+        w.ebar.resize(m * mp, 0.0);
+        for j in 0..m {
+            w.ebar[j * mp + m..(j + 1) * mp].fill(0.0);
+        }
         zero(&mut w.qb, m);
         zero(&mut w.uabar, mp);
         zero(&mut w.ubbar, mp);
