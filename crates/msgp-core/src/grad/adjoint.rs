@@ -42,19 +42,30 @@ struct GpAdjoint {
 }
 
 impl GpAdjoint {
+    /// `self += o`, field by field (the destructuring is exhaustive: a new field must be added
+    /// here, or the per-episode sums would drop it).
     fn add(&mut self, o: &GpAdjoint) {
-        self.xbar += &o.xbar;
-        for (a, b) in self.beta.iter_mut().zip(&o.beta) {
+        let GpAdjoint {
+            xbar,
+            beta,
+            kinv,
+            inv_l2,
+            sf2,
+            sx2,
+            sy2,
+        } = o;
+        self.xbar += xbar;
+        for (a, b) in self.beta.iter_mut().zip(beta) {
             *a += b;
         }
-        for (a, b) in self.kinv.iter_mut().zip(&o.kinv) {
+        for (a, b) in self.kinv.iter_mut().zip(kinv) {
             *a += b;
         }
-        self.inv_l2 += &o.inv_l2;
+        self.inv_l2 += inv_l2;
         for (a, b) in [
-            (&mut self.sf2, &o.sf2),
-            (&mut self.sx2, &o.sx2),
-            (&mut self.sy2, &o.sy2),
+            (&mut self.sf2, sf2),
+            (&mut self.sx2, sx2),
+            (&mut self.sy2, sy2),
         ] {
             for (x, y) in a.iter_mut().zip(b) {
                 *x += y;
