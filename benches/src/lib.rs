@@ -54,6 +54,7 @@ pub fn problem(
         log_signal_var: DVector::from_element(1, 0.0),
         log_process_noise: DVector::from_element(1, (0.01f64).ln()),
         log_obs_noise: DVector::from_element(1, (0.01f64).ln()),
+        linear_mean: DMatrix::zeros(1, spec.input_dim()),
     };
     Ok((params, spec, vec![Episode::feed_forward(traj)]))
 }

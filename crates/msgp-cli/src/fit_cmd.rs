@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use msgp_core::fit::{FitOptions, FitProgress, fit};
+use msgp_core::gp::MeanFunction;
 use msgp_core::model::Method;
 use msgp_core::model_file::{FitRecord, ModelFile};
 use msgp_core::trajectory::Trajectory;
@@ -39,6 +40,24 @@ impl From<MethodArg> for Method {
             MethodArg::Msgp => Method::Msgp,
             MethodArg::GpNarx => Method::GpNarx,
             MethodArg::PilcoNarx => Method::PilcoNarx,
+        }
+    }
+}
+
+/// Prior mean of the GP on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MeanArg {
+    /// No prior mean (the paper's model).
+    Zero,
+    /// A trained linear (ARX) map of the window; the GP models what it leaves over.
+    Linear,
+}
+
+impl From<MeanArg> for MeanFunction {
+    fn from(m: MeanArg) -> Self {
+        match m {
+            MeanArg::Zero => MeanFunction::Zero,
+            MeanArg::Linear => MeanFunction::Linear,
         }
     }
 }
@@ -90,6 +109,9 @@ pub struct FitArgs {
     /// marginal likelihood for gp-narx and pilco-narx [default: 300].
     #[arg(long, value_name = "N")]
     iters: Option<usize>,
+    /// Prior mean of the GP.
+    #[arg(long, value_enum, default_value_t = MeanArg::Zero)]
+    mean: MeanArg,
     /// Seed of every random choice.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -159,6 +181,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         inducing: args.inducing,
         iterations: args.iters,
         seed: args.seed,
+        mean: args.mean.into(),
     }
     .settings(&trajs)?;
     let inducing = settings.inducing;

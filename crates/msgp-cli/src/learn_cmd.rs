@@ -17,6 +17,7 @@ use msgp_sim::{PendulumParams, write_run};
 use serde_json::{Value, json};
 
 use crate::cost_plot::{CostCurve, plot_costs};
+use crate::fit_cmd::MeanArg;
 use crate::output::{out, out_json};
 use crate::sim_cmd::PlantArgs;
 
@@ -68,6 +69,12 @@ pub struct BudgetArgs {
     /// Random gain candidates screened on the model before each policy optimisation.
     #[arg(long, value_name = "N", default_value_t = LearnSettings::default().search.candidates)]
     pub candidates: usize,
+    /// Prior mean of the GP model (linear: an ARX map under the GP; see docs/design.md).
+    #[arg(long, value_enum, default_value_t = MeanArg::Zero)]
+    pub mean: MeanArg,
+    /// Highest frequency of the random excitation [Hz].
+    #[arg(long, value_name = "HZ", default_value_t = LearnSettings::default().excitation.max_hz)]
+    pub excitation_max_hz: f64,
 }
 
 /// Options of `msgp learn-policy`.
@@ -245,15 +252,24 @@ pub fn settings(
         anyhow::bail!("--inducing must be at least 1");
     }
     let d = LearnSettings::default();
+    let excitation = msgp_sim::ExcitationConfig {
+        max_hz: args.excitation_max_hz,
+        ..d.excitation
+    };
+    excitation
+        .validate()
+        .with_context(|| format!("--excitation-max-hz {}", args.excitation_max_hz))?;
     let method: Method = model.into();
     Ok(LearnSettings {
         method,
         iterations,
         random_rollouts: args.random_rollouts,
         episode_seconds: args.episode_seconds,
+        excitation,
         seed,
         fit: msgp_core::fit::FitSettings {
             inducing: args.inducing,
+            mean: args.mean.into(),
             iterations: match (method, args.fit_iters) {
                 (Method::Msgp, Some(n)) => n,
                 _ => d.fit.iterations,
@@ -275,7 +291,16 @@ pub fn settings(
 
 /// A progress line for one iteration.
 pub fn progress_line(r: &IterationReport, started: Instant) -> String {
-    format!(
+    let mut notes = String::new();
+    if let Some(stop) = &r.fit_numerical_stop {
+        notes.push_str(&format!("\n  fit stopped early: {stop}"));
+    }
+    if let Some(why) = &r.search_failure {
+        notes.push_str(&format!(
+            "\n  policy search failed ({why}): the previous gains ran again"
+        ));
+    }
+    let line = format!(
         "iteration {:>2}: predicted cost {:7.2} ± {:5.2} (2σ), actual {:7.2}, interaction {:5.1} s, stable {:<3} gains [{:.3}, {:.3}, {:.3}, {:.2}, {:.3}]  [fit {:.0} s, search {:.0} s, total {:.0} s]",
         r.iteration,
         r.predicted_cost,
@@ -291,7 +316,8 @@ pub fn progress_line(r: &IterationReport, started: Instant) -> String {
         r.fit_seconds,
         r.search_seconds,
         started.elapsed().as_secs_f64()
-    )
+    );
+    line + &notes
 }
 
 /// Runs one learning loop on `params`, printing progress unless `quiet`.

@@ -264,8 +264,51 @@ fn baselines_text_output_and_default_model_path() {
         serde_json::from_str(&std::fs::read_to_string(dir.path("p.json")).expect("model file"))
             .expect("model JSON");
     assert_eq!(model["format"], "msgp-model");
-    assert_eq!(model["format_version"], "1.0");
+    assert_eq!(model["format_version"], "1.1");
     assert_eq!(model["method"], "pilco-narx");
+}
+
+#[test]
+fn linear_prior_mean_is_fitted_saved_and_used() {
+    let dir = Scratch::new("linear-mean");
+    dir.write("s.csv", &system_csv(160, None));
+    let v = ok_json(
+        &dir,
+        &args(
+            &[
+                "fit", "--data", "s.csv", "--mean", "linear", "--json", "--out", "m.json",
+            ],
+            &FAST,
+        ),
+    );
+    let model: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path("m.json")).expect("model file"))
+            .expect("model JSON");
+    let a = model["gp"]["linear_mean"]
+        .as_array()
+        .expect("gp.linear_mean");
+    assert_eq!(a.len(), 1);
+    assert!(
+        a[0].as_array()
+            .expect("row")
+            .iter()
+            .all(|x| x.as_f64() != Some(0.0))
+    );
+    // eval of the saved model gives the numbers the fit reported
+    let e = ok_json(
+        &dir,
+        &[
+            "eval", "--model", "m.json", "--data", "s.csv", "--from", "80", "--json",
+        ],
+    );
+    for key in ["rmse", "nll"] {
+        assert_eq!(e[key], v[key], "`{key}` differs between fit and eval");
+    }
+    fails(
+        &dir,
+        &["fit", "--data", "s.csv", "--mean", "quadratic"],
+        &["--mean"],
+    );
 }
 
 #[test]

@@ -8,12 +8,15 @@
 //! `k(x)ᵀ K̃_m⁻¹ ȳ` equals the DTC/projected-process mean
 //! `k(x)ᵀ (σ_n² K_mm + K_mn K_nm)⁻¹ K_mn y`, i.e. `ȳ = K̃_m (σ_n² K_mm + K_mn K_nm)⁻¹ K_mn y`.
 //! This sparse GP-NARX is also MSGP's initialisation, as in the paper.
+//!
+//! With a linear prior mean ([`MeanFunction::Linear`]) the map `A` is the ridge least-squares
+//! ARX fit of the targets on the windows, and the GP is fitted to what it leaves over.
 
 use nalgebra::{DMatrix, DVector};
 
 use crate::dense::DenseChol;
 use crate::error::{MsgpError, Result};
-use crate::gp::{GpConfig, GpParams};
+use crate::gp::{GpConfig, GpParams, MeanFunction};
 use crate::kernel::kernel_matrix;
 use crate::kmeans::kmeans;
 use crate::linalg::JitterLog;
@@ -184,6 +187,23 @@ fn column_std(x: &DMatrix<f64>, d: usize) -> f64 {
     var.sqrt().max(1e-6)
 }
 
+/// Ridge least squares `A = argmin ‖Y − X Aᵀ‖² + λ‖A‖²` (E × D), `λ = 1e-6 N` on the
+/// normalised pairs.
+fn arx_least_squares(
+    data: &OneStepData,
+    config: &GpConfig,
+    log: &mut JitterLog,
+) -> Result<DMatrix<f64>> {
+    let (n, d) = data.x.shape();
+    let mut gram = data.x.transpose() * &data.x;
+    for k in 0..d {
+        gram[(k, k)] += 1e-6 * n as f64;
+    }
+    let ch = DenseChol::new(&gram, &config.jitter, "XᵀX + λI (linear prior mean)", log)?;
+    let at = ch.solve(&(data.x.transpose() * &data.y)); // D × E
+    Ok(at.transpose())
+}
+
 /// Fits one-step GP-NARX hyperparameters per output and projects onto `m` pseudo-inputs.
 /// Returns the sparse model (process noise = one-step noise, observation noise at the floor).
 pub fn fit_one_step(
@@ -201,6 +221,12 @@ pub fn fit_one_step(
             "{n} one-step pairs are too few to fit a GP"
         )));
     }
+    let linear_mean = match config.mean {
+        MeanFunction::Zero => DMatrix::zeros(e, d),
+        MeanFunction::Linear => arx_least_squares(data, config, log)?,
+    };
+    // the targets the GP models: what the prior mean leaves over
+    let targets = &data.y - &data.x * linear_mean.transpose();
     let stride = n.div_ceil(settings.max_pairs.max(1));
     let idx: Vec<usize> = (0..n).step_by(stride).collect();
     let xs = DMatrix::from_fn(idx.len(), d, |i, k| data.x[(idx[i], k)]);
@@ -219,9 +245,10 @@ pub fn fit_one_step(
         log_signal_var: DVector::zeros(e),
         log_process_noise: DVector::zeros(e),
         log_obs_noise: DVector::from_element(e, (1e-3 * config.noise_floor).ln()),
+        linear_mean,
     };
     for a in 0..e {
-        let ys = DVector::from_fn(idx.len(), |i, _| data.y[(idx[i], a)]);
+        let ys = DVector::from_fn(idx.len(), |i, _| targets[(idx[i], a)]);
         let var_y = {
             let mean = ys.mean();
             ys.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (ys.len() as f64 - 1.0).max(1.0)
@@ -273,7 +300,7 @@ pub fn fit_one_step(
             .collect();
         let sf2 = h.log_signal_var.exp();
         let sn2 = config.noise_floor + h.log_noise.exp();
-        let yfull = DVector::from_fn(n, |i, _| data.y[(i, a)]);
+        let yfull = DVector::from_fn(n, |i, _| targets[(i, a)]);
         let ybar = if m >= n {
             yfull
         } else {

@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 use crate::baseline::{OneStepSettings, fit_one_step, one_step_pairs};
 use crate::data::Normalizer;
 use crate::error::{MsgpError, Result};
-use crate::gp::{GpConfig, GpParams, GpShape, ParamGroup, PreparedGp};
+use crate::gp::{GpConfig, GpParams, GpShape, MeanFunction, ParamGroup, PreparedGp};
 use crate::grad::adjoint::loss_and_gradient;
 use crate::linalg::JitterLog;
 use crate::loss::{Complexity, gaussian_nll};
@@ -62,6 +62,9 @@ pub struct FitSettings {
     pub one_step_iterations: usize,
     /// After early stopping, refit on all training data for the chosen number of iterations.
     pub refit: bool,
+    /// Prior mean of the GP (the paper's model has none).
+    #[serde(default)]
+    pub mean: MeanFunction,
 }
 
 impl Default for FitSettings {
@@ -84,6 +87,7 @@ impl Default for FitSettings {
             frozen: vec![ParamGroup::PseudoInputs],
             one_step_iterations: 300,
             refit: false,
+            mean: MeanFunction::Zero,
         }
     }
 }
@@ -112,6 +116,8 @@ pub struct FitOptions {
     pub iterations: Option<usize>,
     /// Seed of every random choice.
     pub seed: u64,
+    /// Prior mean of the GP.
+    pub mean: MeanFunction,
 }
 
 impl FitOptions {
@@ -165,6 +171,7 @@ impl FitOptions {
                 (_, Some(n)) => n,
             },
             seed: self.seed,
+            mean: self.mean,
             ..defaults
         })
     }
@@ -200,6 +207,11 @@ pub struct FitReport {
     pub train_seconds: f64,
     /// Jitter added along the way.
     pub jitter: JitterLog,
+    /// Set when an Adam step led to parameters whose rollouts fail numerically (a predictive
+    /// covariance that is not positive definite even with jitter, or non-finite values): training
+    /// stopped there and kept the last parameters that evaluated.
+    #[serde(default)]
+    pub numerical_stop: Option<String>,
 }
 
 struct MsgpObjective<'a> {
@@ -209,19 +221,28 @@ struct MsgpObjective<'a> {
     episodes: &'a [Episode],
     complexity: Complexity,
     log: JitterLog,
+    /// The numerical failure that ended training, if any (the loss is then reported as NaN).
+    failure: Option<MsgpError>,
 }
 
 impl Objective for MsgpObjective<'_> {
     fn value_and_gradient(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>)> {
         let params = GpParams::from_flat(self.shape, x)?;
-        let (v, mut g) = loss_and_gradient(
+        let evaluated = loss_and_gradient(
             &params,
             &self.config,
             &self.spec,
             self.episodes,
             self.complexity,
             &mut self.log,
-        )?;
+        );
+        let (v, mut g) = match evaluated {
+            Err(e @ (MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_))) => {
+                self.failure = Some(e);
+                return Ok((f64::NAN, vec![0.0; x.len()]));
+            }
+            other => other?,
+        };
         let scale = 1.0 / v.steps.max(1) as f64;
         g.iter_mut().for_each(|gi| *gi *= scale);
         Ok((v.total() * scale, g))
@@ -328,7 +349,10 @@ pub fn fit_episodes(
     };
 
     if settings.method != Method::Msgp {
-        let config = GpConfig::default();
+        let config = GpConfig {
+            mean: settings.mean,
+            ..GpConfig::default()
+        };
         let nrefs: Vec<&Trajectory> = norm.iter().collect();
         let data = one_step_pairs(&spec, &nrefs)?;
         let params = fit_one_step(
@@ -377,6 +401,7 @@ pub fn fit_episodes(
     }
     let config = GpConfig {
         noise_floor: settings.noise_floor,
+        mean: settings.mean,
         ..GpConfig::default()
     };
     let mut stage = Stage {
@@ -476,7 +501,8 @@ impl Stage<'_, '_> {
     ) -> Result<(GpParams<f64>, usize)> {
         let shape = init.shape()?;
         let mut active = vec![true; shape.len()];
-        for g in &self.settings.frozen {
+        let no_mean = (self.config.mean == MeanFunction::Zero).then_some(ParamGroup::LinearMean);
+        for g in self.settings.frozen.iter().chain(no_mean.iter()) {
             for i in shape.group_range(*g) {
                 active[i] = false;
             }
@@ -488,6 +514,7 @@ impl Stage<'_, '_> {
             episodes,
             complexity: self.settings.complexity,
             log: JitterLog::default(),
+            failure: None,
         };
         let adam = Adam {
             learning_rate: self.settings.learning_rate,
@@ -497,6 +524,7 @@ impl Stage<'_, '_> {
         let every = settings.eval_every.max(1);
         let mut best: (f64, Vec<f64>, usize) = (f64::INFINITY, init.to_flat(), 0);
         let mut since_best = 0usize;
+        let mut good: Option<(Vec<f64>, usize)> = None;
         let report = &mut *self.report;
         let progress = &mut *self.progress;
         let (last_x, _) = minimize(
@@ -506,6 +534,11 @@ impl Stage<'_, '_> {
             &active,
             iterations + 1,
             |it, loss, x| {
+                if loss.is_nan() {
+                    // the parameters of this step failed numerically (see `failure`)
+                    return Ok(Flow::Stop);
+                }
+                good = Some((x.to_vec(), it));
                 let mut validation = None;
                 if !tails.is_empty() && (it % every == 0 || it == iterations) {
                     let p = GpParams::from_flat(shape, x)?;
@@ -535,10 +568,21 @@ impl Stage<'_, '_> {
             },
         )?;
         report.jitter.merge(&objective.log);
-        let (x, it) = if tails.is_empty() {
-            (last_x, iterations)
-        } else {
-            (best.1, best.2)
+        let (x, it) = match (objective.failure.take(), good) {
+            (Some(e), None) => return Err(e),
+            (Some(e), Some((x, it))) => {
+                report.numerical_stop = Some(format!(
+                    "stage {stage}: stopped at iteration {} of {iterations}: {e}; kept iteration {it}",
+                    it + 1
+                ));
+                if !tails.is_empty() && best.0.is_finite() {
+                    (best.1, best.2)
+                } else {
+                    (x, it)
+                }
+            }
+            (None, _) if tails.is_empty() => (last_x, iterations),
+            (None, _) => (best.1, best.2),
         };
         Ok((GpParams::from_flat(shape, &x)?, it))
     }
@@ -562,7 +606,49 @@ mod tests {
             inducing,
             iterations,
             seed: 7,
+            mean: MeanFunction::Zero,
         }
+    }
+
+    #[test]
+    fn a_numerically_failing_step_keeps_the_last_good_parameters() {
+        // an absurd step size drives the rollout covariances to overflow within a few steps
+        let u: Vec<f64> = (0..80).map(|i| (i as f64 * 0.37).sin()).collect();
+        let mut y = vec![0.0; 80];
+        for t in 1..80 {
+            y[t] = 0.9 * y[t - 1] + 0.5 * u[t - 1];
+        }
+        let traj = Trajectory::siso(&u, &y).expect("finite");
+        let settings = FitSettings {
+            ly: 1,
+            lu: 1,
+            inducing: 10,
+            iterations: 200,
+            learning_rate: 30.0,
+            validation_fraction: 0.0,
+            mean: MeanFunction::Linear,
+            ..FitSettings::default()
+        };
+        let (model, report) = fit(&[traj.clone()], &settings, &mut |_| {}).expect("fit survives");
+        let stop = report
+            .numerical_stop
+            .expect("the step size is absurd enough to fail");
+        assert!(stop.contains("kept iteration"), "{stop}");
+        assert!(report.iterations_run < 201);
+        // the kept parameters evaluate
+        let mut log = JitterLog::default();
+        let gp = PreparedGp::new(&model.params, &model.config, &mut log).expect("kept model");
+        let norm = model.normalizer.apply(&traj);
+        rollout(
+            &gp,
+            &model.spec,
+            &norm,
+            &Control::FeedForward,
+            norm.len(),
+            &mut log,
+            |_| Ok(()),
+        )
+        .expect("kept model rolls out");
     }
 
     #[test]

@@ -35,6 +35,27 @@ pub struct GpParams<T: Scalar> {
     pub log_process_noise: DVector<T>,
     /// `log(σ_y² − floor)` per output (observation noise).
     pub log_obs_noise: DVector<T>,
+    /// `A`: E × D coefficients of the linear prior mean `m(x̃) = A x̃` (zero, and frozen, under
+    /// [`MeanFunction::Zero`]).
+    pub linear_mean: DMatrix<T>,
+}
+
+/// The GP's prior mean over the NARX window.
+///
+/// `Zero` is the paper's model: far from the pseudo-inputs every prediction reverts to the
+/// (normalised) data mean with the full signal variance. `Linear` adds a trained linear map
+/// `m(x̃) = A x̃` (an ARX model) and lets the GP model what it leaves over, the usual choice for
+/// mechanical systems: an unstable plant (a pendulum) stays nearly linear near its operating
+/// point, and predictions outside the data follow the linear model instead of collapsing to the
+/// mean. Moment matching stays exact (`A x̃` is linear in the Gaussian window).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MeanFunction {
+    /// `m(x̃) = 0`.
+    #[default]
+    Zero,
+    /// `m(x̃) = A x̃`, `A` trained with the other parameters.
+    Linear,
 }
 
 /// Settings that are not optimised.
@@ -44,6 +65,9 @@ pub struct GpConfig {
     pub noise_floor: f64,
     /// Jitter policy for every Cholesky factorisation.
     pub jitter: JitterPolicy,
+    /// Prior mean function.
+    #[serde(default)]
+    pub mean: MeanFunction,
 }
 
 impl Default for GpConfig {
@@ -51,6 +75,7 @@ impl Default for GpConfig {
         Self {
             noise_floor: 1e-6,
             jitter: JitterPolicy::default(),
+            mean: MeanFunction::Zero,
         }
     }
 }
@@ -70,17 +95,20 @@ pub enum ParamGroup {
     ProcessNoise,
     /// observation noise
     ObsNoise,
+    /// `A` of the linear prior mean
+    LinearMean,
 }
 
 impl ParamGroup {
     /// All groups in flattening order.
-    pub const ALL: [ParamGroup; 6] = [
+    pub const ALL: [ParamGroup; 7] = [
         ParamGroup::PseudoInputs,
         ParamGroup::PseudoTargets,
         ParamGroup::Lengthscales,
         ParamGroup::SignalVar,
         ParamGroup::ProcessNoise,
         ParamGroup::ObsNoise,
+        ParamGroup::LinearMean,
     ];
 }
 
@@ -101,7 +129,7 @@ impl GpShape {
         match group {
             ParamGroup::PseudoInputs => self.m * self.d,
             ParamGroup::PseudoTargets => self.m * self.e,
-            ParamGroup::Lengthscales => self.e * self.d,
+            ParamGroup::Lengthscales | ParamGroup::LinearMean => self.e * self.d,
             ParamGroup::SignalVar | ParamGroup::ProcessNoise | ParamGroup::ObsNoise => self.e,
         }
     }
@@ -141,11 +169,12 @@ impl<T: Scalar> GpParams<T> {
             && self.log_signal_var.len() == e
             && self.log_process_noise.len() == e
             && self.log_obs_noise.len() == e
+            && self.linear_mean.shape() == (e, d)
             && m > 0
             && e > 0;
         if !ok {
             return Err(MsgpError::Shape(format!(
-                "inconsistent GP parameters: X̄ {}x{}, ȳ {}x{}, log ℓ {}x{}, noise lengths {}/{}/{}",
+                "inconsistent GP parameters: X̄ {}x{}, ȳ {}x{}, log ℓ {}x{}, noise lengths {}/{}/{}, A {}x{}",
                 m,
                 d,
                 self.pseudo_targets.nrows(),
@@ -154,7 +183,9 @@ impl<T: Scalar> GpParams<T> {
                 self.log_lengthscales.ncols(),
                 self.log_signal_var.len(),
                 self.log_process_noise.len(),
-                self.log_obs_noise.len()
+                self.log_obs_noise.len(),
+                self.linear_mean.nrows(),
+                self.linear_mean.ncols()
             )));
         }
         Ok(GpShape { m, d, e })
@@ -175,6 +206,9 @@ impl<T: Scalar> GpParams<T> {
         v.extend(self.log_signal_var.iter().copied());
         v.extend(self.log_process_noise.iter().copied());
         v.extend(self.log_obs_noise.iter().copied());
+        for i in 0..self.linear_mean.nrows() {
+            v.extend(self.linear_mean.row(i).iter().copied());
+        }
         v
     }
 
@@ -196,6 +230,7 @@ impl<T: Scalar> GpParams<T> {
             log_signal_var: DVector::from_column_slice(take(ParamGroup::SignalVar)),
             log_process_noise: DVector::from_column_slice(take(ParamGroup::ProcessNoise)),
             log_obs_noise: DVector::from_column_slice(take(ParamGroup::ObsNoise)),
+            linear_mean: DMatrix::from_row_slice(e, d, take(ParamGroup::LinearMean)),
         })
     }
 
@@ -208,6 +243,7 @@ impl<T: Scalar> GpParams<T> {
             log_signal_var: self.log_signal_var.map(f),
             log_process_noise: self.log_process_noise.map(f),
             log_obs_noise: self.log_obs_noise.map(f),
+            linear_mean: self.linear_mean.map(f),
         }
     }
 }
@@ -240,6 +276,8 @@ pub struct PreparedGp<T: Scalar> {
     pub outputs: Vec<OutputGp<T>>,
     /// Jitter policy used for later factorisations (moment matching).
     pub jitter: JitterPolicy,
+    /// `A` (E × D) of the linear prior mean; `None` for [`MeanFunction::Zero`].
+    pub linear_mean: Option<DMatrix<T>>,
 }
 
 impl<T: Scalar> PreparedGp<T> {
@@ -277,6 +315,7 @@ impl<T: Scalar> PreparedGp<T> {
             pseudo_inputs: params.pseudo_inputs.clone(),
             outputs,
             jitter: config.jitter,
+            linear_mean: (config.mean == MeanFunction::Linear).then(|| params.linear_mean.clone()),
         })
     }
 
@@ -290,13 +329,15 @@ impl<T: Scalar> PreparedGp<T> {
         self.outputs.len()
     }
 
-    /// Predictive mean and variance of the latent `f_a` at a deterministic input (eq. 13).
+    /// Predictive mean and variance of the latent `f_a` at a deterministic input (eq. 13), the
+    /// linear prior mean included.
     pub fn predict(&self, x: &[T]) -> Vec<(T, T)> {
         let m = self.pseudo_inputs.nrows();
         let mut row = vec![T::zero(); x.len()];
         self.outputs
             .iter()
-            .map(|o| {
+            .enumerate()
+            .map(|(a, o)| {
                 let k = DVector::from_iterator(
                     m,
                     (0..m).map(|i| {
@@ -306,7 +347,12 @@ impl<T: Scalar> PreparedGp<T> {
                         crate::kernel::se_ard(x, &row, &o.inv_l2, o.sf2)
                     }),
                 );
-                let mean = k.dot(&o.beta);
+                let mut mean = k.dot(&o.beta);
+                if let Some(lm) = &self.linear_mean {
+                    for (d, xd) in x.iter().enumerate() {
+                        mean += lm[(a, d)] * *xd;
+                    }
+                }
                 let var = o.sf2 - (&o.kinv * &k).dot(&k);
                 (mean, var)
             })

@@ -25,6 +25,7 @@ pub mod kernel;
 pub mod kmeans;
 pub mod linalg;
 pub mod loss;
+pub mod mean_fn;
 pub(crate) mod mm_f64;
 pub mod model;
 pub mod model_file;

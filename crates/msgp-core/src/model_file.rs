@@ -21,7 +21,7 @@ use serde_json::Value;
 use crate::data::Normalizer;
 use crate::error::{MsgpError, Result};
 use crate::fit::{FitReport, FitSettings};
-use crate::gp::{GpConfig, GpParams, PreparedGp};
+use crate::gp::{GpConfig, GpParams, MeanFunction, PreparedGp};
 use crate::linalg::{JitterLog, JitterPolicy};
 use crate::model::{Method, Model};
 use crate::narx::NarxSpec;
@@ -32,7 +32,7 @@ pub const FORMAT: &str = "msgp-model";
 /// Major format version written and read by this build.
 pub const FORMAT_MAJOR: u32 = 1;
 /// Minor format version written by this build (readers accept any minor of their major).
-pub const FORMAT_MINOR: u32 = 0;
+pub const FORMAT_MINOR: u32 = 1;
 
 /// NARX history lengths.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -86,6 +86,10 @@ pub struct GpFile {
     pub noise_floor: f64,
     /// Jitter policy.
     pub jitter: Jitter,
+    /// `E` rows of `D` coefficients of the linear prior mean `m(x̃) = A x̃` (format 1.1);
+    /// absent for the zero mean.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub linear_mean: Option<Vec<Vec<f64>>>,
 }
 
 /// Where the model came from (not needed for predictions).
@@ -318,6 +322,8 @@ impl ModelFile {
                     growth: model.config.jitter.growth,
                     max_relative: model.config.jitter.max_relative,
                 },
+                linear_mean: (model.config.mean == MeanFunction::Linear)
+                    .then(|| rows_of(&p.linear_mean)),
             },
             training: Training {
                 seed: record.settings.seed,
@@ -395,6 +401,10 @@ impl ModelFile {
             log_signal_var: vector(path, "gp.log_signal_var", &g.log_signal_var, dy)?,
             log_process_noise: vector(path, "gp.log_process_noise", &g.log_process_noise, dy)?,
             log_obs_noise: vector(path, "gp.log_obs_noise", &g.log_obs_noise, dy)?,
+            linear_mean: match &g.linear_mean {
+                Some(rows) => matrix(path, "gp.linear_mean", rows, dy, d)?,
+                None => DMatrix::zeros(dy, d),
+            },
         };
         for (what, values) in [
             ("gp.pseudo_inputs", params.pseudo_inputs.as_slice()),
@@ -403,6 +413,7 @@ impl ModelFile {
             ("gp.log_signal_var", params.log_signal_var.as_slice()),
             ("gp.log_process_noise", params.log_process_noise.as_slice()),
             ("gp.log_obs_noise", params.log_obs_noise.as_slice()),
+            ("gp.linear_mean", params.linear_mean.as_slice()),
         ] {
             check_finite(path, what, values)?;
         }
@@ -431,6 +442,11 @@ impl ModelFile {
                     initial_relative: j.initial_relative,
                     growth: j.growth,
                     max_relative: j.max_relative,
+                },
+                mean: if g.linear_mean.is_some() {
+                    MeanFunction::Linear
+                } else {
+                    MeanFunction::Zero
                 },
             },
             normalizer: Normalizer {

@@ -142,7 +142,8 @@ pub struct PolicyProblem<'a> {
 impl PolicyProblem<'_> {
     /// Start state in normalised units: every output lag at `y0` (latent, variance `y0_var`,
     /// fully correlated across lags: the system is at rest), inputs at `u0`, and the policy
-    /// state `[y_{−1} = y0; I = 0]` (deterministic).
+    /// state `[y_{−1}; I = 0]` with `y_{−1}` the observation of the latent start (original
+    /// units, observation noise included, correlated with the window).
     fn start<T: Scalar>(&self, policy_state: usize) -> StartState<T> {
         let spec = self.model.spec;
         let n = &self.model.normalizer;
@@ -163,8 +164,19 @@ impl PolicyProblem<'_> {
                 mean[spec.u_index(k, j)] = c((self.u0[j] - n.u_mean[j]) / n.u_std[j]);
             }
         }
+        // the policy's previous observation: the latent start plus observation noise, correlated
+        // with every output lag of the window (a derivative term then sees measurement noise,
+        // not the whole spread of the start state)
         for j in 0..spec.dy.min(policy_state) {
+            let std = n.y_std[j];
+            let sy2 = self.model.params.log_obs_noise[j].exp() + self.model.config.noise_floor;
             mean[d + j] = c(self.y0_mean[j]);
+            cov[(d + j, d + j)] = c(self.y0_var[j] + sy2 * std * std);
+            for k in 0..spec.ly {
+                let i = spec.y_index(k, j);
+                cov[(d + j, i)] = c(self.y0_var[j] / std);
+                cov[(i, d + j)] = c(self.y0_var[j] / std);
+            }
         }
         StartState { mean, cov }
     }
@@ -283,10 +295,15 @@ pub fn optimise_pid(
         let on = vec![true; z.len()];
         for _ in 0..settings.iterations {
             let g: Vec<f64> = z.iter().zip(&scale).map(|(z, s)| z * s).collect();
-            let (value, grad) = gradient(&g, &active, 1, |gd| {
+            let evaluated = gradient(&g, &active, 1, |gd| {
                 let p = mask.unpack(initial, gd);
                 Ok(problem.evaluate(&p)?.0)
-            })?;
+            });
+            let (value, grad) = match evaluated {
+                // gains whose rollout fails numerically end this start; the best so far stays
+                Err(MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_)) => break,
+                other => other?,
+            };
             if value.is_finite() && best.as_ref().is_none_or(|b| value < b.0) {
                 best = Some((value, g.clone()));
             }

@@ -1,7 +1,8 @@
 //! Free-running moment-matching rollouts over the NARX window (paper section 3.3).
 //!
 //! The state is the joint Gaussian over the whole window `x̃_t` (see [`crate::narx`]). One step:
-//! 1. moment-match the GP at `x̃_t ~ N(μ, Σ)`: `f ~ N(M, S)`, `Cov(x̃_t, f) = C`;
+//! 1. moment-match the GP at `x̃_t ~ N(μ, Σ)`: `f ~ N(M, S)`, `Cov(x̃_t, f) = C` (with the
+//!    linear prior mean, if any: [`crate::mean_fn`]);
 //! 2. `x_{t+1} = f + ε_x`: mean `M`, covariance `S + Σ_x`, `Cov(x̃_t, x_{t+1}) = C`;
 //! 3. the observation `y_{t+1} = x_{t+1} + ε_y ~ N(M, S + Σ_x + Σ_y)` is reported;
 //! 4. the window shifts: `x_{t+1}` enters at lag 0, the oldest output and input lags drop out,
@@ -16,6 +17,7 @@ use nalgebra::{DMatrix, DVector};
 use crate::error::{MsgpError, Result};
 use crate::gp::PreparedGp;
 use crate::linalg::{JitterLog, symmetrize};
+use crate::mean_fn::add_linear_mean;
 use crate::moments::moment_match;
 use crate::narx::NarxSpec;
 use crate::policy::{FeedbackPolicy, PolicyMoments};
@@ -187,7 +189,10 @@ pub fn rollout_from<T: Scalar>(
     for t in t0..horizon {
         let wmu = mu.rows(0, d).into_owned();
         let wsigma = sigma.view((0, 0), (d, d)).into_owned();
-        let mm = moment_match(gp, &wmu, &wsigma, log)?;
+        let mut mm = moment_match(gp, &wmu, &wsigma, log)?;
+        if let Some(a) = &gp.linear_mean {
+            add_linear_mean(a, &wmu, &wsigma, &mut mm);
+        }
         let (xcov, ycov) = noisy_covariances(gp, &mm.cov);
         if mm.mean.iter().any(|v| !v.re().is_finite()) || ycov.iter().any(|v| !v.re().is_finite()) {
             return Err(MsgpError::NonFinite(format!(

@@ -7,7 +7,7 @@ mod common;
 use common::{
     config, linear_feedback_episodes, normal, random_gp, rng, sys4_problem, two_output_trajectory,
 };
-use msgp_core::gp::{GpParams, GpShape, ParamGroup};
+use msgp_core::gp::{GpConfig, GpParams, GpShape, MeanFunction, ParamGroup};
 use msgp_core::grad::{adjoint, dual};
 use msgp_core::linalg::JitterLog;
 use msgp_core::loss::{Complexity, msgp_loss};
@@ -17,19 +17,28 @@ use msgp_core::trajectory::{Episode, Excitation, Trajectory};
 use nalgebra::DMatrix;
 
 fn compare(params: &GpParams<f64>, spec: &NarxSpec, episodes: &[Episode], complexity: Complexity) {
+    compare_with(params, &config(), spec, episodes, complexity);
+}
+
+fn compare_with(
+    params: &GpParams<f64>,
+    cfg: &GpConfig,
+    spec: &NarxSpec,
+    episodes: &[Episode],
+    complexity: Complexity,
+) {
     let shape: GpShape = params.shape().expect("shape");
     let x = params.to_flat();
     let active: Vec<usize> = (0..x.len()).collect();
     let (value, gd) = dual::gradient(&x, &active, 0, |xd| {
         let p = GpParams::from_flat(shape, xd)?;
         let mut log = JitterLog::default();
-        Ok(msgp_loss(&p, &config(), spec, episodes, complexity, &mut log)?.total())
+        Ok(msgp_loss(&p, cfg, spec, episodes, complexity, &mut log)?.total())
     })
     .expect("dual");
     let mut log = JitterLog::default();
-    let (lv, ga) =
-        adjoint::loss_and_gradient(params, &config(), spec, episodes, complexity, &mut log)
-            .expect("adjoint");
+    let (lv, ga) = adjoint::loss_and_gradient(params, cfg, spec, episodes, complexity, &mut log)
+        .expect("adjoint");
     assert!(
         (lv.total() - value).abs() <= 1e-11 * value.abs().max(1.0),
         "values {} vs {value}",
@@ -67,6 +76,34 @@ fn open_loop_single_output() {
     ] {
         compare(&params, &spec, &eps, c);
     }
+}
+
+#[test]
+fn linear_prior_mean_open_and_closed_loop() {
+    let mut r = rng(24);
+    let spec = NarxSpec {
+        ly: 2,
+        lu: 1,
+        dy: 2,
+        du: 1,
+    };
+    let mut params = random_gp(&mut r, 9, spec.input_dim(), 2);
+    // a stable ARX part: mostly the last output, a little of the rest
+    params.linear_mean = DMatrix::from_fn(2, spec.input_dim(), |a, k| {
+        if k == a { 0.8 } else { 0.1 * normal(&mut r) }
+    });
+    let cfg = GpConfig {
+        mean: MeanFunction::Linear,
+        ..config()
+    };
+    let traj = two_output_trajectory(&mut r, 55);
+    compare_with(
+        &params,
+        &cfg,
+        &spec,
+        &linear_feedback_episodes(&traj),
+        Complexity::PseudoDataNll,
+    );
 }
 
 #[test]

@@ -50,6 +50,7 @@ fn closed_loop_expected_cost_matches_monte_carlo() {
         log_signal_var: DVector::from_element(2, 0.0),
         log_process_noise: DVector::from_element(2, (2e-3f64).ln()),
         log_obs_noise: DVector::from_element(2, (1e-3f64).ln()),
+        linear_mean: DMatrix::zeros(2, d),
     };
     let mut log = JitterLog::default();
     let gp = PreparedGp::new(&params, &config(), &mut log).expect("gp");

@@ -11,24 +11,26 @@ mod common;
 use common::{
     config, linear_feedback_episodes, random_gp, rng, sys4_problem, two_output_trajectory,
 };
-use msgp_core::gp::{GpParams, GpShape, ParamGroup};
+use msgp_core::gp::{GpConfig, GpParams, GpShape, MeanFunction, ParamGroup};
 use msgp_core::grad::dual::gradient;
 use msgp_core::linalg::JitterLog;
 use msgp_core::loss::{Complexity, msgp_loss};
 use msgp_core::narx::NarxSpec;
 use msgp_core::scalar::Scalar;
 use msgp_core::trajectory::Episode;
+use nalgebra::DMatrix;
 
 fn loss_at<T: Scalar>(
     shape: GpShape,
     flat: &[T],
+    cfg: &GpConfig,
     spec: &NarxSpec,
     episodes: &[Episode],
     complexity: Complexity,
 ) -> msgp_core::Result<T> {
     let params = GpParams::from_flat(shape, flat)?;
     let mut log = JitterLog::default();
-    Ok(msgp_loss(&params, &config(), spec, episodes, complexity, &mut log)?.total())
+    Ok(msgp_loss(&params, cfg, spec, episodes, complexity, &mut log)?.total())
 }
 
 fn fd(f: &dyn Fn(&[f64]) -> f64, x: &[f64], i: usize, h: f64) -> f64 {
@@ -40,8 +42,30 @@ fn fd(f: &dyn Fn(&[f64]) -> f64, x: &[f64], i: usize, h: f64) -> f64 {
     (8.0 * (at(h) - at(-h)) - (at(2.0 * h) - at(-2.0 * h))) / (12.0 * h)
 }
 
+/// Checks every group under the zero prior mean (where `A` must have an exactly zero gradient)
+/// and again with a linear prior mean `A` (small random entries).
 fn check_gradients(
     params: &GpParams<f64>,
+    spec: &NarxSpec,
+    episodes: &[Episode],
+    complexity: Complexity,
+) {
+    check_gradients_with(params, &config(), spec, episodes, complexity);
+    let mut with_mean = params.clone();
+    let (e, d) = with_mean.linear_mean.shape();
+    with_mean.linear_mean = DMatrix::from_fn(e, d, |a, k| {
+        0.05 * ((3 * a + 7 * k) as f64).sin() + if a == k { 0.5 } else { 0.0 }
+    });
+    let cfg = GpConfig {
+        mean: MeanFunction::Linear,
+        ..config()
+    };
+    check_gradients_with(&with_mean, &cfg, spec, episodes, complexity);
+}
+
+fn check_gradients_with(
+    params: &GpParams<f64>,
+    cfg: &GpConfig,
     spec: &NarxSpec,
     episodes: &[Episode],
     complexity: Complexity,
@@ -50,17 +74,24 @@ fn check_gradients(
     let x = params.to_flat();
     let active: Vec<usize> = (0..x.len()).collect();
     let (value, grad) = gradient(&x, &active, 0, |xd| {
-        loss_at(shape, xd, spec, episodes, complexity)
+        loss_at(shape, xd, cfg, spec, episodes, complexity)
     })
     .expect("dual gradient");
-    let f64_value = loss_at(shape, &x, spec, episodes, complexity).expect("f64 loss");
+    let f64_value = loss_at(shape, &x, cfg, spec, episodes, complexity).expect("f64 loss");
     assert!(
         (value - f64_value).abs() <= 1e-14 * f64_value.abs().max(1.0),
         "dual real part {value:e} vs f64 {f64_value:e}"
     );
-    let f = |y: &[f64]| loss_at(shape, y, spec, episodes, complexity).expect("loss");
+    let f = |y: &[f64]| loss_at(shape, y, cfg, spec, episodes, complexity).expect("loss");
     for group in ParamGroup::ALL {
         let range = shape.group_range(group);
+        if group == ParamGroup::LinearMean && cfg.mean == MeanFunction::Zero {
+            assert!(
+                grad[range].iter().all(|g| *g == 0.0),
+                "A has a gradient under the zero mean"
+            );
+            continue;
+        }
         let gd: Vec<f64> = grad[range.clone()].to_vec();
         let gf: Vec<f64> = range.clone().map(|i| fd(&f, &x, i, 1e-3)).collect();
         let scale = gf.iter().fold(0.0f64, |m, v| m.max(v.abs()));

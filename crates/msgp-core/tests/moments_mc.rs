@@ -9,8 +9,9 @@
 mod common;
 
 use common::{config, normal, random_cov, random_gp, rng};
-use msgp_core::gp::PreparedGp;
+use msgp_core::gp::{MeanFunction, PreparedGp};
 use msgp_core::linalg::{JitterLog, JitterPolicy, cholesky};
+use msgp_core::mean_fn::add_linear_mean;
 use msgp_core::moments::moment_match;
 use nalgebra::{DMatrix, DVector};
 
@@ -45,10 +46,22 @@ impl Check {
 }
 
 fn check_case(seed: u64, m: usize, d: usize, e: usize, input_scale: f64) {
+    check_case_with(seed, m, d, e, input_scale, false);
+}
+
+/// With `linear`, the GP has a random linear prior mean `A x̃` and the moments are
+/// `moment_match` followed by `add_linear_mean`; the reference samples `gp.predict`, which
+/// includes `A x̃`.
+fn check_case_with(seed: u64, m: usize, d: usize, e: usize, input_scale: f64, linear: bool) {
     let mut r = rng(seed);
-    let params = random_gp(&mut r, m, d, e);
+    let mut params = random_gp(&mut r, m, d, e);
+    let mut cfg = config();
+    if linear {
+        params.linear_mean = DMatrix::from_fn(e, d, |_, _| normal(&mut r));
+        cfg.mean = MeanFunction::Linear;
+    }
     let mut log = JitterLog::default();
-    let gp = PreparedGp::new(&params, &config(), &mut log).expect("prepare");
+    let gp = PreparedGp::new(&params, &cfg, &mut log).expect("prepare");
     let mu = DVector::from_fn(d, |_, _| 0.5 * normal(&mut r));
     let mut sigma = random_cov(&mut r, d, input_scale);
     // a deterministic input component, as in open-loop rollouts
@@ -58,7 +71,16 @@ fn check_case(seed: u64, m: usize, d: usize, e: usize, input_scale: f64) {
             sigma[(k, d - 1)] = 0.0;
         }
     }
-    let mm = moment_match(&gp, &mu, &sigma, &mut log).expect("moment match");
+    let mut mm = moment_match(&gp, &mu, &sigma, &mut log).expect("moment match");
+    if let Some(a) = &gp.linear_mean {
+        add_linear_mean(a, &mu, &sigma, &mut mm);
+        // V = Σ⁻¹ Cov[x̃, f] must stay consistent with the input–output covariance
+        let err = (&sigma * &mm.v - &mm.io_cov).abs().max();
+        assert!(
+            err <= 1e-10 * mm.io_cov.abs().max().max(1.0),
+            "Σ V ≠ Cov[x̃, f]: {err:e}"
+        );
+    }
 
     let chol = cholesky(
         &sigma,
@@ -132,6 +154,12 @@ fn one_output_matches_monte_carlo() {
 fn several_outputs_with_cross_covariances_match_monte_carlo() {
     check_case(3, 12, 3, 2, 0.5);
     check_case(4, 10, 4, 3, 0.8);
+}
+
+#[test]
+fn linear_prior_mean_matches_monte_carlo() {
+    check_case_with(6, 12, 4, 1, 0.6, true);
+    check_case_with(7, 10, 4, 2, 0.8, true);
 }
 
 #[test]

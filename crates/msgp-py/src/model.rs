@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use msgp_core::fit::{FitOptions, FitReport, FitSettings, fit};
+use msgp_core::gp::MeanFunction;
 use msgp_core::model::{Method, Metrics, Model, pool, score};
 use msgp_core::model_file::{FitRecord, ModelFile};
 use msgp_core::trajectory::Trajectory;
@@ -118,6 +119,7 @@ impl Msgp {
                 inducing: Some(model.params.pseudo_inputs.nrows()),
                 iterations,
                 seed: file.training.seed,
+                mean: model.config.mean,
             },
             overrides: None,
             fitted: Some(Arc::new(Fitted {
@@ -268,6 +270,7 @@ impl Msgp {
             inducing,
             iterations,
             seed,
+            mean: MeanFunction::Zero,
         };
         let overrides = match settings.filter(|s| !s.is_none()) {
             None => None,
@@ -497,7 +500,8 @@ impl Msgp {
 
     /// The fitted parameters as numpy arrays, named as in the model file (normalised units):
     /// `pseudo_inputs` (m, D), `pseudo_targets` (m, d_y), `log_lengthscales` (d_y, D),
-    /// `log_signal_var`, `log_process_noise`, `log_obs_noise` (d_y,), `u_mean`, `u_std` (d_u,),
+    /// `log_signal_var`, `log_process_noise`, `log_obs_noise` (d_y,), `linear_mean` (d_y, D;
+    /// zero unless fitted with `settings={"mean": "linear"}`), `u_mean`, `u_std` (d_u,),
     /// `y_mean`, `y_std` (d_y,), and the float `noise_floor`.
     #[getter]
     fn params<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
@@ -514,6 +518,7 @@ impl Msgp {
             array1(py, p.log_process_noise.as_slice()),
         )?;
         d.set_item("log_obs_noise", array1(py, p.log_obs_noise.as_slice()))?;
+        d.set_item("linear_mean", array2(py, &p.linear_mean))?;
         d.set_item("u_mean", array1(py, &n.u_mean))?;
         d.set_item("u_std", array1(py, &n.u_std))?;
         d.set_item("y_mean", array1(py, &n.y_mean))?;

@@ -65,6 +65,42 @@ def test_reference_prediction_matches_numpy_gp(fitted):
     assert abs(var - ref["var"][0]) < 1e-9
 
 
+def test_linear_prior_mean_is_in_params_file_and_prediction(tmp_path):
+    """`settings={"mean": "linear"}`: A in `params` and the file, and eq. (13) plus A x̃ in numpy."""
+    data = msgp.synthetic_system(3, seed=3)
+    model = msgp.Msgp(history=data["history"], method="gp-narx", inducing=30, iterations=40, seed=1,
+                      settings={"mean": "linear"}).fit(data["u_train"], data["y_train"])
+    p, ref = model.params, model.reference
+    A = p["linear_mean"]
+    assert A.shape == (1, 2) and np.all(A != 0.0)
+    X, ybar = p["pseudo_inputs"], p["pseudo_targets"][:, 0]
+    ell = np.exp(p["log_lengthscales"][0])
+    sf2 = math.exp(p["log_signal_var"][0])
+    sx2 = p["noise_floor"] + math.exp(p["log_process_noise"][0])
+
+    def k(a, b):
+        d = (a[:, None, :] - b[None, :, :]) / ell
+        return sf2 * np.exp(-0.5 * np.sum(d * d, axis=2))
+
+    Kt = k(X, X) + sx2 * np.eye(len(X))
+    kx = k(X, ref["window"][None, :])[:, 0]
+    mean = kx @ np.linalg.solve(Kt, ybar) + A[0] @ ref["window"]
+    assert abs(mean - ref["mean"][0]) < 1e-9
+    path = tmp_path / "lin.json"
+    model.save(path)
+    doc = json.loads(path.read_text())
+    assert np.array_equal(np.array(doc["gp"]["linear_mean"]), A)
+    loaded = msgp.Msgp.load(str(path))
+    a = model.simulate(data["u_test"], data["y_test"])
+    b = loaded.simulate(data["u_test"], data["y_test"])
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    # without the mean the file has no such field
+    plain = msgp.Msgp(history=data["history"], method="gp-narx", inducing=30, iterations=5, seed=1)
+    plain.fit(data["u_train"], data["y_train"]).save(tmp_path / "plain.json")
+    assert "linear_mean" not in json.loads((tmp_path / "plain.json").read_text())["gp"]
+    assert np.all(plain.params["linear_mean"] == 0.0)
+
+
 def test_score_matches_numpy_metrics_of_simulate(fitted):
     """RMSE, NLL and coverage recomputed in numpy from `simulate`'s mean and variance."""
     model, data = fitted
@@ -106,7 +142,7 @@ def test_save_load_round_trip_is_exact(fitted, tmp_path):
     assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
     assert model.score(data["u_test"], data["y_test"]) == loaded.score(data["u_test"], data["y_test"])
     doc = json.loads(path.read_text())
-    assert doc["format"] == "msgp-model" and doc["format_version"] == "1.0"
+    assert doc["format"] == "msgp-model" and doc["format_version"] == "1.1"
     assert msgp.Msgp.from_json(model.to_json()).to_json() == model.to_json()
 
 

@@ -17,6 +17,7 @@ use serde::{Deserialize, Serialize};
 
 use msgp_core::cost::SaturatingCost;
 use msgp_core::fit::{FitSettings, TrainingEpisode, fit_episodes};
+use msgp_core::gp::MeanFunction;
 use msgp_core::model::Method;
 use msgp_core::policy::{PidPolicy, PolicySpec};
 use msgp_core::policy_search::{PidMask, PolicyProblem, PolicySearchSettings, optimise_pid};
@@ -39,6 +40,13 @@ pub struct LearnSettings {
     pub iterations: usize,
     /// Random-excitation episodes before the first policy.
     pub random_rollouts: usize,
+    /// The smooth random signal of those episodes. Its band reaches 10 Hz: a NARX model at
+    /// 50 Hz only learns how the pole answers quick changes of the command (the inputs' lags
+    /// differ) if the first data have them, and every feedback policy makes them (its
+    /// derivative term passes on measurement noise). With 0.1–2 Hz the input lags are nearly
+    /// collinear and a fitted model may weight their differences arbitrarily (docs/design.md).
+    #[serde(default = "learn_excitation")]
+    pub excitation: ExcitationConfig,
     /// Length of every interaction episode \[s\].
     pub episode_seconds: f64,
     /// Horizon of the predicted rollouts the gains are optimised on \[s\]. Longer than an
@@ -70,6 +78,7 @@ impl Default for LearnSettings {
             method: Method::Msgp,
             iterations: 8,
             random_rollouts: 4,
+            excitation: learn_excitation(),
             episode_seconds: 3.0,
             policy_horizon_seconds: 5.0,
             seed: 0,
@@ -80,6 +89,7 @@ impl Default for LearnSettings {
                 iterations: 300,
                 learning_rate: 0.01,
                 validation_fraction: 0.0,
+                mean: MeanFunction::Zero,
                 ..FitSettings::default()
             },
             search: PolicySearchSettings {
@@ -96,6 +106,16 @@ impl Default for LearnSettings {
             ff_segment: Some(30),
             gain_scale: [1.0, 0.3, 1.0, 10.0, 2.0],
         }
+    }
+}
+
+/// The excitation of the random rollouts: 20 sines in 0.1–10 Hz, 1 m/s² RMS.
+pub fn learn_excitation() -> ExcitationConfig {
+    ExcitationConfig {
+        components: 20,
+        min_hz: 0.1,
+        max_hz: 10.0,
+        rms: 1.0,
     }
 }
 
@@ -121,6 +141,14 @@ pub struct IterationReport {
     /// Wall-clock seconds of the policy optimisation.
     #[serde(default)]
     pub search_seconds: f64,
+    /// Why the model fit stopped early, when a training step failed numerically (the fit then
+    /// keeps the last parameters that evaluated).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fit_numerical_stop: Option<String>,
+    /// Set when every policy-search start diverged on the model: the previous gains ran again
+    /// and the predicted cost is the episode's maximum (every step 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub search_failure: Option<String>,
     /// The gains run in this iteration.
     pub gains: PidPdGains,
 }
@@ -254,7 +282,7 @@ pub fn learn_policy(
     let mut seconds = 0.0;
     for k in 0..settings.random_rollouts {
         let seed = settings.seed.wrapping_mul(1000).wrapping_add(k as u64);
-        let mut excitation = RandomExcitation::new(seed, &ExcitationConfig::default())?;
+        let mut excitation = RandomExcitation::new(seed, &settings.excitation)?;
         let ep = interact(
             params,
             &mut excitation,
@@ -312,7 +340,7 @@ pub fn learn_policy(
             ..settings.fit.clone()
         };
         let clock = std::time::Instant::now();
-        let (model, _) = fit_episodes(&training, &fit_settings, &mut |_| {})?;
+        let (model, fit_report) = fit_episodes(&training, &fit_settings, &mut |_| {})?;
         let fit_seconds = clock.elapsed().as_secs_f64();
         let problem = PolicyProblem {
             model: &model,
@@ -331,13 +359,26 @@ pub fn learn_policy(
             ..settings.search
         };
         let clock = std::time::Instant::now();
-        let result = optimise_pid(&problem, &modelled_policy(&gains, params)?, &mask, &search)?;
+        let searched = optimise_pid(&problem, &modelled_policy(&gains, params)?, &mask, &search);
         let search_seconds = clock.elapsed().as_secs_f64();
-        gains = gains_from(&result.policy);
-        // reported over the episode's length, comparable with the cost measured on the system
-        let episode_steps = &result.steps[..horizon.min(result.steps.len())];
-        let predicted: f64 = episode_steps.iter().map(|(m, _)| m).sum();
-        let var: f64 = episode_steps.iter().map(|(_, v)| v).sum();
+        let (predicted, var, search_failure) = match searched {
+            Ok(result) => {
+                gains = gains_from(&result.policy);
+                // reported over the episode's length, comparable with the cost measured on the
+                // system
+                let episode_steps = &result.steps[..horizon.min(result.steps.len())];
+                let predicted: f64 = episode_steps.iter().map(|(m, _)| m).sum();
+                let var: f64 = episode_steps.iter().map(|(_, v)| v).sum();
+                (predicted, var, None)
+            }
+            // the model's rollouts diverge for every start: it predicts failure whatever the
+            // gains (every step costs 1); the gains stay and the episode adds data
+            Err(
+                e @ (msgp_core::MsgpError::NonFinite(_)
+                | msgp_core::MsgpError::NotPositiveDefinite { .. }),
+            ) => (horizon as f64, 0.0, Some(e.to_string())),
+            Err(e) => return Err(e.into()),
+        };
 
         let seed = settings
             .seed
@@ -369,6 +410,8 @@ pub fn learn_policy(
             stable,
             fit_seconds,
             search_seconds,
+            fit_numerical_stop: fit_report.numerical_stop,
+            search_failure,
             gains,
         };
         progress(&report);

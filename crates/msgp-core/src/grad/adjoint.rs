@@ -20,7 +20,9 @@ use crate::grad::dual::{Dual, gradient};
 use crate::kernel::kernel_matrix;
 use crate::linalg::{JitterLog, cholesky, symmetrize};
 use crate::loss::{Complexity, LossValue, complexity_term, gaussian_nll};
+use crate::mean_fn::{add_linear_mean, linear_mean_backward};
 use crate::mm_f64::{MmState, q_block};
+use crate::moments::Moments;
 use crate::narx::NarxSpec;
 use crate::policy::{FeedbackPolicy, PolicyMoments, PolicySpec};
 use crate::rollout::{Layout, gather, initial_window, noisy_covariances};
@@ -39,6 +41,7 @@ struct GpAdjoint {
     sf2: Vec<f64>,
     sx2: Vec<f64>,
     sy2: Vec<f64>,
+    lin: DMatrix<f64>, // E × D (linear prior mean)
 }
 
 impl GpAdjoint {
@@ -53,8 +56,10 @@ impl GpAdjoint {
             sf2,
             sx2,
             sy2,
+            lin,
         } = o;
         self.xbar += xbar;
+        self.lin += lin;
         for (a, b) in self.beta.iter_mut().zip(beta) {
             *a += b;
         }
@@ -82,6 +87,7 @@ impl GpAdjoint {
             sf2: vec![0.0; e],
             sx2: vec![0.0; e],
             sy2: vec![0.0; e],
+            lin: DMatrix::zeros(e, d),
         }
     }
 }
@@ -480,6 +486,9 @@ struct StepRecord {
     ycov: DMatrix<f64>,
     resid: DVector<f64>,
     v: DMatrix<f64>,
+    /// The GP's own `V` (without the linear mean) and the window mean.
+    v_gp: DMatrix<f64>,
+    wmu: DVector<f64>,
     /// Closed loop: policy input moments, the policy's output, and `Cov(z, q)`.
     policy: Option<PolicyRecord>,
 }
@@ -562,25 +571,40 @@ fn episode_adjoint(
     let mut nll_log = JitterLog::default();
     for t in t0..horizon {
         let wsig = sigma.view((0, 0), (d, d)).into_owned();
+        let wmu = mu.rows(0, d).into_owned();
         let mut mm = MmState::default();
-        mm.forward(gp, &mu.rows(0, d).into_owned(), &wsig, log)?;
-        let (xcov, ycov) = noisy_covariances(gp, &mm.cov);
+        mm.forward(gp, &wmu, &wsig, log)?;
+        let v_gp = DMatrix::from_fn(d, dy, |k, a| mm.outs[a].acc[k]);
+        // the moments of f = A x̃ + g (the GP's own stay in the cache for the backward pass)
+        let (mut fmean, mut fcov, mut v) = (mm.mean.clone(), mm.cov.clone(), v_gp.clone());
+        if let Some(a) = &gp.linear_mean {
+            let mut mom = Moments {
+                mean: mm.mean.clone(),
+                cov: mm.cov.clone(),
+                io_cov: DMatrix::zeros(d, dy),
+                v: v_gp.clone(),
+            };
+            add_linear_mean(a, &wmu, &wsig, &mut mom);
+            (fmean, fcov, v) = (mom.mean, mom.cov, mom.v);
+        }
+        let (xcov, ycov) = noisy_covariances(gp, &fcov);
         let yrow: Vec<f64> = (0..dy).map(|j| traj.y[(t, j)]).collect();
-        nll += gaussian_nll(&yrow, &mm.mean, &ycov, &gp.jitter, &mut nll_log)?;
+        nll += gaussian_nll(&yrow, &fmean, &ycov, &gp.jitter, &mut nll_log)?;
         if !nll.is_finite() {
             return Err(MsgpError::NonFinite(format!(
                 "trajectory likelihood at step {t}"
             )));
         }
-        let v = DMatrix::from_fn(d, dy, |k, a| mm.outs[a].acc[k]);
-        let resid = DVector::from_fn(dy, |j, _| yrow[j] - mm.mean[j]);
-        let mean = mm.mean.clone();
+        let resid = DVector::from_fn(dy, |j, _| yrow[j] - fmean[j]);
+        let mean = fmean;
         let mut rec = StepRecord {
             sigma: sigma.clone(),
             cache: mm,
             ycov: ycov.clone(),
             resid,
             v: v.clone(),
+            v_gp,
+            wmu,
             policy: None,
         };
         if t + 1 < horizon {
@@ -690,6 +714,15 @@ fn episode_adjoint(
             adj.sx2[j] += xcovbar[(j, j)];
         }
         let wsig = rec.sigma.view((0, 0), (d, d)).into_owned();
+        if let Some(a) = &gp.linear_mean {
+            let lb = linear_mean_backward(a, &rec.wmu, &wsig, &rec.v_gp, &mbar, &xcovbar, &vbar);
+            adj.lin += &lb.a;
+            for k in 0..d {
+                mubar[k] += lb.mu[k];
+            }
+            add_block(&mut sigmabar, (0, 0), &lb.sigma);
+            vbar = lb.v;
+        }
         let (mub, sigb) = mm_backward(
             gp, &wsig, &rec.cache, &mbar, &xcovbar, &vbar, adj, &mut work,
         );
@@ -937,6 +970,14 @@ pub fn loss_and_gradient_with_threads(
             sx2_bar[a] * (o.sx2 - config.noise_floor);
         grad[shape.group_range(ParamGroup::ObsNoise).start + a] =
             adj.sy2[a] * (o.sy2 - config.noise_floor);
+    }
+    if gp.linear_mean.is_some() {
+        let r = shape.group_range(ParamGroup::LinearMean);
+        for a in 0..e {
+            for dd in 0..d {
+                grad[r.start + a * d + dd] = adj.lin[(a, dd)];
+            }
+        }
     }
     Ok((
         LossValue {

@@ -23,6 +23,7 @@ pub fn random_gp(rng: &mut StdRng, m: usize, d: usize, e: usize) -> GpParams<f64
         log_signal_var: DVector::from_fn(e, |_, _| rng.random_range(-0.5..0.5)),
         log_process_noise: DVector::from_fn(e, |_, _| rng.random_range(-4.0..-2.0)),
         log_obs_noise: DVector::from_fn(e, |_, _| rng.random_range(-5.0..-3.0)),
+        linear_mean: DMatrix::zeros(e, d),
     }
 }
 

@@ -98,7 +98,8 @@ class Msgp:
     @property
     def params(self) -> Dict[str, Union[Array, float]]:
         """pseudo_inputs, pseudo_targets, log_lengthscales, log_signal_var,
-        log_process_noise, log_obs_noise, u_mean, u_std, y_mean, y_std (arrays) and
+        log_process_noise, log_obs_noise, linear_mean (zero unless fitted with
+        settings={"mean": "linear"}), u_mean, u_std, y_mean, y_std (arrays) and
         noise_floor (float); names and units as in the model file."""
     @property
     def training(self) -> Dict[str, Any]: ...
