@@ -2,11 +2,13 @@
 
 Subcommands (run through run.sh, which builds the Rust tool, sets XLA_FLAGS and pins the CPU):
 
-  compare [--rounds R] [--reps N] [--configs d4,d20]
+  compare [--rounds R] [--reps N] [--configs d4,d20] [--baseline BIN]
       For each configuration: `msgp_perf dump` writes the problem and our loss/gradient; JAX
       recomputes both (loss must agree to 1e-8 relative); then R rounds, each running the Rust
       timing process (N reps of loss, N of value+gradient) followed by N JAX reps of each, so both
-      sides see the same machine load. Ratios are taken per round and summarised.
+      sides see the same machine load. Ratios are taken per round and summarised. With
+      --baseline, each round first times a second `msgp_perf` build (e.g. of an older commit)
+      the same way, for before/after ratios from the same rounds.
   scaling [--reps N] [--rounds R]
       Loss and gradient time, Rust and JAX, as T, m and D vary; each measurement is a separate
       process under `/usr/bin/time -v` so its peak RSS is its own. R rounds over all sizes,
@@ -166,6 +168,9 @@ def cmd_compare(a):
         rounds = []
         for r in range(a.rounds):
             load0 = load_avg()
+            base = None
+            if a.baseline:
+                base, _ = rust_time(a.baseline, d, m, t, "loss,grad", a.reps)
             rust, _ = rust_time(a.bin, d, m, t, "loss,grad", a.reps)
             jl = jx.time("loss", a.reps)
             jg = jx.time("grad", a.reps)
@@ -179,6 +184,9 @@ def cmd_compare(a):
                     "jax_grad": jg,
                 }
             )
+            if base is not None:
+                rounds[-1]["base_loss"] = {k: base["loss"][k] for k in ("wall_ms", "cpu_ms")}
+                rounds[-1]["base_grad"] = {k: base["grad"][k] for k in ("wall_ms", "cpu_ms")}
             print(
                 f"{name} round {r}: load {load0} rust loss {min(rust['loss']['wall_ms']):.1f} "
                 f"grad {min(rust['grad']['wall_ms']):.1f} | jax loss {min(jl['wall_ms']):.1f} "
@@ -195,7 +203,8 @@ def cmd_compare(a):
             "rounds": rounds,
         }
         stats = {}
-        for k in ("rust_loss", "rust_grad", "jax_loss", "jax_grad"):
+        sides = ["rust", "jax"] + (["base"] if a.baseline else [])
+        for k in [f"{x}_{op}" for x in sides for op in ("loss", "grad")]:
             for clock in ("wall_ms", "cpu_ms"):
                 allv = [x for r in rounds for x in r[k][clock]]
                 stats[f"{k}_{clock}"] = summary(allv)
@@ -209,7 +218,18 @@ def cmd_compare(a):
                     "per_round_min_ratio": per_round,
                     "median": statistics.median(per_round),
                 }
-        for side in ("rust", "jax"):
+        if a.baseline:
+            for op in ("loss", "grad"):
+                for num, den in (("rust", "base"), ("base", "jax")):
+                    per_round = [
+                        min(r[f"{num}_{op}"]["cpu_ms"]) / min(r[f"{den}_{op}"]["cpu_ms"])
+                        for r in rounds
+                    ]
+                    ratios[f"{num}_over_{den}_{op}_cpu_ms"] = {
+                        "per_round_min_ratio": per_round,
+                        "median": statistics.median(per_round),
+                    }
+        for side in sides:
             per_round = [
                 min(r[f"{side}_grad"]["cpu_ms"]) / min(r[f"{side}_loss"]["cpu_ms"]) for r in rounds
             ]
@@ -262,6 +282,15 @@ def print_compare(report):
             f"gradient/loss: Rust {r['rust_grad_over_loss_cpu']:.2f}, "
             f"JAX {r['jax_grad_over_loss_cpu']:.2f}"
         )
+        if "base_loss_cpu_ms" in s:
+            for op in ("loss", "grad"):
+                nb = r[f"rust_over_base_{op}_cpu_ms"]
+                bj = r[f"base_over_jax_{op}_cpu_ms"]
+                print(
+                    f"baseline {op}: CPU min {s[f'base_{op}_cpu_ms']['min']:.1f} ms; new/baseline "
+                    f"{nb['median']:.2f} ({min(nb['per_round_min_ratio']):.2f}–"
+                    f"{max(nb['per_round_min_ratio']):.2f}); baseline/JAX {bj['median']:.2f}"
+                )
 
 
 SCALING = (
@@ -376,6 +405,7 @@ def main():
     c.add_argument("--rounds", type=int, default=5)
     c.add_argument("--reps", type=int, default=5)
     c.add_argument("--configs", default="d4,d20")
+    c.add_argument("--baseline", default=None, help="a second msgp_perf binary to time per round")
     s = sub.add_parser("scaling")
     s.add_argument("--bin", required=True)
     s.add_argument("--reps", type=int, default=5)

@@ -26,6 +26,7 @@ pub mod kmeans;
 pub mod linalg;
 pub mod loss;
 pub mod mean_fn;
+pub(crate) mod mm_f64;
 pub mod model;
 pub mod model_file;
 pub mod moments;
@@ -37,6 +38,7 @@ pub mod policy_search;
 pub mod rollout;
 pub mod saturation;
 pub mod scalar;
+mod simd;
 pub mod trajectory;
 
 pub use error::{MsgpError, Result};

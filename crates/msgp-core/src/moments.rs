@@ -47,8 +47,21 @@ fn scaled_plus_identity<T: Scalar>(sigma: &DMatrix<T>, p: &[T]) -> DMatrix<T> {
     s
 }
 
-/// Propagates `N(mu, sigma)` through the GP (see the module docs).
+/// Propagates `N(mu, sigma)` through the GP (see the module docs). Dispatches through
+/// [`Scalar::moment_match`]: the vectorised f64 kernel for `f64`, the generic code
+/// ([`moment_match_generic`]) for dual numbers.
 pub fn moment_match<T: Scalar>(
+    gp: &PreparedGp<T>,
+    mu: &DVector<T>,
+    sigma: &DMatrix<T>,
+    log: &mut JitterLog,
+) -> Result<Moments<T>> {
+    T::moment_match(gp, mu, sigma, log)
+}
+
+/// The generic implementation of [`moment_match`], for every [`Scalar`]: the reference the f64
+/// kernel is tested against, and what forward-mode duals run.
+pub fn moment_match_generic<T: Scalar>(
     gp: &PreparedGp<T>,
     mu: &DVector<T>,
     sigma: &DMatrix<T>,

@@ -5,8 +5,13 @@
 //! ([`num_dual::DualSVec64`]), which carry `N` directional derivatives at once; the real part of
 //! a dual run is the f64 run (the same operations in the same order).
 
-use nalgebra::RealField;
+use nalgebra::{DMatrix, DVector, RealField};
 use num_dual::DualSVec64;
+
+use crate::error::Result;
+use crate::gp::PreparedGp;
+use crate::linalg::JitterLog;
+use crate::moments::Moments;
 
 /// A real scalar the numerics can run on: `f64` or a forward-mode dual number.
 pub trait Scalar: RealField + Copy + Send + Sync {
@@ -14,6 +19,19 @@ pub trait Scalar: RealField + Copy + Send + Sync {
     fn lift(v: f64) -> Self;
     /// The real (value) part.
     fn re(&self) -> f64;
+
+    /// Moment matching of `N(mu, sigma)` through `gp` ([`crate::moments::moment_match`]).
+    /// The default is the generic reference implementation
+    /// ([`crate::moments::moment_match_generic`]); `f64` overrides it with a vectorised kernel
+    /// that computes the same quantities (equal to rounding).
+    fn moment_match(
+        gp: &PreparedGp<Self>,
+        mu: &DVector<Self>,
+        sigma: &DMatrix<Self>,
+        log: &mut JitterLog,
+    ) -> Result<Moments<Self>> {
+        crate::moments::moment_match_generic(gp, mu, sigma, log)
+    }
 }
 
 impl Scalar for f64 {
@@ -24,6 +42,14 @@ impl Scalar for f64 {
     #[inline]
     fn re(&self) -> f64 {
         *self
+    }
+    fn moment_match(
+        gp: &PreparedGp<f64>,
+        mu: &DVector<f64>,
+        sigma: &DMatrix<f64>,
+        log: &mut JitterLog,
+    ) -> Result<Moments<f64>> {
+        crate::mm_f64::moment_match_f64(gp, mu, sigma, log)
     }
 }
 

@@ -172,3 +172,40 @@ fn closed_loop_with_saturated_pid_policies() {
     ];
     compare(&params, &spec, &eps, Complexity::PseudoDataNll);
 }
+
+#[test]
+fn gradient_is_bit_identical_for_any_thread_count() {
+    let spec = NarxSpec::siso(2, 2);
+    let mut r = rng(31);
+    let (params, traj) = sys4_problem(&mut r, 31, 12, &spec, 90);
+    let eps: Vec<Episode> = (0..5)
+        .map(|k| Episode::feed_forward(traj.slice(3 * k, 60 + 5 * k)))
+        .collect();
+    let run = |threads: usize| {
+        let mut log = JitterLog::default();
+        adjoint::loss_and_gradient_with_threads(
+            &params,
+            &config(),
+            &spec,
+            &eps,
+            Complexity::PseudoDataNll,
+            threads,
+            &mut log,
+        )
+        .expect("adjoint")
+    };
+    let (v1, g1) = run(1);
+    for threads in [2, 3, 8] {
+        let (v, g) = run(threads);
+        assert_eq!(
+            v.total().to_bits(),
+            v1.total().to_bits(),
+            "{threads} threads"
+        );
+        assert_eq!(v.steps, v1.steps);
+        assert!(
+            g.iter().zip(&g1).all(|(a, b)| a.to_bits() == b.to_bits()),
+            "{threads} threads: gradient differs"
+        );
+    }
+}

@@ -21,10 +21,15 @@ use crate::kernel::kernel_matrix;
 use crate::linalg::{JitterLog, cholesky, symmetrize};
 use crate::loss::{Complexity, LossValue, complexity_term, gaussian_nll};
 use crate::mean_fn::{add_linear_mean, linear_mean_backward};
+use crate::mm_f64::{MmState, q_block};
 use crate::moments::Moments;
 use crate::narx::NarxSpec;
 use crate::policy::{FeedbackPolicy, PolicyMoments, PolicySpec};
 use crate::rollout::{Layout, gather, initial_window, noisy_covariances};
+use crate::simd::{
+    Kernel, axpy, chol_inverse, dispatch, dot, gemm_rows, gram_add, solve_lower_rows,
+    solve_upper_rows, sum,
+};
 use crate::trajectory::{Episode, Excitation, Trajectory};
 
 /// Adjoint accumulators for the quantities the rollout reads from the prepared GP.
@@ -40,6 +45,39 @@ struct GpAdjoint {
 }
 
 impl GpAdjoint {
+    /// `self += o`, field by field (the destructuring is exhaustive: a new field must be added
+    /// here, or the per-episode sums would drop it).
+    fn add(&mut self, o: &GpAdjoint) {
+        let GpAdjoint {
+            xbar,
+            beta,
+            kinv,
+            inv_l2,
+            sf2,
+            sx2,
+            sy2,
+            lin,
+        } = o;
+        self.xbar += xbar;
+        self.lin += lin;
+        for (a, b) in self.beta.iter_mut().zip(beta) {
+            *a += b;
+        }
+        for (a, b) in self.kinv.iter_mut().zip(kinv) {
+            *a += b;
+        }
+        self.inv_l2 += inv_l2;
+        for (a, b) in [
+            (&mut self.sf2, sf2),
+            (&mut self.sx2, sx2),
+            (&mut self.sy2, sy2),
+        ] {
+            for (x, y) in a.iter_mut().zip(b) {
+                *x += y;
+            }
+        }
+    }
+
     fn zeros(m: usize, d: usize, e: usize) -> Self {
         Self {
             xbar: DMatrix::zeros(m, d),
@@ -54,152 +92,27 @@ impl GpAdjoint {
     }
 }
 
-struct OutCache {
-    s: Vec<f64>,
-    shat_inv: DMatrix<f64>,
-    nut: DMatrix<f64>, // D × m
-    w: DMatrix<f64>,   // D × m
-    q: DVector<f64>,
-    bq: DVector<f64>,
-    acc: DVector<f64>,
-    lk: DVector<f64>,
+fn zero(v: &mut Vec<f64>, n: usize) {
+    v.clear();
+    v.resize(n, 0.0);
 }
 
-struct PairCache {
-    a: usize,
-    b: usize,
-    sp: Vec<f64>,
-    st_inv: DMatrix<f64>,
-    n: DMatrix<f64>,
-    at: DMatrix<f64>, // D × m
-    bt: DMatrix<f64>, // D × m
-    y: DMatrix<f64>,  // N B̃
-    q: DMatrix<f64>,  // m × m
-}
-
-struct MmCache {
-    nu: DMatrix<f64>, // m × D
-    outs: Vec<OutCache>,
-    pairs: Vec<PairCache>,
-    mean: DVector<f64>,
-    cov: DMatrix<f64>,
-}
-
-fn scaled_plus_identity(sigma: &DMatrix<f64>, p: &[f64]) -> DMatrix<f64> {
-    let d = sigma.nrows();
-    DMatrix::from_fn(d, d, |i, j| {
-        p[i] * sigma[(i, j)] * p[j] + if i == j { 1.0 } else { 0.0 }
-    })
-}
-
-fn mm_forward(
-    gp: &PreparedGp<f64>,
-    mu: &DVector<f64>,
-    sigma: &DMatrix<f64>,
-    log: &mut JitterLog,
-) -> Result<MmCache> {
-    let x = &gp.pseudo_inputs;
-    let (m, d) = (x.nrows(), x.ncols());
-    let e = gp.output_dim();
-    let nu = DMatrix::from_fn(m, d, |i, k| x[(i, k)] - mu[k]);
-    let mut outs = Vec::with_capacity(e);
-    let mut mean = DVector::zeros(e);
-    for (a, o) in gp.outputs.iter().enumerate() {
-        let s: Vec<f64> = o.inv_l2.iter().map(|v| v.sqrt()).collect();
-        let ch = cholesky(
-            &scaled_plus_identity(sigma, &s),
-            &gp.jitter,
-            "I + Λ^{-½} Σ Λ^{-½}",
-        )?;
-        log.record(ch.jitter);
-        let logdet = ch.log_det();
-        let nut = DMatrix::from_fn(d, m, |k, i| nu[(i, k)] * s[k]);
-        let w = ch.solve(&nut);
-        let lsf2 = o.sf2.ln();
-        let mut q = DVector::zeros(m);
-        let mut lk = DVector::zeros(m);
-        for i in 0..m {
-            let mut quad = 0.0;
-            let mut plain = 0.0;
-            for k in 0..d {
-                quad += nut[(k, i)] * w[(k, i)];
-                plain += nut[(k, i)] * nut[(k, i)];
-            }
-            lk[i] = lsf2 - 0.5 * plain;
-            q[i] = (lsf2 - 0.5 * (quad + logdet)).exp();
-        }
-        let bq = o.beta.component_mul(&q);
-        let mut acc = &w * &bq;
-        for k in 0..d {
-            acc[k] *= s[k];
-        }
-        mean[a] = bq.sum();
-        outs.push(OutCache {
-            s,
-            shat_inv: ch.inverse(),
-            nut,
-            w,
-            q,
-            bq,
-            acc,
-            lk,
-        });
-    }
-    let mut cov = DMatrix::zeros(e, e);
-    let mut pairs = Vec::new();
-    for a in 0..e {
-        for b in a..e {
-            let (oa, ob) = (&gp.outputs[a], &gp.outputs[b]);
-            let sp: Vec<f64> = (0..d)
-                .map(|k| (oa.inv_l2[k] + ob.inv_l2[k]).sqrt())
-                .collect();
-            let ch = cholesky(
-                &scaled_plus_identity(sigma, &sp),
-                &gp.jitter,
-                "I + P^{½} Σ P^{½}",
-            )?;
-            log.record(ch.jitter);
-            let logdet_r = ch.log_det();
-            let st_inv = ch.inverse();
-            let n = DMatrix::identity(d, d) - &st_inv;
-            let at = DMatrix::from_fn(d, m, |k, i| oa.inv_l2[k] * nu[(i, k)] / sp[k]);
-            let bt = DMatrix::from_fn(d, m, |k, i| ob.inv_l2[k] * nu[(i, k)] / sp[k]);
-            let y = &n * &bt;
-            let na = &n * &at;
-            let g = at.transpose() * &y;
-            let ua = DVector::from_fn(m, |i, _| {
-                outs[a].lk[i] + 0.5 * at.column(i).dot(&na.column(i))
-            });
-            let ub = DVector::from_fn(m, |j, _| {
-                outs[b].lk[j] + 0.5 * bt.column(j).dot(&y.column(j)) - 0.5 * logdet_r
-            });
-            let q = DMatrix::from_fn(m, m, |i, j| (ua[i] + ub[j] + g[(i, j)]).exp());
-            let mut v = oa.beta.dot(&(&q * &ob.beta)) - mean[a] * mean[b];
-            if a == b {
-                v += oa.sf2 - oa.kinv.component_mul(&q).sum();
-            }
-            cov[(a, b)] = v;
-            cov[(b, a)] = v;
-            pairs.push(PairCache {
-                a,
-                b,
-                sp,
-                st_inv,
-                n,
-                at,
-                bt,
-                y,
-                q,
-            });
-        }
-    }
-    Ok(MmCache {
-        nu,
-        outs,
-        pairs,
-        mean,
-        cov,
-    })
+/// Reused buffers of the backward moment-matching pass.
+#[derive(Default)]
+struct BackWork {
+    q: Vec<f64>,
+    ebuf: Vec<f64>,
+    ebar: Vec<f64>,
+    ebar_t: Vec<f64>,
+    qb: Vec<f64>,
+    uabar: Vec<f64>,
+    ubbar: Vec<f64>,
+    atbar: Vec<f64>,
+    btbar: Vec<f64>,
+    ybar: Vec<f64>,
+    tmp: Vec<f64>,
+    nubar: Vec<f64>,
+    lkbar: Vec<Vec<f64>>,
 }
 
 /// Adds `Σ̄` and `s̄`/`p̄` contributions of `Ŝ = I + diag(s) Σ diag(s)` given `Ŝ̄`.
@@ -219,140 +132,357 @@ fn pull_scaled(
     }
 }
 
-/// Pulls adjoints of (mean, cov, io_cov) back to (μ, Σ) and the GP quantities.
+struct Backward<'a> {
+    gp: &'a PreparedGp<f64>,
+    sigma: &'a DMatrix<f64>,
+    c: &'a MmState,
+    mbar_in: &'a DVector<f64>,
+    sbar: &'a DMatrix<f64>,
+    vbar: &'a DMatrix<f64>,
+    adj: &'a mut GpAdjoint,
+    w: &'a mut BackWork,
+}
+
+impl Kernel for Backward<'_> {
+    type Output = (DVector<f64>, DMatrix<f64>);
+    #[inline(always)]
+    fn run<const F: bool>(self) -> Self::Output {
+        mm_backward_impl::<F>(self)
+    }
+}
+
+/// Pulls adjoints of (mean, cov, V) back to (μ, Σ) and the GP quantities.
 fn mm_backward(
     gp: &PreparedGp<f64>,
     sigma: &DMatrix<f64>,
-    c: &MmCache,
+    c: &MmState,
     mbar_in: &DVector<f64>,
     sbar: &DMatrix<f64>,
     vbar: &DMatrix<f64>,
     adj: &mut GpAdjoint,
+    w: &mut BackWork,
 ) -> (DVector<f64>, DMatrix<f64>) {
-    let (m, d) = c.nu.shape();
+    dispatch(Backward {
+        gp,
+        sigma,
+        c,
+        mbar_in,
+        sbar,
+        vbar,
+        adj,
+        w,
+    })
+}
+
+#[inline(always)]
+fn mm_backward_impl<const F: bool>(bw: Backward<'_>) -> (DVector<f64>, DMatrix<f64>) {
+    let Backward {
+        gp,
+        sigma,
+        c,
+        mbar_in,
+        sbar,
+        vbar,
+        adj,
+        w,
+    } = bw;
+    let (m, d, mp) = (c.m, c.d, c.mp);
     let e = gp.output_dim();
     let mut mbar = mbar_in.clone();
-    let mut nubar = DMatrix::<f64>::zeros(m, d);
     let mut sigma_bar = DMatrix::<f64>::zeros(d, d);
-    let mut lkbar = vec![DVector::<f64>::zeros(m); e];
+    zero(&mut w.nubar, d * mp);
+    w.lkbar.resize_with(e, Vec::new);
+    for lk in w.lkbar.iter_mut() {
+        zero(lk, mp);
+    }
 
     for pc in &c.pairs {
         let (a, b) = (pc.a, pc.b);
-        let vbar = if a == b {
+        let diag = a == b;
+        let vb = if diag {
             sbar[(a, a)]
         } else {
             sbar[(a, b)] + sbar[(b, a)]
         };
-        if vbar == 0.0 {
+        if vb == 0.0 {
             continue;
         }
         let (oa, ob) = (&gp.outputs[a], &gp.outputs[b]);
-        // S_ab = β_aᵀ Q β_b − M_a M_b (+ σ_f² − tr(K̃⁻¹ Q))
-        let qb = &pc.q * &ob.beta;
-        let qta = pc.q.tr_mul(&oa.beta);
-        adj.beta[a] += &qb * vbar;
-        adj.beta[b] += &qta * vbar;
-        mbar[a] -= vbar * c.mean[b];
-        mbar[b] -= vbar * c.mean[a];
-        let mut qbar = &oa.beta * ob.beta.transpose() * vbar;
-        if a == b {
-            adj.sf2[a] += vbar;
-            qbar -= &oa.kinv * vbar;
-            adj.kinv[a] -= &pc.q * vbar;
+        let (beta_a, beta_b) = (oa.beta.as_slice(), ob.beta.as_slice());
+        // S_ab = β_aᵀ Q β_b − M_a M_b (+ σ_f² − tr(K̃⁻¹ Q)): one pass over Q's columns gives
+        // Qβ_b, Qᵀβ_a, K̃⁻¹'s adjoint, Ē = Q̄ ∘ Q and its row and column sums
+        mbar[a] -= vb * c.mean[b];
+        mbar[b] -= vb * c.mean[a];
+        if diag {
+            adj.sf2[a] += vb;
         }
-        let ebar = qbar.component_mul(&pc.q);
-        let uabar = DVector::from_fn(m, |i, _| ebar.row(i).sum());
-        let ubbar = DVector::from_fn(m, |j, _| ebar.column(j).sum());
-        // G = Ãᵀ Y, Y = N B̃
-        let mut atbar = &pc.y * ebar.transpose();
-        let ybar = &pc.at * &ebar;
-        let mut nbar = &ybar * pc.bt.transpose();
-        let mut btbar = &pc.n * &ybar;
-        // ua_i = lk^a_i + ½ Ã_iᵀ N Ã_i ; ub_j = lk^b_j + ½ B̃_jᵀ N B̃_j − ½ log|S̃|
-        let na = &pc.n * &pc.at;
-        for i in 0..m {
+        // Q again, by the forward's own code (bit-identical to what the forward used): cheaper
+        // than keeping 8·m² bytes per step and pair
+        // (q_block overwrites every entry it reads: no zero fill)
+        w.q.resize(m * m, 0.0);
+        w.ebuf.resize(4 * mp, 0.0);
+        q_block::<F>(
+            m,
+            mp,
+            d,
+            &pc.at,
+            &pc.nb,
+            &pc.ua,
+            &pc.ub,
+            beta_a,
+            beta_b,
+            if diag { Some(oa.kinv.as_slice()) } else { None },
+            &mut w.ebuf,
+            Some(&mut w.q),
+        );
+        // Ē as m columns of stride mp: rows < m are written below, the padding is zeroed here
+        w.ebar.resize(m * mp, 0.0);
+        for j in 0..m {
+            w.ebar[j * mp + m..(j + 1) * mp].fill(0.0);
+        }
+        zero(&mut w.qb, m);
+        zero(&mut w.uabar, mp);
+        zero(&mut w.ubbar, mp);
+        {
+            let kinv = oa.kinv.as_slice();
+            let adj_kinv = adj.kinv[a].as_mut_slice();
+            let adj_beta_b = adj.beta[b].as_mut_slice();
+            for j in 0..m {
+                let qcol = &w.q[j * m..(j + 1) * m];
+                adj_beta_b[j] += vb * dot::<F>(beta_a, qcol);
+                axpy::<F>(beta_b[j], qcol, &mut w.qb);
+                let ecol = &mut w.ebar[j * mp..j * mp + m];
+                let f = vb * beta_b[j];
+                if diag {
+                    let kcol = &kinv[j * m..(j + 1) * m];
+                    let acol = &mut adj_kinv[j * m..(j + 1) * m];
+                    for ((((ac, ec), &q), &k), &ba) in acol
+                        .iter_mut()
+                        .zip(ecol.iter_mut())
+                        .zip(qcol)
+                        .zip(kcol)
+                        .zip(beta_a)
+                    {
+                        *ac -= vb * q;
+                        *ec = (f * ba - vb * k) * q;
+                    }
+                } else {
+                    for ((ec, &q), &ba) in ecol.iter_mut().zip(qcol).zip(beta_a) {
+                        *ec = f * ba * q;
+                    }
+                }
+                w.ubbar[j] = sum(ecol);
+                for (u, e) in w.uabar.iter_mut().zip(ecol.iter()) {
+                    *u += e;
+                }
+            }
+            let adj_beta_a = adj.beta[a].as_mut_slice();
+            axpy::<F>(vb, &w.qb, adj_beta_a);
+        }
+        // G = Ãᵀ Y, Y = N B̃: Ã̄ = Y Ēᵀ, Ȳ = Ã Ē. For a diagonal pair Ē is symmetric and
+        // Y = N Ã, so Ã̄ = N Ȳ (formed below with B̃̄ = N Ȳ): one m × m product instead of two.
+        let bt: &[f64] = if diag { &pc.at } else { &pc.bt };
+        let na: &[f64] = if diag { &pc.nb } else { &pc.na };
+        zero(&mut w.atbar, d * mp);
+        zero(&mut w.ybar, d * mp);
+        zero(&mut w.btbar, d * mp);
+        if diag {
+            gemm_rows::<F>(&pc.at, &w.ebar, &mut w.ybar, d, m, mp);
+        } else {
+            gemm_rows::<F>(&pc.nb, &w.ebar, &mut w.atbar, d, m, mp);
+            zero(&mut w.ebar_t, m * mp);
+            for j in 0..m {
+                for i in 0..m {
+                    w.ebar_t[i * mp + j] = w.ebar[j * mp + i];
+                }
+            }
+            gemm_rows::<F>(&pc.at, &w.ebar_t, &mut w.ybar, d, m, mp);
+        }
+        // N̄ = Ȳ B̃ᵀ + ½ (Ã diag(ū_a) Ãᵀ + B̃ diag(ū_b) B̃ᵀ); for a diagonal pair (Ã = B̃) one
+        // product: (Ȳ + ½ Ã diag(ū_a + ū_b)) Ãᵀ
+        let mut nbar = DMatrix::<f64>::zeros(d, d);
+        zero(&mut w.tmp, d * mp);
+        if diag {
             for k in 0..d {
-                atbar[(k, i)] += uabar[i] * na[(k, i)];
-                btbar[(k, i)] += ubbar[i] * pc.y[(k, i)];
+                let r = k * mp..k * mp + m;
+                for ((((t, &y), &x), &ua), &ub) in w.tmp[r.clone()]
+                    .iter_mut()
+                    .zip(&w.ybar[r.clone()])
+                    .zip(&pc.at[r])
+                    .zip(&w.uabar)
+                    .zip(&w.ubbar)
+                {
+                    *t = y + 0.5 * (ua + ub) * x;
+                }
+            }
+            gram_add::<F>(&w.tmp, &pc.at, 1.0, &mut nbar, d, mp);
+        } else {
+            gram_add::<F>(&w.ybar, bt, 1.0, &mut nbar, d, mp);
+            for k in 0..d {
+                let r = k * mp..k * mp + m;
+                for ((t, &x), &u) in w.tmp[r.clone()].iter_mut().zip(&pc.at[r]).zip(&w.uabar) {
+                    *t = x * u;
+                }
+            }
+            gram_add::<F>(&w.tmp, &pc.at, 0.5, &mut nbar, d, mp);
+            for k in 0..d {
+                let r = k * mp..k * mp + m;
+                for ((t, &x), &u) in w.tmp[r.clone()].iter_mut().zip(&bt[r]).zip(&w.ubbar) {
+                    *t = x * u;
+                }
+            }
+            gram_add::<F>(&w.tmp, bt, 0.5, &mut nbar, d, mp);
+        }
+        // B̃̄ = N Ȳ = Ȳ − S̃⁻¹ Ȳ ; ua_i = lk^a_i + ½ Ã_iᵀ N Ã_i ; ub_j = lk^b_j + ½ B̃_jᵀ N B̃_j − ½ log|S̃|
+        w.tmp.clear();
+        w.tmp.extend_from_slice(&w.ybar);
+        solve_lower_rows::<F>(&pc.l, &mut w.tmp, d, mp);
+        solve_upper_rows::<F>(&pc.l, &mut w.tmp, d, mp);
+        for k in 0..d {
+            let r = k * mp..k * mp + m;
+            for ((((bb, &y), &t), &ub), &nb) in w.btbar[r.clone()]
+                .iter_mut()
+                .zip(&w.ybar[r.clone()])
+                .zip(&w.tmp[r.clone()])
+                .zip(&w.ubbar)
+                .zip(&pc.nb[r.clone()])
+            {
+                *bb = y - t + ub * nb;
+            }
+            if diag {
+                for ((((ab, &y), &t), &ua), &x) in w.atbar[r.clone()]
+                    .iter_mut()
+                    .zip(&w.ybar[r.clone()])
+                    .zip(&w.tmp[r.clone()])
+                    .zip(&w.uabar)
+                    .zip(&na[r])
+                {
+                    *ab = y - t + ua * x;
+                }
+            } else {
+                for ((ab, &ua), &x) in w.atbar[r.clone()].iter_mut().zip(&w.uabar).zip(&na[r]) {
+                    *ab += ua * x;
+                }
             }
         }
-        let at_s = DMatrix::from_fn(d, m, |k, i| pc.at[(k, i)] * uabar[i]);
-        let bt_s = DMatrix::from_fn(d, m, |k, i| pc.bt[(k, i)] * ubbar[i]);
-        nbar += (&at_s * pc.at.transpose() + &bt_s * pc.bt.transpose()) * 0.5;
-        lkbar[a] += &uabar;
-        lkbar[b] += &ubbar;
-        let logdet_bar = -0.5 * ubbar.sum();
+        for i in 0..m {
+            w.lkbar[a][i] += w.uabar[i];
+            w.lkbar[b][i] += w.ubbar[i];
+        }
+        let logdet_bar = -0.5 * sum(&w.ubbar[..m]);
         // N = I − S̃⁻¹ ; log|S̃|
-        let stbar = &pc.st_inv * &nbar * &pc.st_inv + &pc.st_inv * logdet_bar;
+        let st_inv = chol_inverse::<F>(&pc.l);
+        let stbar = &st_inv * &nbar * &st_inv + &st_inv * logdet_bar;
         let mut spbar = vec![0.0; d];
         pull_scaled(&stbar, sigma, &pc.sp, &mut sigma_bar, &mut spbar);
         for k in 0..d {
             let (ila, ilb, sp) = (oa.inv_l2[k], ob.inv_l2[k], pc.sp[k]);
+            let r = k * mp..k * mp + m;
+            let (atb, btb, atk, btk, nuk) = (
+                &w.atbar[r.clone()],
+                &w.btbar[r.clone()],
+                &pc.at[r.clone()],
+                &bt[r.clone()],
+                &c.nu_t[r.clone()],
+            );
+            let nubar = &mut w.nubar[r];
+            let (mut la, mut lb, mut sq) = (0.0, 0.0, 0.0);
             for i in 0..m {
-                let nu = c.nu[(i, k)];
-                nubar[(i, k)] += atbar[(k, i)] * ila / sp + btbar[(k, i)] * ilb / sp;
-                adj.inv_l2[(a, k)] += atbar[(k, i)] * nu / sp;
-                adj.inv_l2[(b, k)] += btbar[(k, i)] * nu / sp;
-                spbar[k] -= (atbar[(k, i)] * pc.at[(k, i)] + btbar[(k, i)] * pc.bt[(k, i)]) / sp;
+                nubar[i] += atb[i] * ila / sp + btb[i] * ilb / sp;
             }
+            la += dot::<F>(atb, nuk) / sp;
+            lb += dot::<F>(btb, nuk) / sp;
+            sq += (dot::<F>(atb, atk) + dot::<F>(btb, btk)) / sp;
+            spbar[k] -= sq;
             let pbar = spbar[k] / (2.0 * sp);
-            adj.inv_l2[(a, k)] += pbar;
-            adj.inv_l2[(b, k)] += pbar;
+            adj.inv_l2[(a, k)] += la + pbar;
+            adj.inv_l2[(b, k)] += lb + pbar;
         }
     }
 
     for (a, oc) in c.outs.iter().enumerate() {
         let o = &gp.outputs[a];
-        // V[:, a] = acc
-        let accbar = vbar.column(a).into_owned();
+        let beta = o.beta.as_slice();
+        // V[:, a] = acc = diag(s) Ŵ (β ∘ q)
         let mut sbar_v = vec![0.0; d];
-        let mut bqbar = DVector::from_element(m, mbar[a]);
-        let mut wbar = DMatrix::<f64>::zeros(d, m);
+        // bq̄_i = M̄_a + Σ_k V̄_ka s_k Ŵ_ki ; Ŵ̄ = (V̄ ∘ s) bqᵀ
+        zero(&mut w.qb, mp);
+        w.qb[..m].iter_mut().for_each(|v| *v = mbar[a]);
+        zero(&mut w.ybar, d * mp); // Ŵ̄
         for k in 0..d {
-            let f = accbar[k] * oc.s[k];
-            let mut sw = 0.0;
-            for i in 0..m {
-                bqbar[i] += f * oc.w[(k, i)];
-                sw += oc.bq[i] * oc.w[(k, i)];
-                wbar[(k, i)] += f * oc.bq[i];
-            }
-            sbar_v[k] += accbar[k] * sw;
+            let f = vbar[(k, a)] * oc.s[k];
+            let r = k * mp..(k + 1) * mp;
+            axpy::<F>(f, &oc.w[r.clone()], &mut w.qb);
+            sbar_v[k] += vbar[(k, a)] * dot::<F>(&oc.bq, &oc.w[r.clone()]);
+            axpy::<F>(f, &oc.bq, &mut w.ybar[r]);
         }
-        adj.beta[a] += bqbar.component_mul(&oc.q);
-        let qbar = bqbar.component_mul(&o.beta);
-        let qq = qbar.component_mul(&oc.q);
-        adj.sf2[a] += qq.sum() / o.sf2 + lkbar[a].sum() / o.sf2;
-        let logdet_bar = -0.5 * qq.sum();
-        let mut nutbar = DMatrix::<f64>::zeros(d, m);
+        // q̄ = bq̄ ∘ β ; qq = q̄ ∘ q
+        let adj_beta = adj.beta[a].as_mut_slice();
+        zero(&mut w.uabar, mp); // qq
         for i in 0..m {
-            let quadbar = -0.5 * qq[i];
-            for k in 0..d {
-                nutbar[(k, i)] += quadbar * oc.w[(k, i)] - lkbar[a][i] * oc.nut[(k, i)];
-                wbar[(k, i)] += quadbar * oc.nut[(k, i)];
+            adj_beta[i] += w.qb[i] * oc.q[i];
+            w.uabar[i] = w.qb[i] * beta[i] * oc.q[i];
+        }
+        let sqq = sum(&w.uabar[..m]);
+        adj.sf2[a] += sqq / o.sf2 + sum(&w.lkbar[a][..m]) / o.sf2;
+        let logdet_bar = -0.5 * sqq;
+        // ν̃̄ = −½ qq ∘ Ŵ − lk̄ ∘ ν̃ ; Ŵ̄ += −½ qq ∘ ν̃
+        zero(&mut w.atbar, d * mp); // ν̃̄
+        let lkbar = &w.lkbar[a];
+        for k in 0..d {
+            let r = k * mp..k * mp + m;
+            for (((((nb, wb), &qq), &lb), &wv), &nv) in w.atbar[r.clone()]
+                .iter_mut()
+                .zip(w.ybar[r.clone()].iter_mut())
+                .zip(&w.uabar)
+                .zip(lkbar)
+                .zip(&oc.w[r.clone()])
+                .zip(&oc.nut[r])
+            {
+                let quadbar = -0.5 * qq;
+                *nb = quadbar * wv - lb * nv;
+                *wb += quadbar * nv;
             }
         }
-        let z = &oc.shat_inv * &wbar;
-        nutbar += &z;
-        let shatbar = -(&z * oc.w.transpose()) + &oc.shat_inv * logdet_bar;
+        // Ŵ = Ŝ⁻¹ ν̃ᵀ: z = Ŝ⁻¹ Ŵ̄, ν̃̄ += z, Ŝ̄ = −z Ŵᵀ + log|Ŝ|̄ Ŝ⁻¹
+        w.tmp.clear();
+        w.tmp.extend_from_slice(&w.ybar);
+        solve_lower_rows::<F>(&oc.l, &mut w.tmp, d, mp);
+        solve_upper_rows::<F>(&oc.l, &mut w.tmp, d, mp);
+        for (t, z) in w.atbar.iter_mut().zip(&w.tmp) {
+            *t += z;
+        }
+        let shat_inv = chol_inverse::<F>(&oc.l);
+        let mut shatbar = &shat_inv * logdet_bar;
+        gram_add::<F>(&w.tmp, &oc.w, -1.0, &mut shatbar, d, mp);
         pull_scaled(&shatbar, sigma, &oc.s, &mut sigma_bar, &mut sbar_v);
         for k in 0..d {
-            for i in 0..m {
-                nubar[(i, k)] += nutbar[(k, i)] * oc.s[k];
-                sbar_v[k] += nutbar[(k, i)] * c.nu[(i, k)];
-            }
-            adj.inv_l2[(a, k)] += sbar_v[k] / (2.0 * oc.s[k]);
+            let r = k * mp..k * mp + m;
+            let sk = oc.s[k];
+            let nutb = &w.atbar[r.clone()];
+            sbar_v[k] += dot::<F>(nutb, &c.nu_t[r.clone()]);
+            axpy::<F>(sk, nutb, &mut w.nubar[r]);
+            adj.inv_l2[(a, k)] += sbar_v[k] / (2.0 * sk);
         }
     }
-    adj.xbar += &nubar;
-    let mubar = DVector::from_fn(d, |k, _| -nubar.column(k).sum());
+    let xbar = adj.xbar.as_mut_slice();
+    let mut mubar = DVector::zeros(d);
+    for k in 0..d {
+        let nb = &w.nubar[k * mp..k * mp + m];
+        for (x, v) in xbar[k * m..(k + 1) * m].iter_mut().zip(nb) {
+            *x += v;
+        }
+        mubar[k] = -sum(nb);
+    }
     (mubar, sigma_bar)
 }
 
 /// What the forward rollout records per step.
 struct StepRecord {
     sigma: DMatrix<f64>,
-    /// The moment-matching intermediates (kept, not recomputed: ≈ 8·m²·pairs bytes per step).
-    cache: MmCache,
+    /// The moment-matching intermediates (O(m·D) per step; `Q` is recomputed in the backward
+    /// pass).
+    cache: MmState,
     ycov: DMatrix<f64>,
     resid: DVector<f64>,
     v: DMatrix<f64>,
@@ -442,7 +572,8 @@ fn episode_adjoint(
     for t in t0..horizon {
         let wsig = sigma.view((0, 0), (d, d)).into_owned();
         let wmu = mu.rows(0, d).into_owned();
-        let mm = mm_forward(gp, &wmu, &wsig, log)?;
+        let mut mm = MmState::default();
+        mm.forward(gp, &wmu, &wsig, log)?;
         let v_gp = DMatrix::from_fn(d, dy, |k, a| mm.outs[a].acc[k]);
         // the moments of f = A x̃ + g (the GP's own stay in the cache for the backward pass)
         let (mut fmean, mut fcov, mut v) = (mm.mean.clone(), mm.cov.clone(), v_gp.clone());
@@ -503,6 +634,7 @@ fn episode_adjoint(
     log.merge(&nll_log);
 
     // backward
+    let mut work = BackWork::default();
     let mut mubar_next = DVector::<f64>::zeros(n);
     let mut sigmabar_next = DMatrix::<f64>::zeros(n, n);
     let last = recs.len() - 1;
@@ -591,7 +723,9 @@ fn episode_adjoint(
             add_block(&mut sigmabar, (0, 0), &lb.sigma);
             vbar = lb.v;
         }
-        let (mub, sigb) = mm_backward(gp, &wsig, &rec.cache, &mbar, &xcovbar, &vbar, adj);
+        let (mub, sigb) = mm_backward(
+            gp, &wsig, &rec.cache, &mbar, &xcovbar, &vbar, adj, &mut work,
+        );
         for k in 0..d {
             mubar[k] += mub[k];
         }
@@ -617,7 +751,81 @@ fn add_block(m: &mut DMatrix<f64>, at: (usize, usize), b: &DMatrix<f64>) {
     }
 }
 
+/// What one episode contributes to the loss and its adjoints.
+struct EpisodeOut {
+    adj: GpAdjoint,
+    nll: f64,
+    steps: usize,
+    log: JitterLog,
+}
+
+/// Environment variable with the number of threads the loss gradient runs its episodes on
+/// (default: every available core).
+pub const THREADS_VAR: &str = "MSGP_THREADS";
+
+/// Threads for the episodes of one loss gradient: [`THREADS_VAR`] if set to a positive integer,
+/// else the available parallelism.
+pub fn thread_count() -> usize {
+    std::env::var(THREADS_VAR)
+        .ok()
+        .and_then(|v| v.trim().parse::<usize>().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+}
+
+/// `f(k, episode)` for every episode, on up to `threads` scoped threads (episode `k` on thread
+/// `k mod threads`); the results come back in episode order.
+fn map_episodes<R: Send>(
+    episodes: &[Episode],
+    threads: usize,
+    f: impl Fn(usize, &Episode) -> Result<R> + Sync,
+) -> Vec<Result<R>> {
+    let threads = threads.min(episodes.len()).max(1);
+    if threads == 1 {
+        return episodes
+            .iter()
+            .enumerate()
+            .map(|(k, ep)| f(k, ep))
+            .collect();
+    }
+    let f = &f;
+    let mut slots: Vec<Option<Result<R>>> = episodes.iter().map(|_| None).collect();
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..threads)
+            .map(|w| {
+                scope.spawn(move || {
+                    episodes
+                        .iter()
+                        .enumerate()
+                        .skip(w)
+                        .step_by(threads)
+                        .map(|(k, ep)| (k, f(k, ep)))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        for h in handles {
+            match h.join() {
+                Ok(done) => {
+                    for (k, r) in done {
+                        slots[k] = Some(r);
+                    }
+                }
+                Err(panic) => std::panic::resume_unwind(panic),
+            }
+        }
+    });
+    slots
+        .into_iter()
+        .enumerate()
+        .map(|(k, r)| {
+            r.unwrap_or_else(|| Err(MsgpError::Data(format!("episode {k} was not evaluated"))))
+        })
+        .collect()
+}
+
 /// Value and gradient (in [`GpParams::to_flat`] layout) of the MSGP loss, by the adjoint sweep.
+/// Episodes run on [`thread_count`] threads; the result is bit-identical for any thread count.
 pub fn loss_and_gradient(
     params: &GpParams<f64>,
     config: &GpConfig,
@@ -626,13 +834,35 @@ pub fn loss_and_gradient(
     complexity: Complexity,
     log: &mut JitterLog,
 ) -> Result<(LossValue<f64>, Vec<f64>)> {
+    loss_and_gradient_with_threads(
+        params,
+        config,
+        spec,
+        episodes,
+        complexity,
+        thread_count(),
+        log,
+    )
+}
+
+/// [`loss_and_gradient`] with the episodes on up to `threads` threads (1: the calling thread
+/// only). Every episode accumulates its own adjoints and the episodes are summed in order, so
+/// the result does not depend on `threads`.
+pub fn loss_and_gradient_with_threads(
+    params: &GpParams<f64>,
+    config: &GpConfig,
+    spec: &NarxSpec,
+    episodes: &[Episode],
+    complexity: Complexity,
+    threads: usize,
+    log: &mut JitterLog,
+) -> Result<(LossValue<f64>, Vec<f64>)> {
     let shape: GpShape = params.shape()?;
     let GpShape { m, d, e } = shape;
     let gp = PreparedGp::new(params, config, log)?;
-    let mut adj = GpAdjoint::zeros(m, d, e);
-    let mut nll = 0.0;
-    let mut steps = 0;
-    for (k, ep) in episodes.iter().enumerate() {
+    // one adjoint accumulator per episode, summed in episode order: the result does not depend
+    // on how many threads ran the episodes
+    let run = |k: usize, ep: &Episode| -> Result<EpisodeOut> {
         ep.traj
             .check(spec)
             .map_err(|err| MsgpError::Data(format!("episode {k}: {err}")))?;
@@ -640,9 +870,26 @@ pub fn loss_and_gradient(
             Excitation::FeedForward => None,
             Excitation::Feedback(p) => Some(p.as_ref()),
         };
-        let (v, n) = episode_adjoint(&gp, spec, &ep.traj, policy, &mut adj, log)?;
-        nll += v;
-        steps += n;
+        let mut adj = GpAdjoint::zeros(m, d, e);
+        let mut elog = JitterLog::default();
+        let (nll, steps) = episode_adjoint(&gp, spec, &ep.traj, policy, &mut adj, &mut elog)?;
+        Ok(EpisodeOut {
+            adj,
+            nll,
+            steps,
+            log: elog,
+        })
+    };
+    let outs = map_episodes(episodes, threads, run);
+    let mut adj = GpAdjoint::zeros(m, d, e);
+    let mut nll = 0.0;
+    let mut steps = 0;
+    for out in outs {
+        let out = out?;
+        adj.add(&out.adj);
+        log.merge(&out.log);
+        nll += out.nll;
+        steps += out.steps;
     }
     let comp = complexity_term(params, &gp, complexity);
     let mut ybar = DMatrix::<f64>::zeros(m, e);

@@ -1,0 +1,518 @@
+//! Small f64 building blocks for the fast moment-matching kernel ([`crate::mm_f64`]): a
+//! polynomial `exp` over slices, dot products with independent partial sums, and triangular
+//! solves whose right-hand sides are the contiguous rows of a `D × mp` block. All are written as
+//! plain scalar loops that the compiler vectorises; [`dispatch`] runs a kernel inside pulp's
+//! runtime-detected AVX2 + FMA context (x86-64-v3) when the CPU has it, and as portable code
+//! otherwise. No `unsafe`: pulp's `Arch::dispatch` is the safe entry point.
+//!
+//! Everything is `#[inline(always)]` so that it is compiled with the dispatching function's
+//! target features. The const parameter `F` selects fused multiply-add (`true` only inside the
+//! FMA context; elsewhere `mul_add` would be a libm call).
+
+use nalgebra::DMatrix;
+
+/// Rows of the blocked kernels are padded to a multiple of this many entries.
+pub(crate) const CHUNK: usize = 8;
+
+/// `m` rounded up to a multiple of [`CHUNK`].
+#[inline]
+pub(crate) fn padded(m: usize) -> usize {
+    m.div_ceil(CHUNK) * CHUNK
+}
+
+/// A kernel generic over the use of fused multiply-add.
+pub(crate) trait Kernel {
+    type Output;
+    fn run<const F: bool>(self) -> Self::Output;
+}
+
+struct Dispatch<K>(K);
+
+impl<K: Kernel> pulp::WithSimd for Dispatch<K> {
+    type Output = K::Output;
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> K::Output {
+        if S::IS_SCALAR {
+            self.0.run::<false>()
+        } else {
+            self.0.run::<true>()
+        }
+    }
+}
+
+/// Runs `k` with the best instruction set the CPU offers (AVX2 + FMA or portable code).
+#[inline]
+pub(crate) fn dispatch<K: Kernel>(k: K) -> K::Output {
+    pulp::Arch::new().dispatch(Dispatch(k))
+}
+
+/// `a·b + c`, fused when `F`.
+#[inline(always)]
+pub(crate) fn madd<const F: bool>(a: f64, b: f64, c: f64) -> f64 {
+    if F { a.mul_add(b, c) } else { a * b + c }
+}
+
+const LOG2E: f64 = std::f64::consts::LOG2_E;
+// fdlibm's split of ln 2: the high part has 21 trailing zero bits, so `n · LN2_HI` is exact
+// for |n| < 2¹¹.
+const LN2_HI: f64 = f64::from_bits(0x3FE6_2E42_FEE0_0000);
+const LN2_LO: f64 = f64::from_bits(0x3DEA_39EF_3579_3C76);
+// 1.5 · 2⁵²: adding it rounds to an integer held in the low mantissa bits.
+const SHIFT: f64 = 6_755_399_441_055_744.0;
+// 1/k! for k = 2..=13: Taylor series of e^r on |r| ≤ ½ ln 2; the truncation error
+// |r|¹⁴/14! ≤ 4·10⁻¹⁸ is far below half an ulp.
+const C: [f64; 12] = [
+    1.0 / 2.0,
+    1.0 / 6.0,
+    1.0 / 24.0,
+    1.0 / 120.0,
+    1.0 / 720.0,
+    1.0 / 5_040.0,
+    1.0 / 40_320.0,
+    1.0 / 362_880.0,
+    1.0 / 3_628_800.0,
+    1.0 / 39_916_800.0,
+    1.0 / 479_001_600.0,
+    1.0 / 6_227_020_800.0,
+];
+
+/// `2^n` for an integer-valued `n` in `[-1022, 1023]`, built from the exponent bits.
+#[inline(always)]
+fn pow2(n: f64) -> f64 {
+    f64::from_bits((n + (1023.0 + SHIFT)).to_bits() << 52)
+}
+
+/// `e^x` to within about one ulp of the correctly rounded value (tested against `f64::exp`),
+/// branch-free so that loops over it vectorise. `x = n ln 2 + r` with `|r| ≤ ½ ln 2`
+/// (Cody–Waite), a degree-13 polynomial for `e^r`, and `2^n` applied as two exact power-of-two
+/// factors so that subnormal results and overflow to `+∞` come out right. NaN propagates;
+/// `x < −746` gives 0 and `x > 710` gives `+∞`.
+#[inline(always)]
+pub(crate) fn exp1<const F: bool>(x: f64) -> f64 {
+    // comparisons are false for NaN, which therefore passes through
+    let x = if x < -746.0 { -746.0 } else { x };
+    let x = if x > 710.0 { 710.0 } else { x };
+    let t = madd::<F>(x, LOG2E, SHIFT);
+    let n = t - SHIFT;
+    let r = madd::<F>(n, -LN2_HI, x);
+    let r = madd::<F>(n, -LN2_LO, r);
+    let mut p = C[11];
+    for k in (0..11).rev() {
+        p = madd::<F>(p, r, C[k]);
+    }
+    // e^r = 1 + (r + r² p(r)): the small part first, one rounding into the final sum
+    let y = 1.0 + madd::<F>(r * r, p, r);
+    // n ∈ [−1077, 1025]: split into two halves that are each a normal power of two
+    let n1 = (n * 0.5 + SHIFT) - SHIFT;
+    let n2 = n - n1;
+    y * pow2(n1) * pow2(n2)
+}
+
+/// `x ← e^x` element-wise.
+#[inline(always)]
+pub(crate) fn exp_slice<const F: bool>(x: &mut [f64]) {
+    for v in x.iter_mut() {
+        *v = exp1::<F>(*v);
+    }
+}
+
+/// `Σ a_i b_i` with [`CHUNK`] independent partial sums (vectorisable).
+#[inline(always)]
+pub(crate) fn dot<const F: bool>(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut acc = [0.0f64; CHUNK];
+    let full = n / CHUNK * CHUNK;
+    for (ca, cb) in a[..full]
+        .chunks_exact(CHUNK)
+        .zip(b[..full].chunks_exact(CHUNK))
+    {
+        for l in 0..CHUNK {
+            acc[l] = madd::<F>(ca[l], cb[l], acc[l]);
+        }
+    }
+    let mut s = hsum(&acc);
+    for i in full..n {
+        s = madd::<F>(a[i], b[i], s);
+    }
+    s
+}
+
+/// `Σ a_i` with [`CHUNK`] independent partial sums.
+#[inline(always)]
+pub(crate) fn sum(a: &[f64]) -> f64 {
+    let mut acc = [0.0f64; CHUNK];
+    let full = a.len() / CHUNK * CHUNK;
+    for c in a[..full].chunks_exact(CHUNK) {
+        for l in 0..CHUNK {
+            acc[l] += c[l];
+        }
+    }
+    let mut s = hsum(&acc);
+    for v in &a[full..] {
+        s += *v;
+    }
+    s
+}
+
+#[inline(always)]
+fn hsum(acc: &[f64; CHUNK]) -> f64 {
+    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7]))
+}
+
+/// `y ← y + α x`.
+#[inline(always)]
+pub(crate) fn axpy<const F: bool>(alpha: f64, x: &[f64], y: &mut [f64]) {
+    for (yi, xi) in y.iter_mut().zip(x) {
+        *yi = madd::<F>(alpha, *xi, *yi);
+    }
+}
+
+/// Solves `L X = B` in place, where `X` (and `B`) are `d` rows of stride `mp` in `x` and `L` is
+/// lower triangular (`d × d`): every step is an axpy over a contiguous row.
+#[inline(always)]
+pub(crate) fn solve_lower_rows<const F: bool>(
+    l: &DMatrix<f64>,
+    x: &mut [f64],
+    d: usize,
+    mp: usize,
+) {
+    for i in 0..d {
+        let (done, rest) = x.split_at_mut(i * mp);
+        let xi = &mut rest[..mp];
+        for k in 0..i {
+            axpy::<F>(-l[(i, k)], &done[k * mp..(k + 1) * mp], xi);
+        }
+        let lii = l[(i, i)];
+        for v in xi.iter_mut() {
+            *v /= lii;
+        }
+    }
+}
+
+/// Solves `Lᵀ X = B` in place (same layout as [`solve_lower_rows`]).
+#[inline(always)]
+pub(crate) fn solve_upper_rows<const F: bool>(
+    l: &DMatrix<f64>,
+    x: &mut [f64],
+    d: usize,
+    mp: usize,
+) {
+    for i in (0..d).rev() {
+        let (head, tail) = x.split_at_mut((i + 1) * mp);
+        let xi = &mut head[i * mp..];
+        for k in (i + 1)..d {
+            axpy::<F>(-l[(k, i)], &tail[(k - i - 1) * mp..(k - i) * mp], xi);
+        }
+        let lii = l[(i, i)];
+        for v in xi.iter_mut() {
+            *v /= lii;
+        }
+    }
+}
+
+/// `(L Lᵀ)⁻¹` (symmetrised) from a lower Cholesky factor, as a dense `d × d` matrix.
+#[inline(always)]
+pub(crate) fn chol_inverse<const F: bool>(l: &DMatrix<f64>) -> DMatrix<f64> {
+    let d = l.nrows();
+    let mut x = vec![0.0; d * d];
+    for i in 0..d {
+        x[i * d + i] = 1.0;
+    }
+    solve_lower_rows::<F>(l, &mut x, d, d);
+    solve_upper_rows::<F>(l, &mut x, d, d);
+    // x holds rows of A⁻¹ (row i at x[i d..]); A⁻¹ is symmetric up to rounding
+    DMatrix::from_fn(d, d, |i, j| 0.5 * (x[i * d + j] + x[j * d + i]))
+}
+
+/// `out[k, :] = Σ_j c[k, j] · mat[:, j]` for `k < d`, `j < n`: `c` and `out` are `d` rows of
+/// stride `mp`, `mat` holds `n` columns of `mp` entries (column `j` at `j·mp`). Four rows of
+/// `out` and eight entries of a row are accumulated in registers over `j` (a GEMM micro-kernel
+/// for the `D × m · m × m` products of the adjoint).
+#[inline(always)]
+pub(crate) fn gemm_rows<const F: bool>(
+    c: &[f64],
+    mat: &[f64],
+    out: &mut [f64],
+    d: usize,
+    n: usize,
+    mp: usize,
+) {
+    let mut k0 = 0;
+    while k0 < d {
+        match d - k0 {
+            1 => gemm_block::<F, 1>(c, mat, out, k0, n, mp),
+            2 => gemm_block::<F, 2>(c, mat, out, k0, n, mp),
+            3 => gemm_block::<F, 3>(c, mat, out, k0, n, mp),
+            _ => gemm_block::<F, 4>(c, mat, out, k0, n, mp),
+        }
+        k0 += 4;
+    }
+}
+
+#[inline(always)]
+fn gemm_block<const F: bool, const KB: usize>(
+    c: &[f64],
+    mat: &[f64],
+    out: &mut [f64],
+    k0: usize,
+    n: usize,
+    mp: usize,
+) {
+    let mut i0 = 0;
+    while i0 < mp {
+        let mut acc = [[0.0f64; CHUNK]; KB];
+        for j in 0..n {
+            let col = &mat[j * mp + i0..j * mp + i0 + CHUNK];
+            for kk in 0..KB {
+                let cv = c[(k0 + kk) * mp + j];
+                for l in 0..CHUNK {
+                    acc[kk][l] = madd::<F>(col[l], cv, acc[kk][l]);
+                }
+            }
+        }
+        for kk in 0..KB {
+            out[(k0 + kk) * mp + i0..(k0 + kk) * mp + i0 + CHUNK].copy_from_slice(&acc[kk]);
+        }
+        i0 += CHUNK;
+    }
+}
+
+/// `out[(r, s)] += α Σ_i x[r, i] y[s, i]` for `d` rows of stride `mp` (a multiple of
+/// [`CHUNK`]; `out` is `d × d`). The sum runs over all `mp` entries, so the padding of `x` or of
+/// `y` must be zero. Two rows of `x` against four of `y` at a time, four lanes each.
+#[inline(always)]
+pub(crate) fn gram_add<const F: bool>(
+    x: &[f64],
+    y: &[f64],
+    alpha: f64,
+    out: &mut DMatrix<f64>,
+    d: usize,
+    mp: usize,
+) {
+    let mut r0 = 0;
+    while r0 + 2 <= d {
+        let mut s0 = 0;
+        while s0 + 4 <= d {
+            gram_block::<F, 2, 4>(x, y, alpha, out, r0, s0, mp);
+            s0 += 4;
+        }
+        while s0 < d {
+            gram_block::<F, 2, 1>(x, y, alpha, out, r0, s0, mp);
+            s0 += 1;
+        }
+        r0 += 2;
+    }
+    if r0 < d {
+        let mut s0 = 0;
+        while s0 + 4 <= d {
+            gram_block::<F, 1, 4>(x, y, alpha, out, r0, s0, mp);
+            s0 += 4;
+        }
+        while s0 < d {
+            gram_block::<F, 1, 1>(x, y, alpha, out, r0, s0, mp);
+            s0 += 1;
+        }
+    }
+}
+
+#[inline(always)]
+fn gram_block<const F: bool, const RB: usize, const SB: usize>(
+    x: &[f64],
+    y: &[f64],
+    alpha: f64,
+    out: &mut DMatrix<f64>,
+    r0: usize,
+    s0: usize,
+    mp: usize,
+) {
+    const W: usize = 4;
+    let mut acc = [[[0.0f64; W]; SB]; RB];
+    let mut i0 = 0;
+    while i0 < mp {
+        for rr in 0..RB {
+            let xv = &x[(r0 + rr) * mp + i0..(r0 + rr) * mp + i0 + W];
+            for ss in 0..SB {
+                let yv = &y[(s0 + ss) * mp + i0..(s0 + ss) * mp + i0 + W];
+                for l in 0..W {
+                    acc[rr][ss][l] = madd::<F>(xv[l], yv[l], acc[rr][ss][l]);
+                }
+            }
+        }
+        i0 += W;
+    }
+    for rr in 0..RB {
+        for ss in 0..SB {
+            let a = &acc[rr][ss];
+            out[(r0 + rr, s0 + ss)] += alpha * ((a[0] + a[2]) + (a[1] + a[3]));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct ExpAll(Vec<f64>);
+    impl Kernel for ExpAll {
+        type Output = Vec<f64>;
+        #[inline(always)]
+        fn run<const F: bool>(mut self) -> Vec<f64> {
+            exp_slice::<F>(&mut self.0);
+            self.0
+        }
+    }
+
+    /// A deterministic sweep: a fine grid plus pseudo-random points (xorshift) on `[lo, hi]`.
+    fn points(lo: f64, hi: f64, n: usize) -> Vec<f64> {
+        let mut s = 0x9E37_79B9_7F4A_7C15u64;
+        let mut v: Vec<f64> = (0..n)
+            .map(|i| lo + (hi - lo) * i as f64 / (n - 1) as f64)
+            .collect();
+        for _ in 0..n {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            v.push(lo + (hi - lo) * ((s >> 11) as f64 / (1u64 << 53) as f64));
+        }
+        v
+    }
+
+    fn max_rel(xs: &[f64], ys: &[f64]) -> f64 {
+        xs.iter()
+            .zip(ys)
+            .map(|(&x, &y)| {
+                let r = x.exp();
+                if r == 0.0 || !r.is_normal() {
+                    0.0
+                } else {
+                    ((y - r) / r).abs()
+                }
+            })
+            .fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn exp_matches_libm_to_about_one_ulp() {
+        // the exponents the kernel sees: Q entries and q_i lie well inside [−700, 50]
+        for (lo, hi) in [(-1.0, 1.0), (-40.0, 10.0), (-708.0, 709.0)] {
+            let xs = points(lo, hi, 200_000);
+            let dispatched = dispatch(ExpAll(xs.clone()));
+            let fused: Vec<f64> = xs.iter().map(|&x| exp1::<true>(x)).collect();
+            let plain: Vec<f64> = xs.iter().map(|&x| exp1::<false>(x)).collect();
+            for (name, ys) in [
+                ("dispatched", &dispatched),
+                ("fma", &fused),
+                ("no fma", &plain),
+            ] {
+                let e = max_rel(&xs, ys);
+                println!("[{lo}, {hi}] {name}: max relative error {e:.3e}");
+                assert!(e <= 2.3e-16, "{name} exp on [{lo}, {hi}]: {e:e}");
+            }
+        }
+    }
+
+    #[test]
+    fn exp_edge_cases() {
+        let xs = vec![
+            0.0,
+            -0.0,
+            1.0,
+            -745.0,
+            -745.2,
+            -750.0,
+            -1e300,
+            709.7,
+            709.8,
+            1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            -720.0,
+            -730.5,
+        ];
+        let ys = dispatch(ExpAll(xs.clone()));
+        assert_eq!(ys[0], 1.0);
+        assert_eq!(ys[1], 1.0);
+        assert!((ys[2] - std::f64::consts::E).abs() <= 2.3e-16 * std::f64::consts::E);
+        assert!(ys[3] > 0.0 && ys[3] < 1e-323);
+        assert_eq!(ys[5], 0.0);
+        assert_eq!(ys[6], 0.0);
+        assert!(ys[7].is_finite() && ((ys[7] - 709.7f64.exp()) / ys[7]).abs() < 3e-16);
+        assert_eq!(ys[8], f64::INFINITY);
+        assert_eq!(ys[9], f64::INFINITY);
+        assert_eq!(ys[10], f64::INFINITY);
+        assert_eq!(ys[11], 0.0);
+        // subnormal results: absolute error below the smallest normal's ulp
+        for &k in &[12usize, 13] {
+            assert!(
+                (ys[k] - xs[k].exp()).abs() <= 1e-320,
+                "{} {}",
+                ys[k],
+                xs[k].exp()
+            );
+        }
+        let nan = dispatch(ExpAll(vec![f64::NAN]));
+        assert!(nan[0].is_nan());
+    }
+
+    #[test]
+    fn row_solves_and_sums() {
+        let a = DMatrix::from_row_slice(3, 3, &[4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0]);
+        let l = a.clone().cholesky().expect("spd").l();
+        let inv = chol_inverse::<false>(&l);
+        assert!((&a * &inv - DMatrix::identity(3, 3)).abs().max() < 1e-14);
+        // two right-hand sides stored as rows of stride 8
+        let b = DMatrix::from_row_slice(3, 2, &[1.0, -2.0, 0.5, 3.0, -1.0, 0.25]);
+        let mut x = vec![0.0; 3 * 8];
+        for i in 0..3 {
+            for j in 0..2 {
+                x[i * 8 + j] = b[(i, j)];
+            }
+        }
+        solve_lower_rows::<true>(&l, &mut x, 3, 8);
+        solve_upper_rows::<true>(&l, &mut x, 3, 8);
+        let want = a.clone().cholesky().expect("spd").solve(&b);
+        for i in 0..3 {
+            for j in 0..2 {
+                assert!((x[i * 8 + j] - want[(i, j)]).abs() < 1e-14);
+            }
+        }
+        // gemm_rows: out = C Mᵀ-style products against a naive loop (d = 6, n = 5, mp = 8)
+        let (d, n, mp) = (6, 5, 8);
+        let cm: Vec<f64> = (0..d * mp).map(|i| ((i * 7) % 11) as f64 - 5.0).collect();
+        let mat: Vec<f64> = (0..n * mp).map(|i| ((i * 5) % 13) as f64 * 0.25).collect();
+        let mut out = vec![0.0; d * mp];
+        gemm_rows::<true>(&cm, &mat, &mut out, d, n, mp);
+        for k in 0..d {
+            for i in 0..mp {
+                let want: f64 = (0..n).map(|j| cm[k * mp + j] * mat[j * mp + i]).sum();
+                assert!((out[k * mp + i] - want).abs() < 1e-12);
+            }
+        }
+        // gram_add against naive dots (d = 5 rows of stride 8, the last 2 entries zero)
+        let (d, mp) = (5, 8);
+        let xs: Vec<f64> = (0..d * mp)
+            .map(|i| {
+                if i % mp < 6 {
+                    ((i * 3) % 7) as f64 - 3.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let ys: Vec<f64> = (0..d * mp).map(|i| ((i * 5) % 9) as f64 * 0.5).collect();
+        let mut g = DMatrix::zeros(d, d);
+        gram_add::<true>(&xs, &ys, 2.0, &mut g, d, mp);
+        for r in 0..d {
+            for c in 0..d {
+                let want: f64 = (0..mp).map(|i| 2.0 * xs[r * mp + i] * ys[c * mp + i]).sum();
+                assert!((g[(r, c)] - want).abs() < 1e-12);
+            }
+        }
+        let v: Vec<f64> = (0..21).map(|i| i as f64 * 0.5).collect();
+        let w: Vec<f64> = (0..21).map(|i| 1.0 - i as f64 * 0.1).collect();
+        let naive: f64 = v.iter().zip(&w).map(|(a, b)| a * b).sum();
+        assert!((dot::<true>(&v, &w) - naive).abs() < 1e-12);
+        assert!((sum(&v) - v.iter().sum::<f64>()).abs() < 1e-12);
+    }
+}
