@@ -340,7 +340,27 @@ pub fn learn_policy(
             ..settings.fit.clone()
         };
         let clock = std::time::Instant::now();
-        let (model, fit_report) = fit_episodes(&training, &fit_settings, &mut |_| {})?;
+        let (model, mut fit_report) = match fit_episodes(&training, &fit_settings, &mut |_| {}) {
+            Ok(fitted) => fitted,
+            // the MSGP start (the one-step model rolled out over every episode) can already
+            // fail numerically; the iteration then runs on that one-step model
+            Err(
+                e @ (msgp_core::MsgpError::NonFinite(_)
+                | msgp_core::MsgpError::NotPositiveDefinite { .. }),
+            ) if settings.method == Method::Msgp => {
+                let one_step = FitSettings {
+                    method: Method::GpNarx,
+                    ..fit_settings.clone()
+                };
+                let (model, mut report) = fit_episodes(&training, &one_step, &mut |_| {})?;
+                report.numerical_stop = Some(format!(
+                    "the MSGP fit failed at its start ({e}); this iteration used the one-step \
+                     GP-NARX model"
+                ));
+                (model, report)
+            }
+            Err(e) => return Err(e.into()),
+        };
         let fit_seconds = clock.elapsed().as_secs_f64();
         let problem = PolicyProblem {
             model: &model,
@@ -410,7 +430,7 @@ pub fn learn_policy(
             stable,
             fit_seconds,
             search_seconds,
-            fit_numerical_stop: fit_report.numerical_stop,
+            fit_numerical_stop: fit_report.numerical_stop.take(),
             search_failure,
             gains,
         };
