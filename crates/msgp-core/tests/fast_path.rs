@@ -134,7 +134,10 @@ fn check_loss(what: &str, params: &GpParams<f64>, spec: &NarxSpec, episodes: &[E
     }
 }
 
-/// Predicted means and covariances of every step, fast against generic.
+/// Predicted means and covariances of every step, fast against generic. The two sum in different
+/// orders (vector lanes, FMA), and a closed-loop rollout feeds each step's rounding into the next:
+/// over 50+ steps that grows to ~1e-12 relative (which lanes and FMA the runtime dispatch picks
+/// depends on the machine), so the bound is 1e-11 — a wrong term would be off by ≥ 1e-6.
 fn check_predictions(
     what: &str,
     params: &GpParams<f64>,
@@ -186,7 +189,7 @@ fn check_predictions(
          {wc:.2e} (first 10 steps {first:.2e})",
         fast.len()
     );
-    assert!(wm.max(wc) <= 1e-12, "{what}: {wm:e} {wc:e}");
+    assert!(wm.max(wc) <= 1e-11, "{what}: {wm:e} {wc:e}");
 }
 
 #[test]
