@@ -7,6 +7,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::linalg::symmetrize;
 use crate::moments::Moments;
 use crate::scalar::Scalar;
 
@@ -21,14 +22,7 @@ pub fn add_linear_mean<T: Scalar>(
     let a_sigma = a * sigma; // E × D
     let cross = &a_sigma * &mm.v; // AΣV, E × E
     let mut cov = &mm.cov + &a_sigma * a.transpose() + &cross + cross.transpose();
-    let e = cov.nrows();
-    for i in 0..e {
-        for j in 0..i {
-            let s = (cov[(i, j)] + cov[(j, i)]) * crate::scalar::c::<T>(0.5);
-            cov[(i, j)] = s;
-            cov[(j, i)] = s;
-        }
-    }
+    symmetrize(&mut cov);
     mm.cov = cov;
     mm.io_cov += a_sigma.transpose();
     mm.v += a.transpose();

@@ -328,3 +328,64 @@ pub fn optimise_pid(
         steps,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::{FitSettings, fit};
+    use crate::model::Method;
+    use crate::trajectory::Trajectory;
+
+    #[test]
+    fn the_policy_start_sees_observation_noise_not_the_start_spread() {
+        // two outputs, so the window has several output lags per output
+        let n = 120;
+        let u = DMatrix::from_fn(n, 1, |t, _| (t as f64 * 0.31).sin());
+        let y = DMatrix::from_fn(n, 2, |t, j| {
+            (t as f64 * 0.1 + j as f64).cos() + 0.01 * ((t * 7 + j) as f64).sin()
+        });
+        let traj = Trajectory::new(u, y).expect("traj");
+        let settings = FitSettings {
+            method: Method::GpNarx,
+            ly: 2,
+            lu: 1,
+            inducing: 20,
+            one_step_iterations: 30,
+            ..FitSettings::default()
+        };
+        let (model, _) = fit(&[traj], &settings, &mut |_| {}).expect("fit");
+        let y0_var = [0.04, 0.09];
+        let problem = PolicyProblem {
+            model: &model,
+            y0_mean: vec![0.2, -0.1],
+            y0_var: y0_var.to_vec(),
+            u0: vec![0.0],
+            cost: SaturatingCost::with_widths(DVector::zeros(2), &[0.5, 0.5]).expect("cost"),
+            horizon: 5,
+        };
+        let start = problem.start::<f64>(4);
+        let (spec, norm) = (model.spec, &model.normalizer);
+        let d = spec.input_dim();
+        for j in 0..2 {
+            let std = norm.y_std[j];
+            let sy2 = model.params.log_obs_noise[j].exp() + model.config.noise_floor;
+            let p = d + j;
+            assert!((start.mean[p] - problem.y0_mean[j]).abs() < 1e-15);
+            for k in 0..spec.ly {
+                // the policy's previous observation minus the latent output at lag k, in
+                // original units: only observation noise (the old deterministic start gave
+                // this difference the whole y0_var, a random kick to any derivative term)
+                let i = spec.y_index(k, j);
+                let var_diff = start.cov[(p, p)] + std * std * start.cov[(i, i)]
+                    - 2.0 * std * start.cov[(p, i)];
+                let want = sy2 * std * std;
+                assert!(
+                    (var_diff - want).abs() <= 1e-12 * y0_var[j],
+                    "output {j} lag {k}: {var_diff:e} vs {want:e}"
+                );
+            }
+            // and nothing links the two outputs
+            assert_eq!(start.cov[(d, d + 1)], 0.0);
+        }
+    }
+}

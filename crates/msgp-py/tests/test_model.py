@@ -44,10 +44,9 @@ def test_params_are_numpy_arrays_of_the_documented_shapes(fitted):
     assert p["noise_floor"] >= 0.0
 
 
-def test_reference_prediction_matches_numpy_gp(fitted):
-    """Eq. (13) of the model-format doc in numpy, from `params`, at the reference window."""
-    model, _ = fitted
-    p, ref = model.params, model.reference
+def numpy_gp(p, window):
+    """Eq. (13) of the model-format doc in numpy for output 0, from `params`: the GP's mean (the
+    linear prior mean not included) and variance at `window`."""
     X, ybar = p["pseudo_inputs"], p["pseudo_targets"][:, 0]
     ell = np.exp(p["log_lengthscales"][0])
     sf2 = math.exp(p["log_signal_var"][0])
@@ -58,9 +57,15 @@ def test_reference_prediction_matches_numpy_gp(fitted):
         return sf2 * np.exp(-0.5 * np.sum(d * d, axis=2))
 
     Kt = k(X, X) + sx2 * np.eye(len(X))
-    kx = k(X, ref["window"][None, :])[:, 0]
-    mean = kx @ np.linalg.solve(Kt, ybar)
-    var = sf2 - kx @ np.linalg.solve(Kt, kx)
+    kx = k(X, window[None, :])[:, 0]
+    return kx @ np.linalg.solve(Kt, ybar), sf2 - kx @ np.linalg.solve(Kt, kx)
+
+
+def test_reference_prediction_matches_numpy_gp(fitted):
+    """Eq. (13) of the model-format doc in numpy, from `params`, at the reference window."""
+    model, _ = fitted
+    p, ref = model.params, model.reference
+    mean, var = numpy_gp(p, ref["window"])
     assert abs(mean - ref["mean"][0]) < 1e-9
     assert abs(var - ref["var"][0]) < 1e-9
 
@@ -73,19 +78,9 @@ def test_linear_prior_mean_is_in_params_file_and_prediction(tmp_path):
     p, ref = model.params, model.reference
     A = p["linear_mean"]
     assert A.shape == (1, 2) and np.all(A != 0.0)
-    X, ybar = p["pseudo_inputs"], p["pseudo_targets"][:, 0]
-    ell = np.exp(p["log_lengthscales"][0])
-    sf2 = math.exp(p["log_signal_var"][0])
-    sx2 = p["noise_floor"] + math.exp(p["log_process_noise"][0])
-
-    def k(a, b):
-        d = (a[:, None, :] - b[None, :, :]) / ell
-        return sf2 * np.exp(-0.5 * np.sum(d * d, axis=2))
-
-    Kt = k(X, X) + sx2 * np.eye(len(X))
-    kx = k(X, ref["window"][None, :])[:, 0]
-    mean = kx @ np.linalg.solve(Kt, ybar) + A[0] @ ref["window"]
-    assert abs(mean - ref["mean"][0]) < 1e-9
+    gp_mean, var = numpy_gp(p, ref["window"])
+    assert abs(gp_mean + A[0] @ ref["window"] - ref["mean"][0]) < 1e-9
+    assert abs(var - ref["var"][0]) < 1e-9
     path = tmp_path / "lin.json"
     model.save(path)
     doc = json.loads(path.read_text())
