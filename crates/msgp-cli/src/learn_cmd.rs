@@ -78,6 +78,15 @@ pub struct BudgetArgs {
     /// Highest frequency of the random excitation [Hz].
     #[arg(long, value_name = "HZ", default_value_t = LearnSettings::default().excitation.max_hz)]
     pub excitation_max_hz: f64,
+    /// Trust region of each policy search, in typical gain magnitudes: no gain moves further
+    /// than this from the previous iteration's (0: off).
+    #[arg(long, value_name = "R", default_value_t = LearnSettings::default().search.trust_region)]
+    pub trust_region: f64,
+    /// Widths of the saturating cost on the pole angle [rad] and the end-effector position [m]:
+    /// `c = 1 − exp(−½ ((θ/w_θ)² + (x/w_x)²))` per step.
+    #[arg(long, value_name = "W_THETA,W_X", value_delimiter = ',',
+          default_values_t = LearnSettings::default().cost_widths)]
+    pub cost_widths: Vec<f64>,
 }
 
 /// Options of `msgp learn-policy`.
@@ -257,6 +266,20 @@ pub fn settings(
             args.policy_horizon
         );
     }
+    if !(args.trust_region.is_finite() && args.trust_region >= 0.0) {
+        anyhow::bail!(
+            "--trust-region must be finite and at least 0, got {}",
+            args.trust_region
+        );
+    }
+    let cost_widths: [f64; 2] = match args.cost_widths.as_slice() {
+        [w_theta, w_x] if [w_theta, w_x].iter().all(|w| w.is_finite() && **w > 0.0) => {
+            [*w_theta, *w_x]
+        }
+        other => anyhow::bail!(
+            "--cost-widths needs two positive widths (angle in rad, position in m), got {other:?}"
+        ),
+    };
     if args.random_rollouts == 0 {
         anyhow::bail!("--random-rollouts must be at least 1 (the first model needs data)");
     }
@@ -279,6 +302,7 @@ pub fn settings(
         episode_seconds: args.episode_seconds,
         policy_horizon_seconds: args.policy_horizon,
         excitation,
+        cost_widths,
         seed,
         fit: msgp_core::fit::FitSettings {
             inducing: args.inducing,
@@ -296,6 +320,7 @@ pub fn settings(
         search: msgp_core::policy_search::PolicySearchSettings {
             iterations: args.search_iters,
             candidates: args.candidates,
+            trust_region: args.trust_region,
             ..d.search
         },
         ..d

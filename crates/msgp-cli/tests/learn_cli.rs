@@ -218,6 +218,22 @@ fn bad_learning_options_fail_with_a_message() {
         ),
         (vec!["learn-policy", "--sim", "cartpole"], "cartpole"),
         (
+            vec!["learn-policy", "--sim", "pendulum", "--cost-widths", "0.1"],
+            "--cost-widths needs two positive widths",
+        ),
+        (
+            vec!["learn-policy", "--sim", "pendulum", "--cost-widths=0.1,-1"],
+            "--cost-widths needs two positive widths",
+        ),
+        (
+            vec!["learn-policy", "--sim", "pendulum", "--trust-region=-1"],
+            "--trust-region",
+        ),
+        (
+            vec!["learn-policy", "--sim", "pendulum", "--policy-horizon", "0"],
+            "--policy-horizon",
+        ),
+        (
             vec!["learn-policy", "--sim", "pendulum", "--pole-length=-1"],
             "pole",
         ),

@@ -9,8 +9,9 @@
 //! `k(x)ᵀ (σ_n² K_mm + K_mn K_nm)⁻¹ K_mn y`, i.e. `ȳ = K̃_m (σ_n² K_mm + K_mn K_nm)⁻¹ K_mn y`.
 //! This sparse GP-NARX is also MSGP's initialisation, as in the paper.
 //!
-//! With a linear prior mean ([`MeanFunction::Linear`]) the map `A` is the ridge least-squares
-//! ARX fit of the targets on the windows, and the GP is fitted to what it leaves over.
+//! With a linear prior mean ([`MeanFunction::Linear`]) the map `A` is an instrumental-variables
+//! ARX fit of the targets on the windows (see [`OneStepData`]), and the GP is fitted to what it
+//! leaves over.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -26,23 +27,51 @@ use crate::trajectory::Trajectory;
 
 const LN_2PI: f64 = 1.837_877_066_409_345_3;
 
-/// One-step training pairs: windows `x̃_t` (N × D) and next outputs `y_{t+1}` (N × E).
+/// Extra lags of the instrument window beyond the regressor's (`l_y + 2` outputs and
+/// `l_u + 2` inputs): an over-identified instrumental-variables estimate.
+const INSTRUMENT_EXTRA_LAGS: usize = 2;
+
+/// One-step training pairs: windows `x̃_t` (N × D) and next outputs `y_{t+1}` (N × E), and for
+/// the pairs with enough history, *instruments* for the linear prior mean.
+///
+/// The measured outputs in `x̃_t` carry the observation noise that also enters the target
+/// (errors in variables), so least squares of `y_{t+1}` on `x̃_t` is biased: on a fast-sampled
+/// mechanical system it can turn `θ_{t+1} ≈ 2θ_t − θ_{t−1}` into a random walk. The instruments
+/// are the signals at times `≤ t − l_y` (`l_y + 2` output and `l_u + 2` input lags of the window
+/// at `t − l_y`): correlated with `x̃_t` through the dynamics, but not with the observation noise
+/// of `y_{t−l_y+1}, …, y_{t+1}` (white noise), nor — under feedback — with inputs computed from
+/// those noisy outputs.
 #[derive(Clone, Debug)]
 pub struct OneStepData {
     /// Inputs.
     pub x: DMatrix<f64>,
     /// Targets.
     pub y: DMatrix<f64>,
+    /// Rows of `x`/`y` that have instruments.
+    pub instrumented: Vec<usize>,
+    /// Their instruments (one row per entry of `instrumented`).
+    pub z: DMatrix<f64>,
 }
 
 /// Builds one-step pairs from every trajectory.
 pub fn one_step_pairs(spec: &NarxSpec, trajs: &[&Trajectory]) -> Result<OneStepData> {
     let d = spec.input_dim();
+    let zspec = NarxSpec {
+        ly: spec.ly + INSTRUMENT_EXTRA_LAGS,
+        lu: spec.lu + INSTRUMENT_EXTRA_LAGS,
+        ..*spec
+    };
     let mut rows_x: Vec<Vec<f64>> = Vec::new();
     let mut rows_y: Vec<Vec<f64>> = Vec::new();
+    let mut rows_z: Vec<Vec<f64>> = Vec::new();
+    let mut instrumented = Vec::new();
     for traj in trajs {
         traj.check(spec)?;
         for t in (spec.warmup() - 1)..(traj.len() - 1) {
+            if t >= spec.ly + zspec.warmup() - 1 {
+                instrumented.push(rows_x.len());
+                rows_z.push(zspec.window(&traj.y, &traj.u, t - spec.ly));
+            }
             rows_x.push(spec.window(&traj.y, &traj.u, t));
             rows_y.push((0..spec.dy).map(|j| traj.y[(t + 1, j)]).collect());
         }
@@ -51,6 +80,8 @@ pub fn one_step_pairs(spec: &NarxSpec, trajs: &[&Trajectory]) -> Result<OneStepD
     Ok(OneStepData {
         x: DMatrix::from_fn(n, d, |i, k| rows_x[i][k]),
         y: DMatrix::from_fn(n, spec.dy, |i, j| rows_y[i][j]),
+        z: DMatrix::from_fn(rows_z.len(), zspec.input_dim(), |i, k| rows_z[i][k]),
+        instrumented,
     })
 }
 
@@ -187,19 +218,54 @@ fn column_std(x: &DMatrix<f64>, d: usize) -> f64 {
     var.sqrt().max(1e-6)
 }
 
-/// Ridge least squares `A = argmin ‖Y − X Aᵀ‖² + λ‖A‖²` (E × D), `λ = 1e-6 N` on the
-/// normalised pairs.
-fn arx_least_squares(
+/// The linear prior mean `A` (E × D) on the normalised pairs: two-stage least squares with the
+/// instruments of [`OneStepData`] when at least `4 · dim(z)` pairs have them, else ridge least
+/// squares `argmin ‖Y − X Aᵀ‖² + λ‖A‖²`. Both use the ridge `λ = 1e-6 N` on their Gram
+/// matrices.
+///
+/// 2SLS: `Aᵀ = (Bᵀ G⁻¹ B)⁻¹ Bᵀ G⁻¹ C` with `G = ZᵀZ`, `B = ZᵀX`, `C = ZᵀY`, i.e. least squares of
+/// `Y` on the projection of `X` onto the instruments.
+fn arx_linear_mean(
     data: &OneStepData,
     config: &GpConfig,
     log: &mut JitterLog,
 ) -> Result<DMatrix<f64>> {
-    let (n, d) = data.x.shape();
-    let mut gram = data.x.transpose() * &data.x;
-    for k in 0..d {
-        gram[(k, k)] += 1e-6 * n as f64;
+    let ridge = |mut g: DMatrix<f64>, n: usize| {
+        for k in 0..g.nrows() {
+            g[(k, k)] += 1e-6 * n as f64;
+        }
+        g
+    };
+    let ni = data.instrumented.len();
+    if ni >= 4 * data.z.ncols() && ni > 0 {
+        let x = data.x.select_rows(&data.instrumented);
+        let y = data.y.select_rows(&data.instrumented);
+        let zt = data.z.transpose();
+        let g = DenseChol::new(
+            &ridge(&zt * &data.z, ni),
+            &config.jitter,
+            "ZᵀZ + λI (instruments of the linear prior mean)",
+            log,
+        )?;
+        let b = &zt * &x;
+        let gb = g.solve(&b);
+        let gc = g.solve(&(&zt * &y));
+        let normal = DenseChol::new(
+            &ridge(b.transpose() * &gb, ni),
+            &config.jitter,
+            "Bᵀ G⁻¹ B + λI (two-stage least squares)",
+            log,
+        )?;
+        let at = normal.solve(&(b.transpose() * gc)); // D × E
+        return Ok(at.transpose());
     }
-    let ch = DenseChol::new(&gram, &config.jitter, "XᵀX + λI (linear prior mean)", log)?;
+    let n = data.x.nrows();
+    let ch = DenseChol::new(
+        &ridge(data.x.transpose() * &data.x, n),
+        &config.jitter,
+        "XᵀX + λI (linear prior mean)",
+        log,
+    )?;
     let at = ch.solve(&(data.x.transpose() * &data.y)); // D × E
     Ok(at.transpose())
 }
@@ -223,7 +289,7 @@ pub fn fit_one_step(
     }
     let linear_mean = match config.mean {
         MeanFunction::Zero => DMatrix::zeros(e, d),
-        MeanFunction::Linear => arx_least_squares(data, config, log)?,
+        MeanFunction::Linear => arx_linear_mean(data, config, log)?,
     };
     // the targets the GP models: what the prior mean leaves over
     let targets = &data.y - &data.x * linear_mean.transpose();
@@ -329,6 +395,57 @@ pub fn fit_one_step(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A lightly damped resonance sampled fast, `y_{t+1} = 1.9 y_t − 0.95 y_{t−1} + 0.1 u_t`,
+    /// measured with 20% noise: least squares turns the lag coefficients towards a random walk,
+    /// the instruments recover them.
+    #[test]
+    fn instruments_remove_the_errors_in_variables_bias_of_the_linear_mean() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let n = 4000;
+        let mut latent = vec![0.0; n];
+        // a smooth multisine: the inputs of the window are predictable from older ones
+        let u = DMatrix::from_fn(n, 1, |t, _| {
+            [(0.07, 0.3), (0.19, 1.1), (0.31, 2.0), (0.53, 0.7)]
+                .iter()
+                .map(|(w, phase)| (w * t as f64 + phase).sin())
+                .sum::<f64>()
+        });
+        for t in 1..n - 1 {
+            latent[t + 1] = 1.9 * latent[t] - 0.95 * latent[t - 1] + 0.1 * u[(t, 0)];
+        }
+        let std = {
+            let m = latent.iter().sum::<f64>() / n as f64;
+            (latent.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n as f64).sqrt()
+        };
+        let y = DMatrix::from_fn(n, 1, |t, _| {
+            let z: f64 = StandardNormal.sample(&mut rng);
+            latent[t] + 0.2 * std * z
+        });
+        let traj = Trajectory::new(u, y).expect("trajectory");
+        let spec = NarxSpec::siso(2, 1);
+        let data = one_step_pairs(&spec, &[&traj]).expect("pairs");
+        assert_eq!(data.instrumented.len(), data.x.nrows() - 4);
+        let mut log = JitterLog::default();
+        let config = GpConfig::default();
+        let iv = arx_linear_mean(&data, &config, &mut log).expect("iv");
+        let ls = {
+            let plain = OneStepData {
+                instrumented: Vec::new(),
+                z: DMatrix::zeros(0, data.z.ncols()),
+                ..data.clone()
+            };
+            arx_linear_mean(&plain, &config, &mut log).expect("ls")
+        };
+        // 20% noise is enough to bias least squares by more than 0.1 on each lag
+        assert!((ls[(0, 0)] - 1.9).abs() > 0.1, "{ls}");
+        assert!((ls[(0, 1)] + 0.95).abs() > 0.1, "{ls}");
+        assert!((iv[(0, 0)] - 1.9).abs() < 0.02, "{iv}");
+        assert!((iv[(0, 1)] + 0.95).abs() < 0.02, "{iv}");
+        assert!((iv[(0, 2)] - 0.1).abs() < 0.01, "{iv}");
+    }
 
     fn problem() -> (DMatrix<f64>, DVector<f64>) {
         let x = DMatrix::from_fn(40, 3, |i, k| ((i * 7 + k * 3) as f64 * 0.37).sin());

@@ -88,7 +88,8 @@ impl PidMask {
 pub struct PolicySearchSettings {
     /// Adam steps per start.
     pub iterations: usize,
-    /// Adam step size, relative to each gain's scale (`max(|g|, 1)`).
+    /// Adam step size, relative to each gain's scale (`max(|g₀|, typical)`, see
+    /// [`optimise_pid_scaled`]).
     pub learning_rate: f64,
     /// Extra starts: the current gains perturbed by `restart_spread` (relative), seeded.
     pub restarts: usize,
@@ -97,7 +98,7 @@ pub struct PolicySearchSettings {
     /// Seed of the restarts and candidates.
     pub seed: u64,
     /// Random candidates screened on the model before the gradient starts: each free gain is
-    /// drawn from `N(0, (candidate_spread · max(|g₀|, 1))²)` around zero (signs included, so
+    /// drawn from `N(0, (candidate_spread · scale)²)` around zero (signs included, so
     /// no sign of the gains is assumed), evaluated in f64, and the `candidate_starts` cheapest
     /// become extra Adam starts. 0 switches the screening off.
     pub candidates: usize,
@@ -105,6 +106,13 @@ pub struct PolicySearchSettings {
     pub candidate_spread: f64,
     /// How many of the best candidates are refined by Adam.
     pub candidate_starts: usize,
+    /// Trust region of one search, in units of each gain's scale: every start, candidate and
+    /// Adam iterate keeps `|g − g₀| ≤ trust_region · scale` gain by gain, and the candidates
+    /// are drawn around `g₀` instead of zero. Keeps the new gains where the model has seen data
+    /// (a model fitted to a few episodes is least reliable for gains far from them). 0 (the
+    /// default) switches it off.
+    #[serde(default)]
+    pub trust_region: f64,
 }
 
 impl Default for PolicySearchSettings {
@@ -118,6 +126,7 @@ impl Default for PolicySearchSettings {
             candidates: 0,
             candidate_spread: 2.0,
             candidate_starts: 2,
+            trust_region: 0.0,
         }
     }
 }
@@ -230,11 +239,26 @@ pub struct PolicySearchResult {
 }
 
 /// Minimises the expected cost over the free gains, starting from `initial` and from
-/// `settings.restarts` seeded perturbations of it; returns the best.
+/// `settings.restarts` seeded perturbations of it; returns the best. Each gain's scale (of the
+/// Adam steps, restarts and candidates) is `max(|g₀|, 1)`.
 pub fn optimise_pid(
     problem: &PolicyProblem<'_>,
     initial: &PidPolicy<f64>,
     mask: &PidMask,
+    settings: &PolicySearchSettings,
+) -> Result<PolicySearchResult> {
+    let typical = vec![1.0; mask.len()];
+    optimise_pid_scaled(problem, initial, mask, &typical, settings)
+}
+
+/// [`optimise_pid`] with each free gain's scale `max(|g₀|, typical)`, `typical` packed like
+/// [`PidMask::pack`]: a gain that has come near zero keeps the scale of its kind, so the
+/// candidates and the Adam steps can still reach typical magnitudes again.
+pub fn optimise_pid_scaled(
+    problem: &PolicyProblem<'_>,
+    initial: &PidPolicy<f64>,
+    mask: &PidMask,
+    typical: &[f64],
     settings: &PolicySearchSettings,
 ) -> Result<PolicySearchResult> {
     if mask.is_empty() {
@@ -243,30 +267,67 @@ pub fn optimise_pid(
             reason: "no free gains".into(),
         });
     }
+    if typical.len() != mask.len() || typical.iter().any(|t| !(t.is_finite() && *t > 0.0)) {
+        return Err(MsgpError::InvalidSetting {
+            name: "policy search scales",
+            reason: format!(
+                "need {} positive finite typical gain magnitudes, got {typical:?}",
+                mask.len()
+            ),
+        });
+    }
+    if !(settings.trust_region.is_finite() && settings.trust_region >= 0.0) {
+        return Err(MsgpError::InvalidSetting {
+            name: "trust_region",
+            reason: format!("must be finite and ≥ 0, got {}", settings.trust_region),
+        });
+    }
     let x0 = mask.pack(initial);
+    let scale: Vec<f64> = x0
+        .iter()
+        .zip(typical)
+        .map(|(g, t)| g.abs().max(*t))
+        .collect();
+    // the trust region as a projection of gains (identity when it is off)
+    let tr = settings.trust_region;
+    let project = |x: &mut [f64]| {
+        if tr > 0.0 {
+            for ((g, g0), s) in x.iter_mut().zip(&x0).zip(&scale) {
+                *g = g.clamp(g0 - tr * s, g0 + tr * s);
+            }
+        }
+    };
     let mut rng = StdRng::seed_from_u64(settings.seed);
     let mut starts = vec![x0.clone()];
     for _ in 0..settings.restarts {
-        starts.push(
-            x0.iter()
-                .map(|g| {
-                    let z: f64 = StandardNormal.sample(&mut rng);
-                    g + settings.restart_spread * g.abs().max(1.0) * z
-                })
-                .collect(),
-        );
+        let mut x: Vec<f64> = x0
+            .iter()
+            .zip(&scale)
+            .map(|(g, s)| {
+                let z: f64 = StandardNormal.sample(&mut rng);
+                g + settings.restart_spread * s * z
+            })
+            .collect();
+        project(&mut x);
+        starts.push(x);
     }
-    let scale: Vec<f64> = x0.iter().map(|g| g.abs().max(1.0)).collect();
     if settings.candidates > 0 {
         let mut screened: Vec<(f64, Vec<f64>)> = Vec::with_capacity(settings.candidates);
+        let centre: Vec<f64> = if tr > 0.0 {
+            x0.clone()
+        } else {
+            vec![0.0; x0.len()]
+        };
         for _ in 0..settings.candidates {
-            let x: Vec<f64> = scale
+            let mut x: Vec<f64> = scale
                 .iter()
-                .map(|s| {
+                .zip(&centre)
+                .map(|(s, c)| {
                     let z: f64 = StandardNormal.sample(&mut rng);
-                    settings.candidate_spread * s * z
+                    c + settings.candidate_spread * s * z
                 })
                 .collect();
+            project(&mut x);
             // a candidate whose rollout fails numerically is simply not a start
             if let Ok((value, _)) = problem.evaluate(&mask.unpack::<f64>(initial, &x))
                 && value.is_finite()
@@ -309,6 +370,11 @@ pub fn optimise_pid(
             }
             let gz: Vec<f64> = grad.iter().zip(&scale).map(|(d, s)| d * s).collect();
             adam.step(&mut state, &mut z, &gz, &on);
+            if tr > 0.0 {
+                for ((z, g0), s) in z.iter_mut().zip(&x0).zip(&scale) {
+                    *z = z.clamp(g0 / s - tr, g0 / s + tr);
+                }
+            }
         }
         let g: Vec<f64> = z.iter().zip(&scale).map(|(z, s)| z * s).collect();
         if let Ok((value, _)) = problem.evaluate(&mask.unpack::<f64>(initial, &g))

@@ -5,14 +5,17 @@
 use msgp_core::cost::SaturatingCost;
 use msgp_core::fit::{FitSettings, fit};
 use msgp_core::model::Method;
+use msgp_core::model::Model;
 use msgp_core::policy::PidPolicy;
-use msgp_core::policy_search::{PidMask, PolicyProblem, PolicySearchSettings, optimise_pid};
+use msgp_core::policy_search::{
+    PidMask, PolicyProblem, PolicySearchSettings, optimise_pid, optimise_pid_scaled,
+};
 use msgp_core::trajectory::Trajectory;
 use nalgebra::{DMatrix, DVector};
 use rand::{RngExt, SeedableRng, rngs::StdRng};
 
-#[test]
-fn finds_a_stabilising_gain_on_a_learned_unstable_plant() {
+/// A GP-NARX model of `x_{t+1} = 1.1 x_t + 0.5 u_t` from 300 noisy random-input samples.
+fn unstable_plant_model() -> Model {
     // x_{t+1} = 1.1 x_t + 0.5 u_t, measured with small noise, random inputs
     let mut rng = StdRng::seed_from_u64(3);
     let n = 300;
@@ -36,8 +39,12 @@ fn finds_a_stabilising_gain_on_a_learned_unstable_plant() {
         inducing: 60,
         ..FitSettings::default()
     };
-    let (model, _) = fit(&[traj], &settings, &mut |_| {}).expect("fit");
+    fit(&[traj], &settings, &mut |_| {}).expect("fit").0
+}
 
+#[test]
+fn finds_a_stabilising_gain_on_a_learned_unstable_plant() {
+    let model = unstable_plant_model();
     let problem = PolicyProblem {
         model: &model,
         y0_mean: vec![1.0],
@@ -79,4 +86,45 @@ fn finds_a_stabilising_gain_on_a_learned_unstable_plant() {
     );
     let again = optimise_pid(&problem, &initial, &mask, &s).expect("search");
     assert_eq!(again.policy, result.policy, "seeded search is reproducible");
+}
+
+/// With three Adam steps from a zero gain, the default scale (1) cannot move the gain far
+/// enough to stabilise the plant; a typical magnitude of 10 can. Malformed scales are errors.
+#[test]
+fn typical_gain_magnitudes_set_the_search_scale() {
+    let model = unstable_plant_model();
+    let problem = PolicyProblem {
+        model: &model,
+        y0_mean: vec![1.0],
+        y0_var: vec![0.01],
+        u0: vec![0.0],
+        cost: SaturatingCost::with_widths(DVector::from_element(1, 0.0), &[0.5]).expect("cost"),
+        horizon: 30,
+    };
+    let zero = DMatrix::zeros(1, 1);
+    let initial =
+        PidPolicy::new(zero.clone(), zero.clone(), zero.clone(), 1.0, vec![2.0]).expect("pid");
+    let mask = PidMask {
+        kp: DMatrix::from_element(1, 1, true),
+        ki: DMatrix::from_element(1, 1, false),
+        kd: DMatrix::from_element(1, 1, false),
+    };
+    let s = PolicySearchSettings {
+        iterations: 3,
+        learning_rate: 0.1,
+        restarts: 0,
+        candidates: 0,
+        ..PolicySearchSettings::default()
+    };
+    let pole = |typical: f64| {
+        let r = optimise_pid_scaled(&problem, &initial, &mask, &[typical], &s).expect("search");
+        1.1 + 0.5 * r.policy.kp[(0, 0)]
+    };
+    let (small, large) = (pole(1.0), pole(10.0));
+    println!("closed-loop pole: scale 1 → {small:.3}, scale 10 → {large:.3}");
+    assert!(small.abs() > 0.9, "{small}");
+    assert!(large.abs() < 0.9, "{large}");
+    for bad in [vec![0.0], vec![f64::NAN], vec![1.0, 1.0], vec![-1.0]] {
+        assert!(optimise_pid_scaled(&problem, &initial, &mask, &bad, &s).is_err());
+    }
 }

@@ -20,7 +20,7 @@ use msgp_core::fit::{FitSettings, TrainingEpisode, fit_episodes};
 use msgp_core::gp::MeanFunction;
 use msgp_core::model::Method;
 use msgp_core::policy::{PidPolicy, PolicySpec};
-use msgp_core::policy_search::{PidMask, PolicyProblem, PolicySearchSettings, optimise_pid};
+use msgp_core::policy_search::{PidMask, PolicyProblem, PolicySearchSettings, optimise_pid_scaled};
 use msgp_core::trajectory::Trajectory;
 
 use crate::controller::{
@@ -101,6 +101,7 @@ impl Default for LearnSettings {
                 candidates: 150,
                 candidate_spread: 2.0,
                 candidate_starts: 2,
+                trust_region: 0.0,
             },
             cost_widths: [0.1, 0.3],
             ff_segment: Some(30),
@@ -332,6 +333,12 @@ pub fn learn_policy(
         ki: DMatrix::from_row_slice(1, 2, &[false, true]),
         kd: DMatrix::from_element(1, 2, true),
     };
+    // the optimiser's coordinate scales: a gain near zero keeps its kind's typical magnitude
+    let typical: Vec<f64> = mask
+        .pack(&modelled_policy(&gains, params)?)
+        .into_iter()
+        .map(f64::abs)
+        .collect();
     let mut reports = Vec::new();
     for it in 1..=settings.iterations {
         let fit_settings = FitSettings {
@@ -379,7 +386,13 @@ pub fn learn_policy(
             ..settings.search
         };
         let clock = std::time::Instant::now();
-        let searched = optimise_pid(&problem, &modelled_policy(&gains, params)?, &mask, &search);
+        let searched = optimise_pid_scaled(
+            &problem,
+            &modelled_policy(&gains, params)?,
+            &mask,
+            &typical,
+            &search,
+        );
         let search_seconds = clock.elapsed().as_secs_f64();
         let (predicted, var, search_failure) = match searched {
             Ok(result) => {
