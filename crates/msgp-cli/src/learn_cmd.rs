@@ -69,8 +69,9 @@ pub struct BudgetArgs {
     /// Random gain candidates screened on the model before each policy optimisation.
     #[arg(long, value_name = "N", default_value_t = LearnSettings::default().search.candidates)]
     pub candidates: usize,
-    /// Prior mean of the GP model (linear: an ARX map under the GP; see docs/design.md).
-    #[arg(long, value_enum, default_value_t = MeanArg::Zero)]
+    /// Prior mean of the GP model, for both models (zero: the paper's GP; linear: an ARX map
+    /// under the GP, started by instrumental variables; see docs/design.md).
+    #[arg(long, value_enum, default_value_t = MeanArg::Linear)]
     pub mean: MeanArg,
     /// Horizon of the predicted rollouts the gains are optimised on [s].
     #[arg(long, value_name = "S", default_value_t = LearnSettings::default().policy_horizon_seconds)]

@@ -55,9 +55,12 @@ pub struct LearnSettings {
     pub policy_horizon_seconds: f64,
     /// Seed of everything random (episodes, excitation, fits, restarts).
     pub seed: u64,
-    /// Model fit settings (history, inducing points, iterations).
+    /// Model fit settings (history, inducing points, iterations). The default prior mean is
+    /// linear (an ARX map under the GP, started by instrumental variables): with a zero mean the
+    /// fitted models lose the pole's angular velocity (docs/design.md).
     pub fit: FitSettings,
-    /// Policy optimisation settings.
+    /// Policy optimisation settings. The default trust region (1 typical magnitude per
+    /// iteration) keeps the new gains near the data the model was fitted to.
     pub search: PolicySearchSettings,
     /// Cost widths for `[θ, x]` (rad, m): `c = 1 − exp(−½ Σ (y_j / w_j)²)`.
     pub cost_widths: [f64; 2],
@@ -89,7 +92,7 @@ impl Default for LearnSettings {
                 iterations: 300,
                 learning_rate: 0.01,
                 validation_fraction: 0.0,
-                mean: MeanFunction::Zero,
+                mean: MeanFunction::Linear,
                 ..FitSettings::default()
             },
             search: PolicySearchSettings {
@@ -101,7 +104,7 @@ impl Default for LearnSettings {
                 candidates: 150,
                 candidate_spread: 2.0,
                 candidate_starts: 2,
-                trust_region: 0.0,
+                trust_region: 1.0,
             },
             cost_widths: [0.1, 0.3],
             ff_segment: Some(30),
