@@ -297,19 +297,23 @@ pub fn optimise_pid_scaled(
             }
         }
     };
-    let mut rng = StdRng::seed_from_u64(settings.seed);
-    let mut starts = vec![x0.clone()];
-    for _ in 0..settings.restarts {
-        let mut x: Vec<f64> = x0
+    // `centre + spread · scale · z`, z ~ N(0, I), kept in the trust region
+    let draw = |rng: &mut StdRng, centre: &[f64], spread: f64| {
+        let mut x: Vec<f64> = centre
             .iter()
             .zip(&scale)
-            .map(|(g, s)| {
-                let z: f64 = StandardNormal.sample(&mut rng);
-                g + settings.restart_spread * s * z
+            .map(|(c, s)| {
+                let z: f64 = StandardNormal.sample(rng);
+                c + spread * s * z
             })
             .collect();
         project(&mut x);
-        starts.push(x);
+        x
+    };
+    let mut rng = StdRng::seed_from_u64(settings.seed);
+    let mut starts = vec![x0.clone()];
+    for _ in 0..settings.restarts {
+        starts.push(draw(&mut rng, &x0, settings.restart_spread));
     }
     if settings.candidates > 0 {
         let mut screened: Vec<(f64, Vec<f64>)> = Vec::with_capacity(settings.candidates);
@@ -319,15 +323,7 @@ pub fn optimise_pid_scaled(
             vec![0.0; x0.len()]
         };
         for _ in 0..settings.candidates {
-            let mut x: Vec<f64> = scale
-                .iter()
-                .zip(&centre)
-                .map(|(s, c)| {
-                    let z: f64 = StandardNormal.sample(&mut rng);
-                    c + settings.candidate_spread * s * z
-                })
-                .collect();
-            project(&mut x);
+            let x = draw(&mut rng, &centre, settings.candidate_spread);
             // a candidate whose rollout fails numerically is simply not a start
             if let Ok((value, _)) = problem.evaluate(&mask.unpack::<f64>(initial, &x))
                 && value.is_finite()

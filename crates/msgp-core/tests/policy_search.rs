@@ -42,11 +42,11 @@ fn unstable_plant_model() -> Model {
     fit(&[traj], &settings, &mut |_| {}).expect("fit").0
 }
 
-#[test]
-fn finds_a_stabilising_gain_on_a_learned_unstable_plant() {
-    let model = unstable_plant_model();
+/// Regulating the plant from `x = 1 ± 0.1` to 0 over 30 steps with a P gain from 0 (the only
+/// free gain), `|u| ≤ 2`.
+fn p_control_problem(model: &Model) -> (PolicyProblem<'_>, PidPolicy<f64>, PidMask) {
     let problem = PolicyProblem {
-        model: &model,
+        model,
         y0_mean: vec![1.0],
         y0_var: vec![0.01],
         u0: vec![0.0],
@@ -61,6 +61,13 @@ fn finds_a_stabilising_gain_on_a_learned_unstable_plant() {
         ki: DMatrix::from_element(1, 1, false),
         kd: DMatrix::from_element(1, 1, false),
     };
+    (problem, initial, mask)
+}
+
+#[test]
+fn finds_a_stabilising_gain_on_a_learned_unstable_plant() {
+    let model = unstable_plant_model();
+    let (problem, initial, mask) = p_control_problem(&model);
     let (before, _) = problem.evaluate(&initial).expect("evaluate");
     let s = PolicySearchSettings {
         iterations: 40,
@@ -93,22 +100,7 @@ fn finds_a_stabilising_gain_on_a_learned_unstable_plant() {
 #[test]
 fn typical_gain_magnitudes_set_the_search_scale() {
     let model = unstable_plant_model();
-    let problem = PolicyProblem {
-        model: &model,
-        y0_mean: vec![1.0],
-        y0_var: vec![0.01],
-        u0: vec![0.0],
-        cost: SaturatingCost::with_widths(DVector::from_element(1, 0.0), &[0.5]).expect("cost"),
-        horizon: 30,
-    };
-    let zero = DMatrix::zeros(1, 1);
-    let initial =
-        PidPolicy::new(zero.clone(), zero.clone(), zero.clone(), 1.0, vec![2.0]).expect("pid");
-    let mask = PidMask {
-        kp: DMatrix::from_element(1, 1, true),
-        ki: DMatrix::from_element(1, 1, false),
-        kd: DMatrix::from_element(1, 1, false),
-    };
+    let (problem, initial, mask) = p_control_problem(&model);
     let s = PolicySearchSettings {
         iterations: 3,
         learning_rate: 0.1,
