@@ -237,7 +237,7 @@ fn arx_linear_mean(
         g
     };
     let ni = data.instrumented.len();
-    if ni >= 4 * data.z.ncols() && ni > 0 {
+    if ni >= 4 * data.z.ncols() {
         let x = data.x.select_rows(&data.instrumented);
         let y = data.y.select_rows(&data.instrumented);
         let zt = data.z.transpose();
