@@ -32,6 +32,7 @@ pub mod model_file;
 pub mod moments;
 pub mod narx;
 pub mod optim;
+mod parallel;
 pub mod policy;
 pub mod policy_cost;
 pub mod policy_search;

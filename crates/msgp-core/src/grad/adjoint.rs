@@ -773,57 +773,6 @@ pub fn thread_count() -> usize {
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
 }
 
-/// `f(k, episode)` for every episode, on up to `threads` scoped threads (episode `k` on thread
-/// `k mod threads`); the results come back in episode order.
-fn map_episodes<R: Send>(
-    episodes: &[Episode],
-    threads: usize,
-    f: impl Fn(usize, &Episode) -> Result<R> + Sync,
-) -> Vec<Result<R>> {
-    let threads = threads.min(episodes.len()).max(1);
-    if threads == 1 {
-        return episodes
-            .iter()
-            .enumerate()
-            .map(|(k, ep)| f(k, ep))
-            .collect();
-    }
-    let f = &f;
-    let mut slots: Vec<Option<Result<R>>> = episodes.iter().map(|_| None).collect();
-    std::thread::scope(|scope| {
-        let handles: Vec<_> = (0..threads)
-            .map(|w| {
-                scope.spawn(move || {
-                    episodes
-                        .iter()
-                        .enumerate()
-                        .skip(w)
-                        .step_by(threads)
-                        .map(|(k, ep)| (k, f(k, ep)))
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        for h in handles {
-            match h.join() {
-                Ok(done) => {
-                    for (k, r) in done {
-                        slots[k] = Some(r);
-                    }
-                }
-                Err(panic) => std::panic::resume_unwind(panic),
-            }
-        }
-    });
-    slots
-        .into_iter()
-        .enumerate()
-        .map(|(k, r)| {
-            r.unwrap_or_else(|| Err(MsgpError::Data(format!("episode {k} was not evaluated"))))
-        })
-        .collect()
-}
-
 /// Value and gradient (in [`GpParams::to_flat`] layout) of the MSGP loss, by the adjoint sweep.
 /// Episodes run on [`thread_count`] threads; the result is bit-identical for any thread count.
 pub fn loss_and_gradient(
@@ -880,7 +829,7 @@ pub fn loss_and_gradient_with_threads(
             log: elog,
         })
     };
-    let outs = map_episodes(episodes, threads, run);
+    let outs = crate::parallel::map_indexed(episodes, threads, run);
     let mut adj = GpAdjoint::zeros(m, d, e);
     let mut nll = 0.0;
     let mut steps = 0;

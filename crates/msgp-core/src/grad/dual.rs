@@ -24,7 +24,22 @@ pub fn gradient<F>(x: &[f64], active: &[usize], threads: usize, f: F) -> Result<
 where
     F: Fn(&[Dual]) -> Result<Dual> + Sync,
 {
-    let chunks: Vec<&[usize]> = active.chunks(LANES).collect();
+    gradient_lanes::<LANES, F>(x, active, threads, f)
+}
+
+/// [`gradient`] with `N` directions per dual evaluation. With few parameters (a policy's
+/// handful of gains) `N` = their number does one evaluation without idle lanes: the cost of a
+/// dual operation grows with `N`.
+pub fn gradient_lanes<const N: usize, F>(
+    x: &[f64],
+    active: &[usize],
+    threads: usize,
+    f: F,
+) -> Result<(f64, Vec<f64>)>
+where
+    F: Fn(&[DualSVec64<N>]) -> Result<DualSVec64<N>> + Sync,
+{
+    let chunks: Vec<&[usize]> = active.chunks(N).collect();
     let threads = if threads == 0 {
         std::thread::available_parallelism()
             .map(|n| n.get())
@@ -35,9 +50,9 @@ where
     .clamp(1, chunks.len().max(1));
 
     let eval_chunk = |chunk: &[usize]| -> ChunkResult {
-        let mut xd: Vec<Dual> = x.iter().map(|&v| Dual::from_re(v)).collect();
+        let mut xd: Vec<DualSVec64<N>> = x.iter().map(|&v| DualSVec64::from_re(v)).collect();
         for (lane, &i) in chunk.iter().enumerate() {
-            xd[i] = Dual::from_re(x[i]).derivative(lane);
+            xd[i] = DualSVec64::from_re(x[i]).derivative(lane);
         }
         let y = f(&xd)?;
         let mut out = Vec::with_capacity(chunk.len());
@@ -49,7 +64,10 @@ where
     };
 
     if chunks.is_empty() {
-        let y = f(&x.iter().map(|&v| Dual::from_re(v)).collect::<Vec<_>>())?;
+        let y = f(&x
+            .iter()
+            .map(|&v| DualSVec64::from_re(v))
+            .collect::<Vec<_>>())?;
         return Ok((y.re, vec![0.0; x.len()]));
     }
 

@@ -1,0 +1,167 @@
+//! The pieces of one policy-learning iteration on the simulated pendulum (`msgp learn-policy`
+//! defaults: outputs θ and x, l_y = 2, l_u = 3, m = 50, linear prior mean, PID + PD gains, 5 s =
+//! 250-step closed-loop rollouts): one expected-cost evaluation in f64, one dual gradient over
+//! the 5 gains (5 and 8 lanes), a reduced policy search (on every core and on one), and 20 Adam iterations of the MSGP
+//! fit on four random rollouts plus one feedback episode.
+//!
+//! The model is fitted once, outside the timings, on four 3 s random-excitation episodes and one
+//! 3 s episode of the hand-tuned gains (seeded).
+
+use std::hint::black_box;
+use std::time::Duration;
+
+use criterion::{Criterion, SamplingMode, criterion_group, criterion_main};
+use msgp_core::cost::SaturatingCost;
+use msgp_core::fit::{FitSettings, TrainingEpisode, fit_episodes};
+use msgp_core::grad::dual;
+use msgp_core::model::Method;
+use msgp_core::policy::PolicySpec;
+use msgp_core::policy_search::{
+    PidMask, PolicyProblem, PolicySearchSettings, optimise_pid_scaled_with_threads,
+};
+use msgp_sim::learn::{LearnSettings, episode_trajectory, modelled_policy, segments};
+use msgp_sim::{
+    EpisodeConfig, PendulumParams, PidPdGains, PidPdPolicy, RandomExcitation, Saturation,
+    run_episode,
+};
+use nalgebra::{DMatrix, DVector};
+
+fn training(params: &PendulumParams, settings: &LearnSettings) -> Vec<TrainingEpisode> {
+    let mut out = Vec::new();
+    for seed in 0..4u64 {
+        let mut ex = RandomExcitation::new(seed, &settings.excitation).expect("excitation");
+        let config = EpisodeConfig {
+            seconds: settings.episode_seconds,
+            seed,
+            initial_theta: None,
+        };
+        let ep = run_episode(params, &mut ex, &config).expect("episode");
+        let traj = episode_trajectory(&ep).expect("trajectory");
+        for traj in segments(&traj, 30, 8).expect("segments") {
+            out.push(TrainingEpisode { traj, policy: None });
+        }
+    }
+    let mut gains = PidPdGains::hand_tuned();
+    gains.saturation = Saturation::Sine;
+    let mut controller = PidPdPolicy::new(gains, params).expect("policy");
+    let config = EpisodeConfig {
+        seconds: settings.episode_seconds,
+        seed: 500,
+        initial_theta: None,
+    };
+    let ep = run_episode(params, &mut controller, &config).expect("episode");
+    out.push(TrainingEpisode {
+        traj: episode_trajectory(&ep).expect("trajectory"),
+        policy: Some(PolicySpec::Pid(
+            modelled_policy(&gains, params).expect("policy"),
+        )),
+    });
+    out
+}
+
+fn bench_policy(c: &mut Criterion) {
+    let params = PendulumParams::default();
+    let settings = LearnSettings::default();
+    let episodes = training(&params, &settings);
+    let fit = FitSettings {
+        method: Method::GpNarx,
+        ..settings.fit.clone()
+    };
+    let (model, _) = fit_episodes(&episodes, &fit, &mut |_| {}).expect("fit");
+    let cost = SaturatingCost::with_widths(DVector::from_element(2, 0.0), &settings.cost_widths)
+        .expect("cost");
+    let problem = PolicyProblem {
+        model: &model,
+        y0_mean: vec![0.0, 0.0],
+        y0_var: vec![params.initial_theta_std.powi(2), 1e-8],
+        u0: vec![0.0],
+        cost,
+        horizon: 250,
+    };
+    let mut gains = PidPdGains::hand_tuned();
+    gains.saturation = Saturation::Sine;
+    let initial = modelled_policy(&gains, &params).expect("policy");
+    let mask = PidMask {
+        kp: DMatrix::from_element(1, 2, true),
+        ki: DMatrix::from_row_slice(1, 2, &[false, true]),
+        kd: DMatrix::from_element(1, 2, true),
+    };
+    let x = mask.pack(&initial);
+    let typical: Vec<f64> = x.iter().map(|g| g.abs().max(1.0)).collect();
+    let all: Vec<usize> = (0..x.len()).collect();
+
+    let mut group = c.benchmark_group("policy_pendulum_m50_H250");
+    group
+        .sample_size(10)
+        .sampling_mode(SamplingMode::Flat)
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(4));
+    group.bench_function("expected_cost_f64", |b| {
+        b.iter(|| black_box(problem.evaluate(&initial).expect("evaluate")))
+    });
+    // the search's gradient: 5 lanes for 5 gains; and the generic 8-lane duals for comparison
+    group.bench_function("gradient_dual_5_lanes", |b| {
+        b.iter(|| {
+            black_box(
+                dual::gradient_lanes::<5, _>(&x, &all, 1, |gd| {
+                    Ok(problem.evaluate(&mask.unpack(&initial, gd))?.0)
+                })
+                .expect("gradient"),
+            )
+        })
+    });
+    group.bench_function("gradient_dual_8_lanes", |b| {
+        b.iter(|| {
+            black_box(
+                dual::gradient(&x, &all, 1, |gd| {
+                    Ok(problem.evaluate(&mask.unpack(&initial, gd))?.0)
+                })
+                .expect("gradient"),
+            )
+        })
+    });
+    // 20 screened candidates + 2 Adam starts × 5 steps: 20 + 2·(5 + 1) f64 rollouts and 10
+    // dual rollouts (the learn-policy default is 150 candidates and 4 starts × 20 steps)
+    let search = PolicySearchSettings {
+        iterations: 5,
+        restarts: 0,
+        candidates: 20,
+        candidate_starts: 1,
+        ..settings.search
+    };
+    for threads in [1, 2] {
+        group.bench_function(
+            format!("search_20_candidates_2x5_steps_threads{threads}"),
+            |b| {
+                b.iter(|| {
+                    black_box(
+                        optimise_pid_scaled_with_threads(
+                            &problem, &initial, &mask, &typical, &search, threads,
+                        )
+                        .expect("search"),
+                    )
+                })
+            },
+        );
+    }
+    group.finish();
+
+    let mut group = c.benchmark_group("fit_pendulum_m50");
+    group
+        .sample_size(10)
+        .sampling_mode(SamplingMode::Flat)
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(10));
+    let msgp = FitSettings {
+        iterations: 20,
+        one_step_iterations: 20,
+        ..settings.fit.clone()
+    };
+    group.bench_function("msgp_20_one_step_plus_20_adam_iterations", |b| {
+        b.iter(|| black_box(fit_episodes(&episodes, &msgp, &mut |_| {}).expect("fit")))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench_policy);
+criterion_main!(benches);
