@@ -150,7 +150,7 @@ fn render(args: &Figure4Args, runs: &[Run], seconds: f64, plot: &std::path::Path
     let models: Vec<&str> = args.models.iter().map(|&m| model_name(m)).collect();
     let mut s = String::from("# PILCO on the simulated pendulum (the paper's Figure 4)\n\n");
     s.push_str(&format!(
-        "Learning to balance the pole on the robot's end effector (`msgp-sim`, default plant: noise, one-step delay, 30 ms lag) from scratch: {} random-excitation rollouts, then per iteration fit the model on all data, optimise the PID + PD gains on it, run them for one {} s episode. After every iteration the simulator's stability test (5 starts, 10 s each; not interaction, not training data) judges the gains. Interaction seconds count every episode so far, random rollouts included. Models: {}; seeds 0–{}; {} iterations per run.\n\n",
+        "Learning to balance the pole on the robot's end effector (`msgp-sim`, default plant: noise, one-step delay, 30 ms lag) from scratch: {} random-excitation rollouts, then per iteration fit the model on all data, optimise the PID + PD gains on it, run them for one {} s episode. After every iteration the simulator's stability test (5 starts × 3 noise draws, 10 s each; not interaction, not training data) judges the gains. Interaction seconds count every episode so far, random rollouts included. Models: {}; seeds 0–{}; {} iterations per run.\n\n",
         d.random_rollouts,
         d.episode_seconds,
         models.join(", "),

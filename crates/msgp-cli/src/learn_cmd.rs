@@ -2,7 +2,8 @@
 //! one-step GP-NARX models (paper section 4.2, Figure 4).
 //!
 //! Writes into `--out DIR`: `policy.json` (the last gains, runnable by `msgp sim pendulum
-//! --policy`), `iterations.csv` (one row per iteration), `episodes/NN-<kind>.mcap` (every
+//! --policy`), `best_policy.json` (the first stable gains, else those with the lowest measured
+//! cost), `iterations.csv` (one row per iteration), `episodes/NN-<kind>.mcap` (every
 //! interaction episode), `cost.png` (predicted and actual cost per iteration) and
 //! `summary.json` (what `--json` prints).
 
@@ -157,6 +158,7 @@ pub fn summary_json(
         "iterations": outcome.iterations.iter().map(iteration_json).collect::<Vec<_>>(),
         "first_stable_iteration": first,
         "interaction_seconds_to_stable": to_stable,
+        "best_iteration": outcome.best_iteration().map(|r| r.iteration),
         "wall_seconds": seconds,
     })
 }
@@ -218,6 +220,10 @@ pub fn write_outputs(
         .with_context(|| format!("cannot create {}", episodes.display()))?;
     let policy = serde_json::to_string_pretty(&outcome.final_gains)?;
     msgp_core::model_file::write_atomically(&dir.join("policy.json"), policy.as_bytes())?;
+    if let Some(best) = outcome.best_iteration() {
+        let policy = serde_json::to_string_pretty(&best.gains)?;
+        msgp_core::model_file::write_atomically(&dir.join("best_policy.json"), policy.as_bytes())?;
+    }
     msgp_core::model_file::write_atomically(
         &dir.join("iterations.csv"),
         iterations_csv(&outcome.iterations).as_bytes(),

@@ -3,7 +3,7 @@
 //! * `msgp sim pendulum (--policy P.json | --gains KP,KI,KD,KPθ,KDθ | --preset NAME | --random)
 //!   [--seconds S] [--seed N] --out RUN.csv|RUN.mcap` — one episode, written atomically.
 //! * `msgp sim stability (--policy P.json | --gains … | --preset NAME) [--seed N] [--json]` —
-//!   the five-start stability test; exits non-zero when any start fails.
+//!   the stability test (five starts × three noise draws); exits non-zero when any episode fails.
 //!
 //! Plant parameters default to `msgp_sim::PendulumParams::default()`; `--params FILE.json`
 //! and the per-field flags override them (flags win).
@@ -22,8 +22,9 @@ use msgp_sim::{
 pub enum SimCommand {
     /// Simulate one episode of the pole on the robot end effector and write a CSV or MCAP log.
     Pendulum(PendulumArgs),
-    /// Stability test of PID + PD gains: 5 starts (±0.03, ±0.015, 0 rad), 10 s each; pass iff
-    /// |θ| < 0.1 rad, |x| < 0.3 m throughout and RMS θ over the last 5 s < 0.03 rad.
+    /// Stability test of PID + PD gains: 5 starts (±0.03, ±0.015, 0 rad), 3 noise draws each,
+    /// 10 s each; pass iff every episode keeps |θ| < 0.1 rad and |x| < 0.3 m throughout and RMS θ
+    /// over the last 5 s < 0.03 rad.
     Stability(StabilityArgs),
 }
 
@@ -328,12 +329,13 @@ fn run_stability(args: &StabilityArgs) -> anyhow::Result<()> {
             gains.kp_x, gains.ki_x, gains.kd_x, gains.kp_theta, gains.kd_theta, args.seed
         ))?;
         crate::output::out(
-            "  θ0 [rad]  result  max|θ| [rad]  max|x| [m]  RMS θ last 5 s  failure",
+            "  θ0 [rad]  draw  result  max|θ| [rad]  max|x| [m]  RMS θ last 5 s  failure",
         )?;
         for s in &report.starts {
             crate::output::out(&format!(
-                "  {:+8.3}  {:6}  {:12.4}  {:10.4}  {:14.4}  {}",
+                "  {:+8.3}  {:4}  {:6}  {:12.4}  {:10.4}  {:14.4}  {}",
                 s.initial_theta,
+                s.repeat,
                 if s.passed { "PASS" } else { "FAIL" },
                 s.max_abs_theta,
                 s.max_abs_x,
@@ -345,7 +347,7 @@ fn run_stability(args: &StabilityArgs) -> anyhow::Result<()> {
     let failed = report.starts.iter().filter(|s| !s.passed).count();
     if failed > 0 {
         bail!(
-            "stability test failed: {failed} of {} starts failed",
+            "stability test failed: {failed} of {} episodes (starts × noise draws) failed",
             report.starts.len()
         );
     }

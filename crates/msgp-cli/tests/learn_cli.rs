@@ -92,13 +92,21 @@ fn learn_policy_writes_policy_table_episodes_plot_and_json() {
     }
     assert!(v.get("first_stable_iteration").is_some());
     assert!(v.get("interaction_seconds_to_stable").is_some());
+    let best = v["best_iteration"].as_u64().expect("best_iteration") as usize;
+    assert!((1..=2).contains(&best), "{best}");
     // interaction grows by at most one episode per iteration
     let s0 = its[0]["interaction_seconds"].as_f64().unwrap_or(0.0);
     let s1 = its[1]["interaction_seconds"].as_f64().unwrap_or(0.0);
     assert!(s1 > s0 && s1 - s0 <= 1.0 + 1e-9, "{s0} → {s1}");
 
     let out = dir.join("out");
-    for f in ["policy.json", "iterations.csv", "summary.json", "cost.png"] {
+    for f in [
+        "policy.json",
+        "best_policy.json",
+        "iterations.csv",
+        "summary.json",
+        "cost.png",
+    ] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
     let csv = std::fs::read_to_string(out.join("iterations.csv")).expect("csv");

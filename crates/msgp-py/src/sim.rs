@@ -207,8 +207,8 @@ pub fn run_episode<'py>(
     episode_dict(py, &episode)
 }
 
-/// The stability test of PID + PD gains (same as `msgp sim stability`): five starts, 10 s
-/// each; a dict with `passed`, `gains`, `seed` and per-start reports in `starts`.
+/// The stability test of PID + PD gains (same as `msgp sim stability`): five starts, three
+/// noise draws each, 10 s each; a dict with `passed`, `gains`, `seed` and per-start reports in `starts`.
 /// `criteria` overrides `defaults("stability")`, `params` the plant.
 #[pyfunction]
 #[pyo3(signature = (gains, *, seed = 0, params = None, criteria = None))]

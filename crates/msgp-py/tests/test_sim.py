@@ -36,12 +36,18 @@ def test_gain_forms_agree():
 
 def test_stability_test():
     good = msgp.stability_test("hand-tuned", seed=0)
-    assert good["passed"] and len(good["starts"]) == 5
+    # five starts, three noise draws each
+    assert good["passed"] and len(good["starts"]) == 15
+    assert [s["repeat"] for s in good["starts"][:3]] == [0, 1, 2]
     bad = msgp.stability_test("zero", seed=0)
     assert not bad["passed"]
     assert any("theta" in (s["failure"] or "") for s in bad["starts"])
     short = msgp.stability_test("hand-tuned", criteria={"initial_thetas": [0.01], "seconds": 6.0})
-    assert len(short["starts"]) == 1
+    assert len(short["starts"]) == 3
+    once = msgp.stability_test(
+        "hand-tuned", criteria={"initial_thetas": [0.01], "seconds": 6.0, "noise_repeats": 1}
+    )
+    assert len(once["starts"]) == 1
 
 
 def test_pendulum_data_fits():

@@ -10,8 +10,15 @@ pub enum Stream {
     MeasurementNoise,
     /// Random excitation signal.
     Excitation,
-    /// Stability-test start number `i` (its own episode seed).
+    /// Stability-test start number `i` (its own episode seed); its first noise draw.
     StabilityStart(u32),
+    /// Further noise draws of a stability-test start (`repeat ≥ 1`, below 65 536).
+    StabilityRepeat {
+        /// Start number.
+        start: u32,
+        /// Noise draw.
+        repeat: u32,
+    },
 }
 
 impl Stream {
@@ -21,6 +28,9 @@ impl Stream {
             Stream::MeasurementNoise => 2,
             Stream::Excitation => 3,
             Stream::StabilityStart(i) => 0x1000 + u64::from(i),
+            Stream::StabilityRepeat { start, repeat } => {
+                (1 << 48) + (u64::from(start) << 16) + u64::from(repeat & 0xFFFF)
+            }
         }
     }
 }

@@ -23,11 +23,26 @@ pub struct StabilityCriteria {
     pub rms_window: f64,
     /// Fail unless the RMS of the true `theta` over the final window is below this \[rad\].
     pub max_rms_theta: f64,
+    /// Episodes per start, each with its own measurement-noise draw; every one must pass. One
+    /// draw can let a policy without a working position loop through by luck: the end effector's
+    /// drift is a random walk driven by the noise.
+    #[serde(default = "default_noise_repeats")]
+    pub noise_repeats: u32,
+}
+
+/// The default [`StabilityCriteria::noise_repeats`].
+pub const DEFAULT_NOISE_REPEATS: u32 = 3;
+
+/// Upper bound of [`StabilityCriteria::noise_repeats`].
+pub const MAX_NOISE_REPEATS: u32 = 1000;
+
+fn default_noise_repeats() -> u32 {
+    DEFAULT_NOISE_REPEATS
 }
 
 impl Default for StabilityCriteria {
-    /// Five starts (±0.03, ±0.015, 0 rad), 10 s, `|θ| < 0.1`, `|x| < 0.3`, RMS θ over the last
-    /// 5 s < 0.03.
+    /// Five starts (±0.03, ±0.015, 0 rad), three noise draws each, 10 s, `|θ| < 0.1`,
+    /// `|x| < 0.3`, RMS θ over the last 5 s < 0.03.
     fn default() -> Self {
         Self {
             initial_thetas: vec![-0.03, -0.015, 0.0, 0.015, 0.03],
@@ -36,6 +51,7 @@ impl Default for StabilityCriteria {
             max_abs_x: 0.3,
             rms_window: 5.0,
             max_rms_theta: 0.03,
+            noise_repeats: DEFAULT_NOISE_REPEATS,
         }
     }
 }
@@ -45,6 +61,9 @@ impl Default for StabilityCriteria {
 pub struct StartReport {
     /// Initial pole angle \[rad\].
     pub initial_theta: f64,
+    /// Noise draw of this start (0-based).
+    #[serde(default)]
+    pub repeat: u32,
     /// Whether this start met every criterion.
     pub passed: bool,
     /// Largest true `|theta|` over the samples \[rad\].
@@ -69,11 +88,12 @@ pub struct StabilityReport {
     pub gains: PidPdGains,
     /// Seed of the measurement noise (start `i` uses a stream derived from it).
     pub seed: u64,
-    /// One report per start, in the order of `initial_thetas`.
+    /// One report per start and noise draw: the draws of the first start, then of the next, in
+    /// the order of `initial_thetas`.
     pub starts: Vec<StartReport>,
 }
 
-/// Runs the stability test: one noisy episode per start angle on `params` (with its
+/// Runs the stability test: `noise_repeats` noisy episodes per start angle on `params` (with its
 /// measurement noise, delay and lag), checked on the *true* states at the control rate.
 /// The plant's early-stop limits are widened so they cannot end an episode before the
 /// criteria do.
@@ -94,21 +114,44 @@ pub fn stability_test(
     require_positive("max_abs_x", criteria.max_abs_x)?;
     require_positive("rms_window", criteria.rms_window)?;
     require_positive("max_rms_theta", criteria.max_rms_theta)?;
+    if !(1..=MAX_NOISE_REPEATS).contains(&criteria.noise_repeats) {
+        return Err(SimError::invalid(
+            "noise_repeats",
+            f64::from(criteria.noise_repeats),
+            "needs 1 to 1000 noise draws per start",
+        ));
+    }
     let plant = PendulumParams {
         stop_theta: params.stop_theta.max(criteria.max_abs_theta),
         stop_x: params.stop_x.max(criteria.max_abs_x),
         ..*params
     };
     let mut starts = Vec::with_capacity(criteria.initial_thetas.len());
-    for (i, &theta0) in criteria.initial_thetas.iter().enumerate() {
+    let runs = criteria
+        .initial_thetas
+        .iter()
+        .enumerate()
+        .flat_map(|(i, &theta0)| {
+            (0..criteria.noise_repeats).map(move |repeat| (i, theta0, repeat))
+        });
+    for (i, theta0, repeat) in runs {
         let mut policy = PidPdPolicy::new(*gains, &plant)?;
         let index = u32::try_from(i).unwrap_or(u32::MAX);
+        // the first draw keeps the stream the test had before it repeated starts
+        let stream = if repeat == 0 {
+            Stream::StabilityStart(index)
+        } else {
+            Stream::StabilityRepeat {
+                start: index,
+                repeat,
+            }
+        };
         let episode = run_episode(
             &plant,
             &mut policy,
             &EpisodeConfig {
                 seconds: criteria.seconds,
-                seed: rng_for(seed, Stream::StabilityStart(index)),
+                seed: rng_for(seed, stream),
                 initial_theta: Some(theta0),
             },
         )?;
@@ -152,6 +195,7 @@ pub fn stability_test(
         };
         starts.push(StartReport {
             initial_theta: theta0,
+            repeat,
             passed: failure.is_none(),
             max_abs_theta,
             max_abs_x,

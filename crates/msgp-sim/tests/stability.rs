@@ -1,6 +1,8 @@
 //! The stability test on the default (noisy, delayed, lagged) plant.
 
-use msgp_sim::{PendulumParams, PidPdGains, StabilityCriteria, StabilityReport, stability_test};
+use msgp_sim::{
+    PendulumParams, PidPdGains, Saturation, StabilityCriteria, StabilityReport, stability_test,
+};
 
 fn print(name: &str, report: &StabilityReport) {
     println!("{name}: passed = {}", report.passed);
@@ -29,7 +31,7 @@ fn hand_tuned_gains_pass_on_default_plant() {
             .expect("valid inputs");
         print(&format!("hand-tuned, seed {seed}"), &report);
         assert!(report.passed, "hand-tuned gains failed with seed {seed}");
-        assert_eq!(report.starts.len(), 5);
+        assert_eq!(report.starts.len(), 15, "5 starts × 3 noise draws");
         for s in &report.starts {
             assert!(
                 s.max_abs_theta < 0.06,
@@ -59,7 +61,7 @@ fn apollo_lqr_gains_pass() {
             &report,
         );
         assert!(report.passed, "Apollo LQR gains failed with seed {seed}");
-        assert_eq!(report.starts.len(), 5);
+        assert_eq!(report.starts.len(), 15, "5 starts × 3 noise draws");
         // The pole really is balanced, not just inside the limits by luck of the window.
         for s in &report.starts {
             assert!(
@@ -148,4 +150,57 @@ fn invalid_inputs_are_errors() {
         )
         .is_err()
     );
+}
+
+/// A PD loop on the angle alone (learned by MSGP seed 4 at iteration 1) keeps the pole up, but
+/// the end effector drifts like a random walk. With one noise draw per start it passed the test
+/// for seed 4 (1 of 10 seeds); three draws per start catch it. The hand-tuned gains, which have a
+/// position loop, pass with three draws for every seed tried.
+#[test]
+fn repeated_noise_draws_catch_a_policy_without_a_position_loop() {
+    let params = PendulumParams::default();
+    let angle_only = PidPdGains {
+        kp_x: 0.0,
+        ki_x: 0.0,
+        kd_x: 0.0,
+        kp_theta: 19.91951182652138,
+        kd_theta: 1.8476892531197018,
+        saturation: Saturation::Sine,
+    };
+    let one_draw = StabilityCriteria {
+        noise_repeats: 1,
+        ..StabilityCriteria::default()
+    };
+    let lucky = stability_test(&params, &angle_only, 4, &one_draw).expect("valid");
+    print("angle only, one draw, seed 4", &lucky);
+    assert!(lucky.passed, "the draw that let it through");
+    assert_eq!(lucky.starts.len(), 5);
+    let default = StabilityCriteria::default();
+    let report = stability_test(&params, &angle_only, 4, &default).expect("valid");
+    print("angle only, three draws, seed 4", &report);
+    assert!(!report.passed);
+    // the first draw of each start is the one-draw test
+    for (k, s) in report
+        .starts
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.repeat == 0)
+    {
+        assert_eq!(s, &lucky.starts[k / 3]);
+    }
+    let failing: Vec<_> = report.starts.iter().filter(|s| !s.passed).collect();
+    assert!(
+        failing.iter().all(|s| s.max_abs_x >= 0.3),
+        "it fails on the position"
+    );
+    for seed in [4, 5] {
+        let hand =
+            stability_test(&params, &PidPdGains::hand_tuned(), seed, &default).expect("valid");
+        assert!(hand.passed, "hand-tuned, seed {seed}");
+    }
+    let none = StabilityCriteria {
+        noise_repeats: 0,
+        ..StabilityCriteria::default()
+    };
+    assert!(stability_test(&params, &angle_only, 4, &none).is_err());
 }
