@@ -238,26 +238,23 @@ fn policy_gradient(
     g: &[f64],
     active: &[usize],
 ) -> Result<(f64, Vec<f64>)> {
-    fn lanes<const N: usize>(
-        problem: &PolicyProblem<'_>,
-        mask: &PidMask,
-        initial: &PidPolicy<f64>,
-        g: &[f64],
-        active: &[usize],
-    ) -> Result<(f64, Vec<f64>)> {
-        gradient_lanes::<N, _>(g, active, 1, |gd| {
-            Ok(problem.evaluate(&mask.unpack(initial, gd))?.0)
-        })
+    // one closure per lane count: the dual type is part of its signature
+    macro_rules! lanes {
+        ($n:expr) => {
+            gradient_lanes::<{ $n }, _>(g, active, 1, |gd| {
+                Ok(problem.evaluate(&mask.unpack(initial, gd))?.0)
+            })
+        };
     }
     match active.len() {
-        1 => lanes::<1>(problem, mask, initial, g, active),
-        2 => lanes::<2>(problem, mask, initial, g, active),
-        3 => lanes::<3>(problem, mask, initial, g, active),
-        4 => lanes::<4>(problem, mask, initial, g, active),
-        5 => lanes::<5>(problem, mask, initial, g, active),
-        6 => lanes::<6>(problem, mask, initial, g, active),
-        7 => lanes::<7>(problem, mask, initial, g, active),
-        _ => lanes::<LANES>(problem, mask, initial, g, active),
+        1 => lanes!(1),
+        2 => lanes!(2),
+        3 => lanes!(3),
+        4 => lanes!(4),
+        5 => lanes!(5),
+        6 => lanes!(6),
+        7 => lanes!(7),
+        _ => lanes!(LANES),
     }
 }
 
