@@ -7,6 +7,7 @@ use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use msgp_core::fit::{FitOptions, FitProgress, fit};
 use msgp_core::gp::MeanFunction;
+use msgp_core::integrator::Integrator;
 use msgp_core::model::Method;
 use msgp_core::model_file::{FitRecord, ModelFile};
 use msgp_core::trajectory::Trajectory;
@@ -85,6 +86,30 @@ pub fn parse_history(s: &str) -> Result<HistoryArg, String> {
     Ok(HistoryArg { ly, lu })
 }
 
+/// Parses `OUTPUT:ORDER[:linear]`.
+pub fn parse_integrator(s: &str) -> Result<Integrator, String> {
+    let expected = || format!("expected OUTPUT:ORDER or OUTPUT:ORDER:linear (e.g. 0:2), got `{s}`");
+    let parts: Vec<&str> = s.split(':').collect();
+    let (output, order, linear) = match parts.as_slice() {
+        [output, order] => (*output, *order, false),
+        [output, order, kind] if kind.trim() == "linear" => (*output, *order, true),
+        _ => return Err(expected()),
+    };
+    let output: usize = output
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad output column `{output}`"))?;
+    let order: usize = order
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad order `{order}`"))?;
+    Ok(Integrator {
+        output,
+        order,
+        linear,
+    })
+}
+
 /// Options of `msgp fit`.
 #[derive(Debug, Args)]
 pub struct FitArgs {
@@ -112,6 +137,13 @@ pub struct FitArgs {
     /// Prior mean of the GP.
     #[arg(long, value_enum, default_value_t = MeanArg::Zero)]
     mean: MeanArg,
+    /// Declare output column OUTPUT (0-based) a pure ORDER-fold integrator (e.g. `0:2` for a
+    /// position under a commanded acceleration): its own lags get the fixed coefficients of
+    /// `(1 − z⁻¹)^ORDER` and enter nothing else. `OUTPUT:ORDER:linear` also drops its GP (its
+    /// ORDER-th difference is linear in the window). Needs `--mean linear`; repeat for more
+    /// outputs.
+    #[arg(long, value_name = "OUTPUT:ORDER[:linear]", value_parser = parse_integrator)]
+    integrating: Vec<Integrator>,
     /// Seed of every random choice.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -182,6 +214,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         iterations: args.iters,
         seed: args.seed,
         mean: args.mean.into(),
+        integrators: args.integrating.clone(),
     }
     .settings(&trajs)?;
     let inducing = settings.inducing;

@@ -74,6 +74,11 @@ pub struct BudgetArgs {
     /// under the GP, started by instrumental variables; see docs/design.md).
     #[arg(long, value_enum, default_value_t = MeanArg::Linear)]
     pub mean: MeanArg,
+    /// Do not declare the end-effector position a double integrator of the commanded
+    /// acceleration (declared by default with the linear mean: its own lags then enter only its
+    /// `2 x_t − x_{t−1}` row, never the GP; see docs/design.md).
+    #[arg(long)]
+    pub free_position: bool,
     /// Horizon of the predicted rollouts the gains are optimised on [s].
     #[arg(long, value_name = "S", default_value_t = LearnSettings::default().policy_horizon_seconds)]
     pub policy_horizon: f64,
@@ -314,6 +319,10 @@ pub fn settings(
         fit: msgp_core::fit::FitSettings {
             inducing: args.inducing,
             mean: args.mean.into(),
+            integrators: match (args.mean, args.free_position) {
+                (MeanArg::Linear, false) => d.fit.integrators.clone(),
+                _ => Vec::new(),
+            },
             iterations: match (method, args.fit_iters) {
                 (Method::Msgp, Some(n)) => n,
                 _ => d.fit.iterations,

@@ -312,6 +312,112 @@ fn linear_prior_mean_is_fitted_saved_and_used() {
 }
 
 #[test]
+fn an_integrating_output_is_declared_on_the_command_line() {
+    let dir = Scratch::new("integrating");
+    dir.write("s.csv", &system_csv(160, None));
+    ok_json(
+        &dir,
+        &args(
+            &[
+                "fit",
+                "--data",
+                "s.csv",
+                "--mean",
+                "linear",
+                "--integrating",
+                "0:1",
+                "--json",
+                "--out",
+                "m.json",
+            ],
+            &FAST,
+        ),
+    );
+    let model: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path("m.json")).expect("model file"))
+            .expect("model JSON");
+    // history 2,2: the window is [y_t, y_{t−1}, u_t, u_{t−1}]; order 1 fixes [1, 0] on y
+    let row = model["gp"]["linear_mean"][0]
+        .as_array()
+        .expect("row")
+        .clone();
+    assert_eq!(row[0].as_f64(), Some(1.0), "{row:?}");
+    assert_eq!(row[1].as_f64(), Some(0.0), "{row:?}");
+    assert_eq!(
+        model["training"]["settings"]["integrators"],
+        serde_json::json!([{"output": 0, "order": 1, "linear": false}])
+    );
+    // `:linear` drops the output's GP: its pseudo-targets are zero
+    ok_json(
+        &dir,
+        &args(
+            &[
+                "fit",
+                "--data",
+                "s.csv",
+                "--mean",
+                "linear",
+                "--integrating",
+                "0:1:linear",
+                "--json",
+                "--out",
+                "l.json",
+            ],
+            &FAST,
+        ),
+    );
+    let model: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path("l.json")).expect("model file"))
+            .expect("model JSON");
+    assert_eq!(
+        model["training"]["settings"]["integrators"][0]["linear"],
+        serde_json::json!(true)
+    );
+    let targets = model["gp"]["pseudo_targets"]
+        .as_array()
+        .expect("pseudo_targets");
+    assert!(!targets.is_empty());
+    assert!(
+        targets
+            .iter()
+            .flat_map(|r| r.as_array().expect("row").iter())
+            .all(|v| v.as_f64() == Some(0.0)),
+        "{targets:?}"
+    );
+    fails(
+        &dir,
+        &["fit", "--data", "s.csv", "--integrating", "0:1"],
+        &["integrators", "linear mean"],
+    );
+    fails(
+        &dir,
+        &[
+            "fit",
+            "--data",
+            "s.csv",
+            "--mean",
+            "linear",
+            "--integrating",
+            "1:1",
+        ],
+        &["output 1 does not exist"],
+    );
+    fails(
+        &dir,
+        &[
+            "fit",
+            "--data",
+            "s.csv",
+            "--mean",
+            "linear",
+            "--integrating",
+            "0",
+        ],
+        &["OUTPUT:ORDER"],
+    );
+}
+
+#[test]
 fn episodes_and_several_files_are_several_trajectories() {
     let dir = Scratch::new("episodes");
     dir.write("e.csv", &system_csv(200, Some(100)));

@@ -18,6 +18,7 @@ use nalgebra::{DMatrix, DVector};
 use crate::dense::DenseChol;
 use crate::error::{MsgpError, Result};
 use crate::gp::{GpConfig, GpParams, MeanFunction};
+use crate::integrator::{FixedCoefficient, IGNORED_LENGTHSCALE, NO_GP_SIGNAL_VAR, Structure};
 use crate::kernel::kernel_matrix;
 use crate::kmeans::kmeans;
 use crate::linalg::JitterLog;
@@ -221,12 +222,57 @@ fn column_std(x: &DMatrix<f64>, d: usize) -> f64 {
 /// The linear prior mean `A` (E × D) on the normalised pairs: two-stage least squares with the
 /// instruments of [`OneStepData`] when at least `4 · dim(z)` pairs have them, else ridge least
 /// squares `argmin ‖Y − X Aᵀ‖² + λ‖A‖²`. Both use the ridge `λ = 1e-6 N` on their Gram
-/// matrices.
+/// matrices. The `fixed` coefficients (of integrating outputs, [`crate::integrator`]) are set,
+/// and each row's other coefficients are fitted to what they leave over.
 ///
 /// 2SLS: `Aᵀ = (Bᵀ G⁻¹ B)⁻¹ Bᵀ G⁻¹ C` with `G = ZᵀZ`, `B = ZᵀX`, `C = ZᵀY`, i.e. least squares of
 /// `Y` on the projection of `X` onto the instruments.
 fn arx_linear_mean(
     data: &OneStepData,
+    config: &GpConfig,
+    fixed: &[FixedCoefficient],
+    log: &mut JitterLog,
+) -> Result<DMatrix<f64>> {
+    let (d, e) = (data.x.ncols(), data.y.ncols());
+    let mut a = DMatrix::zeros(e, d);
+    let mut is_fixed = vec![vec![false; d]; e];
+    for c in fixed {
+        a[(c.row, c.col)] = c.value;
+        is_fixed[c.row][c.col] = true;
+    }
+    // rows with the same free columns are solved together (all rows, when nothing is fixed)
+    let mut groups: Vec<(Vec<usize>, Vec<usize>)> = Vec::new();
+    for (row, flags) in is_fixed.iter().enumerate() {
+        let free: Vec<usize> = (0..d).filter(|&k| !flags[k]).collect();
+        match groups.iter_mut().find(|(cols, _)| *cols == free) {
+            Some((_, rows)) => rows.push(row),
+            None => groups.push((free, vec![row])),
+        }
+    }
+    // the targets less the fixed part
+    let y = &data.y - &data.x * a.transpose();
+    for (cols, rows) in groups {
+        if cols.is_empty() {
+            continue;
+        }
+        let x = data.x.select_columns(&cols);
+        let y = y.select_columns(&rows);
+        let at = arx_solve(data, &x, &y, config, log)?; // free × rows
+        for (i, &row) in rows.iter().enumerate() {
+            for (k, &col) in cols.iter().enumerate() {
+                a[(row, col)] = at[(k, i)];
+            }
+        }
+    }
+    Ok(a)
+}
+
+/// `Aᵀ` of `y ≈ x Aᵀ` by two-stage least squares with `data`'s instruments, or ridge least
+/// squares (see [`arx_linear_mean`]).
+fn arx_solve(
+    data: &OneStepData,
+    x: &DMatrix<f64>,
+    y: &DMatrix<f64>,
     config: &GpConfig,
     log: &mut JitterLog,
 ) -> Result<DMatrix<f64>> {
@@ -238,8 +284,8 @@ fn arx_linear_mean(
     };
     let ni = data.instrumented.len();
     if ni >= 4 * data.z.ncols() {
-        let x = data.x.select_rows(&data.instrumented);
-        let y = data.y.select_rows(&data.instrumented);
+        let x = x.select_rows(&data.instrumented);
+        let y = y.select_rows(&data.instrumented);
         let zt = data.z.transpose();
         let g = DenseChol::new(
             &ridge(&zt * &data.z, ni),
@@ -256,18 +302,16 @@ fn arx_linear_mean(
             "Bᵀ G⁻¹ B + λI (two-stage least squares)",
             log,
         )?;
-        let at = normal.solve(&(b.transpose() * gc)); // D × E
-        return Ok(at.transpose());
+        return Ok(normal.solve(&(b.transpose() * gc)));
     }
-    let n = data.x.nrows();
+    let n = x.nrows();
     let ch = DenseChol::new(
-        &ridge(data.x.transpose() * &data.x, n),
+        &ridge(x.transpose() * x, n),
         &config.jitter,
         "XᵀX + λI (linear prior mean)",
         log,
     )?;
-    let at = ch.solve(&(data.x.transpose() * &data.y)); // D × E
-    Ok(at.transpose())
+    Ok(ch.solve(&(x.transpose() * y)))
 }
 
 /// Fits one-step GP-NARX hyperparameters per output and projects onto `m` pseudo-inputs.
@@ -277,6 +321,7 @@ pub fn fit_one_step(
     m: usize,
     settings: &OneStepSettings,
     config: &GpConfig,
+    structure: &Structure,
     seed: u64,
     log: &mut JitterLog,
 ) -> Result<GpParams<f64>> {
@@ -289,19 +334,29 @@ pub fn fit_one_step(
     }
     let linear_mean = match config.mean {
         MeanFunction::Zero => DMatrix::zeros(e, d),
-        MeanFunction::Linear => arx_linear_mean(data, config, log)?,
+        MeanFunction::Linear => arx_linear_mean(data, config, &structure.fixed, log)?,
     };
     // the targets the GP models: what the prior mean leaves over
     let targets = &data.y - &data.x * linear_mean.transpose();
+    // the GP's inputs: the windows with the coordinates it ignores at zero
+    let mut gx = data.x.clone();
+    for &k in &structure.ignored {
+        gx.column_mut(k).fill(0.0);
+    }
     let stride = n.div_ceil(settings.max_pairs.max(1));
     let idx: Vec<usize> = (0..n).step_by(stride).collect();
-    let xs = DMatrix::from_fn(idx.len(), d, |i, k| data.x[(idx[i], k)]);
-    let std: Vec<f64> = (0..d).map(|k| column_std(&data.x, k)).collect();
+    let xs = DMatrix::from_fn(idx.len(), d, |i, k| gx[(idx[i], k)]);
+    let std: Vec<f64> = (0..d)
+        .map(|k| match structure.ignored.contains(&k) {
+            true => IGNORED_LENGTHSCALE,
+            false => column_std(&gx, k),
+        })
+        .collect();
 
     let pseudo = if m >= n {
-        data.x.clone()
+        gx.clone()
     } else {
-        kmeans(&data.x, m, 30, seed)?
+        kmeans(&gx, m, 30, seed)?
     };
     let mm = pseudo.nrows();
     let mut params = GpParams {
@@ -320,6 +375,17 @@ pub fn fit_one_step(
             ys.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (ys.len() as f64 - 1.0).max(1.0)
         }
         .max(1e-6);
+        if structure.without_gp.contains(&a) {
+            // no GP: what the linear mean leaves over is noise (pseudo-targets stay zero)
+            for k in 0..d {
+                params.log_lengthscales[(a, k)] = std[k].ln();
+            }
+            params.log_signal_var[a] = NO_GP_SIGNAL_VAR.ln();
+            params.log_process_noise[a] = (var_y - config.noise_floor)
+                .max(1e-3 * config.noise_floor)
+                .ln();
+            continue;
+        }
         let init = Hyper {
             log_lengthscales: std.iter().map(|s| s.ln()).collect(),
             log_signal_var: var_y.ln(),
@@ -336,7 +402,10 @@ pub fn fit_one_step(
             learning_rate: settings.learning_rate,
             ..Adam::default()
         };
-        let active = vec![true; d + 2];
+        let mut active = vec![true; d + 2];
+        for &k in &structure.ignored {
+            active[k] = false;
+        }
         let mut best = (f64::INFINITY, init.to_vec());
         let (x, v) = minimize(
             &mut objective,
@@ -371,7 +440,7 @@ pub fn fit_one_step(
             yfull
         } else {
             let kmm = kernel_matrix(&pseudo, &pseudo, &inv_l2, sf2);
-            let kmn = kernel_matrix(&pseudo, &data.x, &inv_l2, sf2);
+            let kmn = kernel_matrix(&pseudo, &gx, &inv_l2, sf2);
             let a_mat = &kmm * sn2 + &kmn * kmn.transpose();
             let ch = DenseChol::new(&a_mat, &config.jitter, "σ² K_mm + K_mn K_nm", log)?;
             let rhs = &kmn * &yfull;
@@ -430,14 +499,14 @@ mod tests {
         assert_eq!(data.instrumented.len(), data.x.nrows() - 4);
         let mut log = JitterLog::default();
         let config = GpConfig::default();
-        let iv = arx_linear_mean(&data, &config, &mut log).expect("iv");
+        let iv = arx_linear_mean(&data, &config, &[], &mut log).expect("iv");
         let ls = {
             let plain = OneStepData {
                 instrumented: Vec::new(),
                 z: DMatrix::zeros(0, data.z.ncols()),
                 ..data.clone()
             };
-            arx_linear_mean(&plain, &config, &mut log).expect("ls")
+            arx_linear_mean(&plain, &config, &[], &mut log).expect("ls")
         };
         // 20% noise is enough to bias least squares by more than 0.1 on each lag
         assert!((ls[(0, 0)] - 1.9).abs() > 0.1, "{ls}");
@@ -445,6 +514,73 @@ mod tests {
         assert!((iv[(0, 0)] - 1.9).abs() < 0.02, "{iv}");
         assert!((iv[(0, 1)] + 0.95).abs() < 0.02, "{iv}");
         assert!((iv[(0, 2)] - 0.1).abs() < 0.01, "{iv}");
+    }
+
+    /// Two outputs measured with noise: a resonance `y₀` and a double integrator `y₁` of the
+    /// same input. With `y₁` declared integrating, its own-lag coefficients are exactly
+    /// `[2, −1]`, `y₀`'s row ignores `y₁`, and the other coefficients are estimated around
+    /// them.
+    #[test]
+    fn an_integrating_output_fixes_its_lags_and_fits_the_rest() {
+        use crate::integrator::Integrator;
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let n = 3000;
+        let u = DMatrix::from_fn(n, 1, |t, _| {
+            [(0.07, 0.3), (0.19, 1.1), (0.31, 2.0), (0.53, 0.7)]
+                .iter()
+                .map(|(w, phase)| (w * t as f64 + phase).sin())
+                .sum::<f64>()
+        });
+        let mut latent = DMatrix::<f64>::zeros(n, 2);
+        for t in 1..n - 1 {
+            latent[(t + 1, 0)] = 1.9 * latent[(t, 0)] - 0.95 * latent[(t - 1, 0)] + 0.1 * u[(t, 0)];
+            latent[(t + 1, 1)] = 2.0 * latent[(t, 1)] - latent[(t - 1, 1)] + 0.002 * u[(t, 0)];
+        }
+        let y = DMatrix::from_fn(n, 2, |t, j| {
+            let z: f64 = StandardNormal.sample(&mut rng);
+            latent[(t, j)] + [0.05, 0.01][j] * z
+        });
+        let traj = Trajectory::new(u, y).expect("trajectory");
+        let spec = NarxSpec {
+            ly: 2,
+            lu: 1,
+            dy: 2,
+            du: 1,
+        };
+        let data = one_step_pairs(&spec, &[&traj]).expect("pairs");
+        let fixed = Structure::new(
+            &[Integrator {
+                output: 1,
+                order: 2,
+                linear: false,
+            }],
+            &spec,
+        )
+        .fixed;
+        let mut log = JitterLog::default();
+        let config = GpConfig::default();
+        let free = arx_linear_mean(&data, &config, &[], &mut log).expect("free");
+        let a = arx_linear_mean(&data, &config, &fixed, &mut log).expect("fixed");
+        let (y1, y1_lag1, u0) = (spec.y_index(0, 1), spec.y_index(1, 1), spec.u_index(0, 0));
+        assert_eq!(a[(1, y1)], 2.0);
+        assert_eq!(a[(1, y1_lag1)], -1.0);
+        assert!((a[(1, u0)] - 0.002).abs() < 2e-4, "{a}");
+        for k in [spec.y_index(0, 0), spec.y_index(1, 0)] {
+            assert!(a[(1, k)].abs() < 0.02, "{a}");
+        }
+        // y₀'s row: zero on y₁'s lags, its own estimated as without the declaration
+        assert_eq!(a[(0, y1)], 0.0);
+        assert_eq!(a[(0, y1_lag1)], 0.0);
+        for (k, truth) in [
+            (spec.y_index(0, 0), 1.9),
+            (spec.y_index(1, 0), -0.95),
+            (u0, 0.1),
+        ] {
+            assert!((a[(0, k)] - truth).abs() < 0.02, "{a}");
+            assert!((a[(0, k)] - free[(0, k)]).abs() < 0.01, "{a} vs {free}");
+        }
     }
 
     fn problem() -> (DMatrix<f64>, DVector<f64>) {

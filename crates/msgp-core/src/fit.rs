@@ -20,6 +20,7 @@ use crate::data::Normalizer;
 use crate::error::{MsgpError, Result};
 use crate::gp::{GpConfig, GpParams, GpShape, MeanFunction, ParamGroup, PreparedGp};
 use crate::grad::adjoint::loss_and_gradient;
+use crate::integrator::{self, Integrator, Structure};
 use crate::linalg::JitterLog;
 use crate::loss::{Complexity, gaussian_nll};
 use crate::model::{Method, Model};
@@ -65,6 +66,10 @@ pub struct FitSettings {
     /// Prior mean of the GP (the paper's model has none).
     #[serde(default)]
     pub mean: MeanFunction,
+    /// Outputs known to integrate the rest of the system ([`crate::integrator`]); needs the
+    /// linear mean, whose coefficients on their own lags they fix.
+    #[serde(default)]
+    pub integrators: Vec<Integrator>,
 }
 
 impl Default for FitSettings {
@@ -88,6 +93,7 @@ impl Default for FitSettings {
             one_step_iterations: 300,
             refit: false,
             mean: MeanFunction::Zero,
+            integrators: Vec::new(),
         }
     }
 }
@@ -98,7 +104,7 @@ pub const DEFAULT_MAX_INDUCING: usize = 100;
 /// The choices a user makes for a fit: what `msgp fit` and the Python `msgp.Msgp` take. Turned
 /// into [`FitSettings`] by [`FitOptions::settings`], so both front ends fit with identical
 /// settings (and give identical numbers) for the same data, options and seed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FitOptions {
     /// Training method.
     pub method: Method,
@@ -118,6 +124,8 @@ pub struct FitOptions {
     pub seed: u64,
     /// Prior mean of the GP.
     pub mean: MeanFunction,
+    /// Outputs declared integrating ([`crate::integrator`]; needs the linear mean).
+    pub integrators: Vec<Integrator>,
 }
 
 impl FitOptions {
@@ -134,6 +142,7 @@ impl FitOptions {
             du: first.u.ncols(),
         };
         spec.validate()?;
+        integrator::validate(&self.integrators, &spec, self.mean)?;
         let warmup = spec.warmup();
         for (k, t) in train.iter().enumerate() {
             if t.len() <= warmup {
@@ -172,6 +181,7 @@ impl FitOptions {
             },
             seed: self.seed,
             mean: self.mean,
+            integrators: self.integrators.clone(),
             ..defaults
         })
     }
@@ -328,6 +338,7 @@ pub fn fit_episodes(
         du: first.u.ncols(),
     };
     spec.validate()?;
+    integrator::validate(&settings.integrators, &spec, settings.mean)?;
     for (k, t) in train.iter().enumerate() {
         t.check(&spec)
             .map_err(|e| MsgpError::Data(format!("training trajectory {k}: {e}")))?;
@@ -360,6 +371,7 @@ pub fn fit_episodes(
             settings.inducing,
             &one_step,
             &config,
+            &Structure::new(&settings.integrators, &spec),
             settings.seed,
             &mut report.jitter,
         )?;
@@ -461,6 +473,7 @@ impl Stage<'_, '_> {
             self.settings.inducing,
             one_step,
             &self.config,
+            &Structure::new(&self.settings.integrators, &self.spec),
             self.settings.seed,
             &mut self.report.jitter,
         )?;
@@ -506,6 +519,30 @@ impl Stage<'_, '_> {
             for i in shape.group_range(*g) {
                 active[i] = false;
             }
+        }
+        // what integrating outputs fix (`linear_mean` and `log_lengthscales` flatten by rows)
+        let structure = Structure::new(&self.settings.integrators, &self.spec);
+        let mean_start = shape.group_range(ParamGroup::LinearMean).start;
+        for c in &structure.fixed {
+            active[mean_start + c.row * shape.d + c.col] = false;
+        }
+        let ls_start = shape.group_range(ParamGroup::Lengthscales).start;
+        for row in 0..shape.e {
+            for &col in &structure.ignored {
+                active[ls_start + row * shape.d + col] = false;
+            }
+        }
+        // outputs without a GP (`pseudo_targets` flattens by pseudo-input, then output)
+        let targets_start = shape.group_range(ParamGroup::PseudoTargets).start;
+        let sf_start = shape.group_range(ParamGroup::SignalVar).start;
+        for &a in &structure.without_gp {
+            for i in 0..shape.m {
+                active[targets_start + i * shape.e + a] = false;
+            }
+            for k in 0..shape.d {
+                active[ls_start + a * shape.d + k] = false;
+            }
+            active[sf_start + a] = false;
         }
         let mut objective = MsgpObjective {
             shape,
@@ -607,6 +644,7 @@ mod tests {
             iterations,
             seed: 7,
             mean: MeanFunction::Zero,
+            integrators: Vec::new(),
         }
     }
 
@@ -650,6 +688,80 @@ mod tests {
             |_| Ok(()),
         )
         .expect("kept model rolls out");
+    }
+
+    /// A driven double integrator `y₁` next to a damped output `y₀`: declared a linear
+    /// integrator, `y₁`'s coefficients, the GP's length-scales on its lags and `y₁`'s absent GP
+    /// come out of an MSGP fit exactly as the declaration set them, while the rest of the model
+    /// was trained.
+    #[test]
+    fn an_msgp_fit_keeps_what_an_integrating_output_fixes() {
+        use crate::integrator::{IGNORED_LENGTHSCALE, Integrator, NO_GP_SIGNAL_VAR, Structure};
+        use nalgebra::DMatrix;
+        let n = 120;
+        let u = DMatrix::from_fn(n, 1, |t, _| {
+            (0.3 * t as f64).sin() + (0.71 * t as f64).cos()
+        });
+        let mut y = DMatrix::<f64>::zeros(n, 2);
+        for t in 1..n - 1 {
+            y[(t + 1, 0)] = 0.8 * y[(t, 0)] + 0.3 * u[(t, 0)];
+            y[(t + 1, 1)] = 2.0 * y[(t, 1)] - y[(t - 1, 1)] + 0.01 * u[(t, 0)];
+        }
+        let y = y.map(|v| v + 1e-3 * (v * 1e4).sin());
+        let traj = Trajectory::new(u, y).expect("trajectory");
+        let integrators = vec![Integrator {
+            output: 1,
+            order: 2,
+            linear: true,
+        }];
+        let settings = FitSettings {
+            ly: 2,
+            lu: 1,
+            inducing: 15,
+            iterations: 20,
+            learning_rate: 0.01,
+            validation_fraction: 0.0,
+            mean: MeanFunction::Linear,
+            integrators: integrators.clone(),
+            ..FitSettings::default()
+        };
+        let (model, _) = fit(std::slice::from_ref(&traj), &settings, &mut |_| {}).expect("fit");
+        let structure = Structure::new(&integrators, &model.spec);
+        let p = &model.params;
+        for c in &structure.fixed {
+            assert_eq!(p.linear_mean[(c.row, c.col)], c.value, "{}", p.linear_mean);
+        }
+        for &col in &structure.ignored {
+            assert_eq!(p.log_lengthscales[(0, col)], IGNORED_LENGTHSCALE.ln());
+            assert!(p.pseudo_inputs.column(col).iter().all(|&v| v == 0.0));
+        }
+        // `linear`: y₁ has no GP
+        assert_eq!(structure.without_gp, vec![1]);
+        assert!(p.pseudo_targets.column(1).iter().all(|&v| v == 0.0));
+        assert_eq!(p.log_signal_var[1], NO_GP_SIGNAL_VAR.ln());
+        // the free part was trained: the same fit without Adam steps differs
+        let (start, _) = fit(
+            std::slice::from_ref(&traj),
+            &FitSettings {
+                iterations: 0,
+                ..settings.clone()
+            },
+            &mut |_| {},
+        )
+        .expect("start");
+        let u0 = model.spec.u_index(0, 0);
+        assert_ne!(p.linear_mean[(1, u0)], start.params.linear_mean[(1, u0)]);
+        // an integrator without the linear mean is refused
+        let err = fit(
+            std::slice::from_ref(&traj),
+            &FitSettings {
+                mean: MeanFunction::Zero,
+                ..settings
+            },
+            &mut |_| {},
+        )
+        .expect_err("needs the linear mean");
+        assert!(err.to_string().contains("integrators"), "{err}");
     }
 
     #[test]

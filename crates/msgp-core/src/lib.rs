@@ -21,6 +21,7 @@ pub mod error;
 pub mod fit;
 pub mod gp;
 pub mod grad;
+pub mod integrator;
 pub mod kernel;
 pub mod kmeans;
 pub mod linalg;

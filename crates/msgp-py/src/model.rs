@@ -120,6 +120,7 @@ impl Msgp {
                 iterations,
                 seed: file.training.seed,
                 mean: model.config.mean,
+                integrators: Vec::new(),
             },
             overrides: None,
             fitted: Some(Arc::new(Fitted {
@@ -271,6 +272,7 @@ impl Msgp {
             iterations,
             seed,
             mean: MeanFunction::Zero,
+            integrators: Vec::new(),
         };
         let overrides = match settings.filter(|s| !s.is_none()) {
             None => None,
@@ -312,7 +314,7 @@ impl Msgp {
         let py = slf.py();
         let (options, overrides) = {
             let me = slf.try_borrow().map_err(|e| Error::Busy(e.to_string()))?;
-            (me.options, me.overrides.clone())
+            (me.options.clone(), me.overrides.clone())
         };
         let train = trajectories(u, y)?;
         let (du, dy) = train.first().map_or((0, 0), |t| (t.u.ncols(), t.y.ncols()));

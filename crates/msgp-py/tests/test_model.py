@@ -96,6 +96,21 @@ def test_linear_prior_mean_is_in_params_file_and_prediction(tmp_path):
     assert np.all(plain.params["linear_mean"] == 0.0)
 
 
+def test_integrating_output_is_a_setting():
+    """`settings={"integrators": ...}` fixes the declared coefficient of A; without the linear
+    mean it is a clear error."""
+    data = msgp.synthetic_system(3, seed=3)
+    declared = {"integrators": [{"output": 0, "order": 1}]}
+    model = msgp.Msgp(history=data["history"], method="gp-narx", inducing=30, iterations=40, seed=1,
+                      settings={"mean": "linear", **declared}).fit(data["u_train"], data["y_train"])
+    A = model.params["linear_mean"]
+    assert A[0, 0] == 1.0 and A[0, 1] != 0.0
+    bad = msgp.Msgp(history=data["history"], method="gp-narx", inducing=30, iterations=5, seed=1,
+                    settings=declared)
+    with pytest.raises(ValueError, match="integrators"):
+        bad.fit(data["u_train"], data["y_train"])
+
+
 def test_score_matches_numpy_metrics_of_simulate(fitted):
     """RMSE, NLL and coverage recomputed in numpy from `simulate`'s mean and variance."""
     model, data = fitted

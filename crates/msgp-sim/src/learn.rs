@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 use msgp_core::cost::SaturatingCost;
 use msgp_core::fit::{FitSettings, TrainingEpisode, fit_episodes};
 use msgp_core::gp::MeanFunction;
+use msgp_core::integrator::Integrator;
 use msgp_core::model::Method;
 use msgp_core::policy::{PidPolicy, PolicySpec};
 use msgp_core::policy_search::{PidMask, PolicyProblem, PolicySearchSettings, optimise_pid_scaled};
@@ -57,7 +58,8 @@ pub struct LearnSettings {
     pub seed: u64,
     /// Model fit settings (history, inducing points, iterations). The default prior mean is
     /// linear (an ARX map under the GP, started by instrumental variables): with a zero mean the
-    /// fitted models lose the pole's angular velocity (docs/design.md).
+    /// fitted models lose the pole's angular velocity (docs/design.md). The end effector is
+    /// declared a double integrator ([`END_EFFECTOR_INTEGRATOR`]).
     pub fit: FitSettings,
     /// Policy optimisation settings. The default trust region (1 typical magnitude per
     /// iteration) keeps the new gains near the data the model was fitted to.
@@ -93,6 +95,7 @@ impl Default for LearnSettings {
                 learning_rate: 0.01,
                 validation_fraction: 0.0,
                 mean: MeanFunction::Linear,
+                integrators: vec![END_EFFECTOR_INTEGRATOR],
                 ..FitSettings::default()
             },
             search: PolicySearchSettings {
@@ -112,6 +115,17 @@ impl Default for LearnSettings {
         }
     }
 }
+
+/// The end-effector position (output 1) is the double integral of the commanded acceleration,
+/// and the plant is the same wherever the end effector is and however fast it moves: a pure
+/// integrator of order 2 ([`msgp_core::integrator`]). Declared by default: four random rollouts
+/// do not identify it, and a model that misses it cannot tell a position loop from none
+/// (docs/design.md).
+pub const END_EFFECTOR_INTEGRATOR: Integrator = Integrator {
+    output: 1,
+    order: 2,
+    linear: false,
+};
 
 /// The excitation of the random rollouts: 20 sines in 0.1–10 Hz, 1 m/s² RMS.
 pub fn learn_excitation() -> ExcitationConfig {
