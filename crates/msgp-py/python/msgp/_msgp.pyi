@@ -41,7 +41,10 @@ class Msgp:
     iterations: Adam iterations (MSGP: trajectory likelihood, default 400; baselines:
         one-step marginal likelihood, default 300) — `msgp fit --iters`.
     seed: seed of every random choice.
-    settings: other fields of `defaults("fit")` to override (advanced).
+    settings: other fields of `defaults("fit")` to override (advanced), e.g.
+        `{"mean": "linear", "integrators": [{"output": 0, "order": 2}]}` declares output 0 a
+        pure double integrator (`msgp fit --integrating 0:2`; add `"linear": True` for
+        `0:2:linear`).
     """
 
     def __init__(
