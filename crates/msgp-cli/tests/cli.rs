@@ -315,27 +315,30 @@ fn linear_prior_mean_is_fitted_saved_and_used() {
 fn an_integrating_output_is_declared_on_the_command_line() {
     let dir = Scratch::new("integrating");
     dir.write("s.csv", &system_csv(160, None));
-    ok_json(
-        &dir,
-        &args(
-            &[
-                "fit",
-                "--data",
-                "s.csv",
-                "--mean",
-                "linear",
-                "--integrating",
-                "0:1",
-                "--json",
-                "--out",
-                "m.json",
-            ],
-            &FAST,
-        ),
-    );
-    let model: Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path("m.json")).expect("model file"))
-            .expect("model JSON");
+    // fits with `--integrating declared` and returns the saved model file
+    let fit_declared = |declared: &str| -> Value {
+        ok_json(
+            &dir,
+            &args(
+                &[
+                    "fit",
+                    "--data",
+                    "s.csv",
+                    "--mean",
+                    "linear",
+                    "--integrating",
+                    declared,
+                    "--json",
+                    "--out",
+                    "m.json",
+                ],
+                &FAST,
+            ),
+        );
+        let text = std::fs::read_to_string(dir.path("m.json")).expect("model file");
+        serde_json::from_str(&text).expect("model JSON")
+    };
+    let model = fit_declared("0:1");
     // history 2,2: the window is [y_t, y_{t−1}, u_t, u_{t−1}]; order 1 fixes [1, 0] on y
     let row = model["gp"]["linear_mean"][0]
         .as_array()
@@ -348,27 +351,7 @@ fn an_integrating_output_is_declared_on_the_command_line() {
         serde_json::json!([{"output": 0, "order": 1, "linear": false}])
     );
     // `:linear` drops the output's GP: its pseudo-targets are zero
-    ok_json(
-        &dir,
-        &args(
-            &[
-                "fit",
-                "--data",
-                "s.csv",
-                "--mean",
-                "linear",
-                "--integrating",
-                "0:1:linear",
-                "--json",
-                "--out",
-                "l.json",
-            ],
-            &FAST,
-        ),
-    );
-    let model: Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path("l.json")).expect("model file"))
-            .expect("model JSON");
+    let model = fit_declared("0:1:linear");
     assert_eq!(
         model["training"]["settings"]["integrators"][0]["linear"],
         serde_json::json!(true)

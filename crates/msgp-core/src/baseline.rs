@@ -465,6 +465,17 @@ pub fn fit_one_step(
 mod tests {
     use super::*;
 
+    /// A smooth multisine (`n` × 1): the inputs of a window are predictable from older ones, so
+    /// older signals are strong instruments.
+    fn multisine(n: usize) -> DMatrix<f64> {
+        DMatrix::from_fn(n, 1, |t, _| {
+            [(0.07, 0.3), (0.19, 1.1), (0.31, 2.0), (0.53, 0.7)]
+                .iter()
+                .map(|(w, phase)| (w * t as f64 + phase).sin())
+                .sum::<f64>()
+        })
+    }
+
     /// A lightly damped resonance sampled fast, `y_{t+1} = 1.9 y_t − 0.95 y_{t−1} + 0.1 u_t`,
     /// measured with 20% noise: least squares turns the lag coefficients towards a random walk,
     /// the instruments recover them.
@@ -475,13 +486,7 @@ mod tests {
         let mut rng = rand::rngs::StdRng::seed_from_u64(3);
         let n = 4000;
         let mut latent = vec![0.0; n];
-        // a smooth multisine: the inputs of the window are predictable from older ones
-        let u = DMatrix::from_fn(n, 1, |t, _| {
-            [(0.07, 0.3), (0.19, 1.1), (0.31, 2.0), (0.53, 0.7)]
-                .iter()
-                .map(|(w, phase)| (w * t as f64 + phase).sin())
-                .sum::<f64>()
-        });
+        let u = multisine(n);
         for t in 1..n - 1 {
             latent[t + 1] = 1.9 * latent[t] - 0.95 * latent[t - 1] + 0.1 * u[(t, 0)];
         }
@@ -527,12 +532,7 @@ mod tests {
         use rand_distr::{Distribution, StandardNormal};
         let mut rng = rand::rngs::StdRng::seed_from_u64(5);
         let n = 3000;
-        let u = DMatrix::from_fn(n, 1, |t, _| {
-            [(0.07, 0.3), (0.19, 1.1), (0.31, 2.0), (0.53, 0.7)]
-                .iter()
-                .map(|(w, phase)| (w * t as f64 + phase).sin())
-                .sum::<f64>()
-        });
+        let u = multisine(n);
         let mut latent = DMatrix::<f64>::zeros(n, 2);
         for t in 1..n - 1 {
             latent[(t + 1, 0)] = 1.9 * latent[(t, 0)] - 0.95 * latent[(t - 1, 0)] + 0.1 * u[(t, 0)];
