@@ -95,14 +95,12 @@ pub fn parse_integrator(s: &str) -> Result<Integrator, String> {
         [output, order, kind] if kind.trim() == "linear" => (*output, *order, true),
         _ => return Err(expected()),
     };
-    let output: usize = output
-        .trim()
-        .parse()
-        .map_err(|_| format!("bad output column `{output}`"))?;
-    let order: usize = order
-        .trim()
-        .parse()
-        .map_err(|_| format!("bad order `{order}`"))?;
+    let number = |text: &str, what: &str| -> Result<usize, String> {
+        text.trim()
+            .parse()
+            .map_err(|_| format!("bad {what} `{text}`"))
+    };
+    let (output, order) = (number(output, "output column")?, number(order, "order")?);
     Ok(Integrator {
         output,
         order,

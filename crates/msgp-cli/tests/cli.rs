@@ -372,32 +372,17 @@ fn an_integrating_output_is_declared_on_the_command_line() {
         &["fit", "--data", "s.csv", "--integrating", "0:1"],
         &["integrators", "linear mean"],
     );
-    fails(
-        &dir,
-        &[
+    for (declared, needle) in [("1:1", "output 1 does not exist"), ("0", "OUTPUT:ORDER")] {
+        let cmd = [
             "fit",
             "--data",
             "s.csv",
             "--mean",
             "linear",
             "--integrating",
-            "1:1",
-        ],
-        &["output 1 does not exist"],
-    );
-    fails(
-        &dir,
-        &[
-            "fit",
-            "--data",
-            "s.csv",
-            "--mean",
-            "linear",
-            "--integrating",
-            "0",
-        ],
-        &["OUTPUT:ORDER"],
-    );
+        ];
+        fails(&dir, &[&cmd[..], &[declared]].concat(), &[needle]);
+    }
 }
 
 #[test]

@@ -83,8 +83,6 @@ impl Structure {
         for i in integrators {
             if i.linear {
                 without_gp.push(i.output);
-            }
-            if i.linear {
                 // the kinematic row: zero on the other outputs' lags (its own follow)
                 for lag in 0..spec.ly {
                     for j in (0..spec.dy).filter(|&j| j != i.output) {
