@@ -2,8 +2,10 @@
 //! polynomial `exp` over slices, dot products with independent partial sums, and triangular
 //! solves whose right-hand sides are the contiguous rows of a `D × mp` block. All are written as
 //! plain scalar loops that the compiler vectorises; [`dispatch`] runs a kernel inside pulp's
-//! runtime-detected AVX2 + FMA context (x86-64-v3) when the CPU has it, and as portable code
-//! otherwise. No `unsafe`: pulp's `Arch::dispatch` is the safe entry point.
+//! runtime-detected AVX-512 context (x86-64-v4: 8 lanes, which is [`CHUNK`]) or AVX2 + FMA
+//! context (x86-64-v3), whichever the CPU has, and as portable code otherwise. No `unsafe`:
+//! pulp's `Arch::dispatch` is the safe entry point. (AVX-512 made the D = 4 loss ≈ 20 % and its
+//! gradient ≈ 10 % faster than AVX2 on the development machine's Xeon; BENCHMARKS.md.)
 //!
 //! Everything is `#[inline(always)]` so that it is compiled with the dispatching function's
 //! target features. The const parameter `F` selects fused multiply-add (`true` only inside the
@@ -40,7 +42,7 @@ impl<K: Kernel> pulp::WithSimd for Dispatch<K> {
     }
 }
 
-/// Runs `k` with the best instruction set the CPU offers (AVX2 + FMA or portable code).
+/// Runs `k` with the best instruction set the CPU offers (AVX-512, AVX2 + FMA or portable code).
 #[inline]
 pub(crate) fn dispatch<K: Kernel>(k: K) -> K::Output {
     pulp::Arch::new().dispatch(Dispatch(k))
