@@ -300,7 +300,7 @@ impl<T: Scalar> PreparedGp<T> {
             log.record(chol.jitter);
             let target = DVector::from_column_slice(params.pseudo_targets.column(a).as_slice());
             let beta = chol.solve_vec(&target);
-            let kinv = chol.inverse();
+            let kinv = T::spd_inverse(&chol);
             outputs.push(OutputGp {
                 inv_l2,
                 sf2,

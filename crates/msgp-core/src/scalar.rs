@@ -10,7 +10,7 @@ use num_dual::DualSVec64;
 
 use crate::error::Result;
 use crate::gp::PreparedGp;
-use crate::linalg::JitterLog;
+use crate::linalg::{Cholesky, JitterLog};
 use crate::moments::Moments;
 
 /// A real scalar the numerics can run on: `f64` or a forward-mode dual number.
@@ -32,6 +32,12 @@ pub trait Scalar: RealField + Copy + Send + Sync {
     ) -> Result<Moments<Self>> {
         crate::moments::moment_match_generic(gp, mu, sigma, log)
     }
+
+    /// `A⁻¹` from `A`'s Cholesky factor ([`Cholesky::inverse`]); f64 overrides it with the
+    /// vectorised row solves of the fast kernels.
+    fn spd_inverse(chol: &Cholesky<Self>) -> DMatrix<Self> {
+        chol.inverse()
+    }
 }
 
 impl Scalar for f64 {
@@ -50,6 +56,9 @@ impl Scalar for f64 {
         log: &mut JitterLog,
     ) -> Result<Moments<f64>> {
         crate::mm_f64::moment_match_f64(gp, mu, sigma, log)
+    }
+    fn spd_inverse(chol: &Cholesky<f64>) -> DMatrix<f64> {
+        crate::simd::spd_inverse(&chol.l)
     }
 }
 
