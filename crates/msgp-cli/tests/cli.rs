@@ -315,26 +315,18 @@ fn linear_prior_mean_is_fitted_saved_and_used() {
 fn an_integrating_output_is_declared_on_the_command_line() {
     let dir = Scratch::new("integrating");
     dir.write("s.csv", &system_csv(160, None));
+    let declare = [
+        "fit",
+        "--data",
+        "s.csv",
+        "--mean",
+        "linear",
+        "--integrating",
+    ];
     // fits with `--integrating declared` and returns the saved model file
     let fit_declared = |declared: &str| -> Value {
-        ok_json(
-            &dir,
-            &args(
-                &[
-                    "fit",
-                    "--data",
-                    "s.csv",
-                    "--mean",
-                    "linear",
-                    "--integrating",
-                    declared,
-                    "--json",
-                    "--out",
-                    "m.json",
-                ],
-                &FAST,
-            ),
-        );
+        let cmd = [&declare[..], &[declared, "--json", "--out", "m.json"]].concat();
+        ok_json(&dir, &args(&cmd, &FAST));
         let text = std::fs::read_to_string(dir.path("m.json")).expect("model file");
         serde_json::from_str(&text).expect("model JSON")
     };
@@ -373,15 +365,7 @@ fn an_integrating_output_is_declared_on_the_command_line() {
         &["integrators", "linear mean"],
     );
     for (declared, needle) in [("1:1", "output 1 does not exist"), ("0", "OUTPUT:ORDER")] {
-        let cmd = [
-            "fit",
-            "--data",
-            "s.csv",
-            "--mean",
-            "linear",
-            "--integrating",
-        ];
-        fails(&dir, &[&cmd[..], &[declared]].concat(), &[needle]);
+        fails(&dir, &[&declare[..], &[declared]].concat(), &[needle]);
     }
 }
 
