@@ -55,8 +55,9 @@ impl Run {
 }
 
 /// A run already in `dir` (its `summary.json`, written last, as `msgp learn-policy --out DIR`
-/// writes it) with the same model, seed, episode length and number of iterations; runs can so
-/// be split over several processes and collected afterwards.
+/// writes it) made with the same model and exactly the same settings (seed, budget, fit and
+/// search settings, integrators, all of them); runs can so be split over several processes and
+/// collected afterwards. A summary without the settings (older runs) is not reused.
 fn finished_run(
     dir: &std::path::Path,
     model: ModelArg,
@@ -68,9 +69,7 @@ fn finished_run(
     let iterations: Vec<IterationReport> =
         serde_json::from_value(v.get("iterations")?.clone()).ok()?;
     let same = v["model"] == model_name(model)
-        && v["seed"].as_u64() == Some(seed)
-        && v["episode_seconds"].as_f64() == Some(settings.episode_seconds)
-        && v["random_rollouts"].as_u64() == Some(settings.random_rollouts as u64)
+        && v.get("settings") == Some(&serde_json::to_value(settings).ok()?)
         && iterations.len() == settings.iterations;
     same.then(|| Run {
         model,

@@ -160,6 +160,7 @@ pub fn summary_json(
         "seed": settings.seed,
         "random_rollouts": settings.random_rollouts,
         "episode_seconds": settings.episode_seconds,
+        "settings": settings,
         "iterations": outcome.iterations.iter().map(iteration_json).collect::<Vec<_>>(),
         "first_stable_iteration": first,
         "interaction_seconds_to_stable": to_stable,

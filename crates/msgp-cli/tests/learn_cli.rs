@@ -201,6 +201,37 @@ fn figure4_writes_its_section_and_keeps_the_others() {
 }
 
 #[test]
+fn figure4_reuses_a_run_only_when_every_setting_matches() {
+    let dir = scratch("fig4reuse");
+    let base = [
+        &[
+            "reproduce",
+            "figure4",
+            "--seeds",
+            "1",
+            "--iterations",
+            "1",
+            "--models",
+            "msgp",
+            "--dir",
+            "fig",
+        ][..],
+        &TINY[..],
+    ]
+    .concat();
+    let reused = |args: &[&str]| -> bool {
+        let o = run(&dir, args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stderr).contains("reusing")
+    };
+    assert!(!reused(&base), "nothing to reuse yet");
+    assert!(reused(&base), "the same settings reuse the finished run");
+    // the same budget, seed and model, but the end effector not declared an integrator
+    assert!(!reused(&[&base[..], &["--free-position"]].concat()));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn bad_learning_options_fail_with_a_message() {
     let dir = scratch("bad");
     for (args, needle) in [
