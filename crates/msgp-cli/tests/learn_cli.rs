@@ -154,6 +154,24 @@ fn learn_policy_writes_policy_table_episodes_plot_and_json() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `msgp reproduce figure4` for `models`, one seed and one iteration on the tiny budget, into
+/// `fig/`, then `extra`.
+fn figure4_args<'a>(models: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
+    let head = [
+        "reproduce",
+        "figure4",
+        "--seeds",
+        "1",
+        "--iterations",
+        "1",
+        "--models",
+        models,
+        "--dir",
+        "fig",
+    ];
+    [&head[..], &TINY[..], extra].concat()
+}
+
 #[test]
 fn figure4_writes_its_section_and_keeps_the_others() {
     let dir = scratch("fig4");
@@ -162,34 +180,7 @@ fn figure4_writes_its_section_and_keeps_the_others() {
         "<!-- msgp:table1:begin -->\nTABLE ONE\n<!-- msgp:table1:end -->\n",
     )
     .expect("write");
-    let o = run(
-        &dir,
-        &[
-            "reproduce",
-            "figure4",
-            "--seeds",
-            "1",
-            "--iterations",
-            "1",
-            "--models",
-            "msgp,gp-narx",
-            "--dir",
-            "fig",
-            "--quiet",
-            "--random-rollouts",
-            "2",
-            "--fit-iters",
-            "2",
-            "--inducing",
-            "8",
-            "--search-iters",
-            "1",
-            "--candidates",
-            "2",
-            "--episode-seconds",
-            "1",
-        ],
-    );
+    let o = run(&dir, &figure4_args("msgp,gp-narx", &["--quiet"]));
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let md = std::fs::read_to_string(dir.join("RESULTS.md")).expect("results");
     assert!(md.contains("TABLE ONE"), "table 1 kept");
@@ -203,22 +194,7 @@ fn figure4_writes_its_section_and_keeps_the_others() {
 #[test]
 fn figure4_reuses_a_run_only_when_every_setting_matches() {
     let dir = scratch("fig4reuse");
-    let base = [
-        &[
-            "reproduce",
-            "figure4",
-            "--seeds",
-            "1",
-            "--iterations",
-            "1",
-            "--models",
-            "msgp",
-            "--dir",
-            "fig",
-        ][..],
-        &TINY[..],
-    ]
-    .concat();
+    let base = figure4_args("msgp", &[]);
     let reused = |args: &[&str]| -> bool {
         let o = run(&dir, args);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
