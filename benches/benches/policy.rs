@@ -1,8 +1,9 @@
 //! The pieces of one policy-learning iteration on the simulated pendulum (`msgp learn-policy`
 //! defaults: outputs θ and x, l_y = 2, l_u = 3, m = 50, linear prior mean, PID + PD gains, 5 s =
-//! 250-step closed-loop rollouts): one expected-cost evaluation in f64, one dual gradient over
-//! the 5 gains (5 and 8 lanes), a reduced policy search (on every core and on one), and 20 Adam iterations of the MSGP
-//! fit on four random rollouts plus one feedback episode.
+//! 250-step closed-loop rollouts): one expected-cost evaluation in f64, the gradient over the 5
+//! gains by the adjoint sweep (the search's) and by duals (5 and 8 lanes), a reduced policy search
+//! (on every core and on one), and 20 Adam iterations of the MSGP fit on four random rollouts
+//! plus one feedback episode.
 //!
 //! The model is fitted once, outside the timings, on four 3 s random-excitation episodes and one
 //! 3 s episode of the hand-tuned gains (seeded).
@@ -99,7 +100,11 @@ fn bench_policy(c: &mut Criterion) {
     group.bench_function("expected_cost_f64", |b| {
         b.iter(|| black_box(problem.evaluate(&initial).expect("evaluate")))
     });
-    // the search's gradient: 5 lanes for 5 gains; and the generic 8-lane duals for comparison
+    // the search's gradient: the rollout's adjoint sweep; and the duals it replaced (5 lanes for
+    // 5 gains, and the generic 8) for comparison
+    group.bench_function("gradient_adjoint", |b| {
+        b.iter(|| black_box(problem.gradient(&mask, &initial, &x).expect("gradient")))
+    });
     group.bench_function("gradient_dual_5_lanes", |b| {
         b.iter(|| {
             black_box(
@@ -121,7 +126,7 @@ fn bench_policy(c: &mut Criterion) {
         })
     });
     // 20 screened candidates + 2 Adam starts × 5 steps: 20 + 2·(5 + 1) f64 rollouts and 10
-    // dual rollouts (the learn-policy default is 150 candidates and 4 starts × 20 steps)
+    // gradients (the learn-policy default is 150 candidates and 4 starts × 20 steps)
     let search = PolicySearchSettings {
         iterations: 5,
         restarts: 0,

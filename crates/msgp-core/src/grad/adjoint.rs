@@ -14,18 +14,19 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::cost::SaturatingCost;
 use crate::error::{MsgpError, Result};
 use crate::gp::{GpConfig, GpParams, GpShape, ParamGroup, PreparedGp};
 use crate::grad::dual::{Dual, gradient};
 use crate::kernel::kernel_matrix;
-use crate::linalg::{JitterLog, cholesky, symmetrize};
+use crate::linalg::{JitterLog, JitterPolicy, cholesky, symmetrize};
 use crate::loss::{Complexity, LossValue, complexity_term, gaussian_nll};
 use crate::mean_fn::{add_linear_mean, linear_mean_backward};
 use crate::mm_f64::{MmState, q_block};
 use crate::moments::Moments;
 use crate::narx::NarxSpec;
 use crate::policy::{FeedbackPolicy, PolicyMoments, PolicySpec};
-use crate::rollout::{Layout, gather, initial_window, noisy_covariances};
+use crate::rollout::{Layout, StartState, gather, initial_window, noisy_covariances};
 use crate::simd::{
     Kernel, axpy, chol_inverse, dispatch, dot, gemm_rows, gram_add, solve_lower_rows,
     solve_upper_rows, sum,
@@ -484,7 +485,8 @@ struct StepRecord {
     /// pass).
     cache: MmState,
     ycov: DMatrix<f64>,
-    resid: DVector<f64>,
+    /// `E[y_t]`.
+    mean: DVector<f64>,
     v: DMatrix<f64>,
     /// The GP's own `V` (without the linear mean) and the window mean.
     v_gp: DMatrix<f64>,
@@ -500,24 +502,40 @@ struct PolicyRecord {
     zq: DMatrix<f64>,
 }
 
-/// Vector–Jacobian product of a policy's moment map at `(qm, qc)`: the gradient of
-/// `⟨ō_mean, mean⟩ + ⟨ō_cov, cov⟩ + ⟨C̄, C⟩` with respect to every entry of `qm` and `qc`,
-/// by forward-mode duals (the policy block is small: `n_q + n_q²` directions).
+/// A policy built from its parameters `θ` given as dual numbers.
+pub type LiftPolicy<'a> = dyn Fn(&[Dual]) -> Box<dyn FeedbackPolicy<Dual>> + Sync + 'a;
+
+/// The policy of a closed-loop adjoint rollout, and what the sweep differentiates it by.
+pub(crate) struct AdjointPolicy<'a> {
+    /// The policy at its current parameters.
+    pub policy: &'a dyn FeedbackPolicy<f64>,
+    /// The same policy with its parameters `θ` given as dual numbers (for the vector–Jacobian
+    /// product of each step's moment map); `θ` may be empty (a fixed policy: the feedback
+    /// episodes of a model fit).
+    pub lift: &'a LiftPolicy<'a>,
+    /// The parameter values `θ`.
+    pub theta: &'a [f64],
+}
+
+/// Vector–Jacobian product of a policy's moment map at `(qm, qc, θ)`: the gradient of
+/// `⟨ō_mean, mean⟩ + ⟨ō_cov, cov⟩ + ⟨C̄, C⟩` with respect to every entry of `qm`, `qc` and `θ`,
+/// by forward-mode duals (the policy block is small: `n_q + n_q² + |θ|` directions).
 fn policy_vjp(
-    policy: &dyn FeedbackPolicy<Dual>,
+    policy: &AdjointPolicy<'_>,
     rec: &PolicyRecord,
     mean_bar: &DVector<f64>,
     cov_bar: &DMatrix<f64>,
     c_bar: &DMatrix<f64>,
-) -> Result<(DVector<f64>, DMatrix<f64>)> {
+) -> Result<(DVector<f64>, DMatrix<f64>, Vec<f64>)> {
     let nq = rec.qm.len();
     let mut x: Vec<f64> = rec.qm.iter().copied().collect();
     x.extend(rec.qc.iter().copied());
+    x.extend_from_slice(policy.theta);
     let active: Vec<usize> = (0..x.len()).collect();
     let (_, g) = gradient(&x, &active, 1, |xd: &[Dual]| {
         let qm = DVector::from_column_slice(&xd[..nq]);
-        let qc = DMatrix::from_column_slice(nq, nq, &xd[nq..]);
-        let pm = policy.moments(&qm, &qc)?;
+        let qc = DMatrix::from_column_slice(nq, nq, &xd[nq..nq + nq * nq]);
+        let pm = (policy.lift)(&xd[nq + nq * nq..]).moments(&qm, &qc)?;
         let mut acc = Dual::from_re(0.0);
         for (o, b) in pm.mean.iter().zip(mean_bar.iter()) {
             acc += *o * *b;
@@ -532,10 +550,108 @@ fn policy_vjp(
     })?;
     Ok((
         DVector::from_column_slice(&g[..nq]),
-        DMatrix::from_column_slice(nq, nq, &g[nq..]),
+        DMatrix::from_column_slice(nq, nq, &g[nq..nq + nq * nq]),
+        g[nq + nq * nq..].to_vec(),
     ))
 }
 
+/// Gradient of the expected cost `E[c(y)]`, `y ~ N(mean, cov)`, with respect to `mean` and
+/// (symmetrised) `cov`, by forward-mode duals (`d_y + d_y²` directions).
+fn cost_vjp(
+    cost: &SaturatingCost,
+    mean: &DVector<f64>,
+    cov: &DMatrix<f64>,
+    jitter: &JitterPolicy,
+) -> Result<(DVector<f64>, DMatrix<f64>)> {
+    let dy = mean.len();
+    let mut x: Vec<f64> = mean.iter().copied().collect();
+    x.extend(cov.iter().copied());
+    let active: Vec<usize> = (0..x.len()).collect();
+    let (_, g) = gradient(&x, &active, 1, |xd: &[Dual]| {
+        let m = DVector::from_column_slice(&xd[..dy]);
+        let s = DMatrix::from_column_slice(dy, dy, &xd[dy..]);
+        let mut log = JitterLog::default();
+        Ok(cost.moments(&m, &s, jitter, &mut log)?.mean)
+    })?;
+    let gc = DMatrix::from_column_slice(dy, dy, &g[dy..]);
+    Ok((
+        DVector::from_column_slice(&g[..dy]),
+        (&gc + gc.transpose()) * 0.5,
+    ))
+}
+
+/// Value and gradient, with respect to the policy parameters `θ`, of the expected cost
+/// `Σ_t E[c(y_t)]` of a closed-loop rollout of `policy` from `start` over `t0..horizon`
+/// ([`crate::policy_cost::closed_loop_cost`]), by the adjoint sweep: reverse mode over the
+/// rollout, forward-mode duals only inside each step's small policy and cost maps. It costs a
+/// few rollouts whatever `|θ|`; duals over `θ` through the whole rollout are the reference it
+/// is tested against. `lift` builds the same policy from dual parameters.
+#[allow(clippy::too_many_arguments)]
+pub fn closed_loop_cost_gradient(
+    gp: &PreparedGp<f64>,
+    spec: &NarxSpec,
+    start: &StartState<f64>,
+    policy: &dyn FeedbackPolicy<f64>,
+    lift: &LiftPolicy<'_>,
+    theta: &[f64],
+    t0: usize,
+    horizon: usize,
+    cost: &SaturatingCost,
+    log: &mut JitterLog,
+) -> Result<(f64, Vec<f64>)> {
+    let (m, d, e) = (gp.pseudo_inputs.nrows(), gp.input_dim(), gp.output_dim());
+    if d != spec.input_dim() || e != spec.dy || policy.input_dim() != spec.du {
+        return Err(MsgpError::Shape(format!(
+            "GP ({d} inputs, {e} outputs), NARX spec ({} inputs, {} outputs) and policy ({} \
+             inputs) do not fit together",
+            spec.input_dim(),
+            spec.dy,
+            policy.input_dim()
+        )));
+    }
+    // the GP's own adjoints are not needed here; they accumulate in a scratch record
+    let mut scratch = GpAdjoint::zeros(m, d, e);
+    let adjoint_policy = AdjointPolicy {
+        policy,
+        lift,
+        theta,
+    };
+    let out = rollout_adjoint(
+        gp,
+        spec,
+        start,
+        StepLoss::Cost(cost),
+        Some(&adjoint_policy),
+        t0,
+        horizon,
+        &mut scratch,
+        log,
+    )?;
+    Ok((out.total, out.theta))
+}
+
+/// What a rollout adjoint scores each predicted observation by.
+enum StepLoss<'a> {
+    /// Negative log likelihood of the measured outputs (the MSGP loss).
+    Nll(&'a Trajectory),
+    /// Expected saturating cost (policy search).
+    Cost(&'a SaturatingCost),
+}
+
+/// What [`rollout_adjoint`] returns.
+struct RolloutAdjoint {
+    /// Σ of the step losses.
+    total: f64,
+    steps: usize,
+    /// Gradient with respect to the policy's parameters `θ`.
+    theta: Vec<f64>,
+    /// Adjoint of the start state's covariance.
+    start_cov: DMatrix<f64>,
+}
+
+/// The MSGP loss of one episode: its free-running prediction from the measured window (open
+/// loop on its inputs, or closed loop under its policy), scored by the likelihood of the
+/// measured outputs. Adds the GP adjoints to `adj`; returns the NLL and the number of steps.
 fn episode_adjoint(
     gp: &PreparedGp<f64>,
     spec: &NarxSpec,
@@ -545,29 +661,91 @@ fn episode_adjoint(
     log: &mut JitterLog,
 ) -> Result<(f64, usize)> {
     let d = spec.input_dim();
-    let (dy, du) = (spec.dy, spec.du);
     let t0 = spec.warmup();
-    let horizon = traj.len();
     let pol: Option<Box<dyn FeedbackPolicy<f64>>> = policy.map(|p| p.lift::<f64>());
-    let pol_dual: Option<Box<dyn FeedbackPolicy<Dual>>> = policy.map(|p| p.lift::<Dual>());
+    let lift;
+    let adjoint_policy = match (policy, pol.as_deref()) {
+        (Some(spec), Some(p)) => {
+            lift = move |_: &[Dual]| spec.lift::<Dual>();
+            Some(AdjointPolicy {
+                policy: p,
+                lift: &lift,
+                theta: &[],
+            })
+        }
+        _ => None,
+    };
     let ds = pol.as_ref().map_or(0, |p| p.state_dim());
-    let layout = Layout { d, ds, dy, du };
-    let (n, x, u) = (layout.n(), layout.x_slot(), layout.u_slot());
-    let len = layout.len();
-    let sel = layout.gather_map(spec);
     let (wmu, wsigma) = initial_window(gp, spec, traj);
-    let mut mu = DVector::<f64>::zeros(n);
-    let mut sigma = DMatrix::<f64>::zeros(n, n);
+    let mut mu = DVector::<f64>::zeros(d + ds);
+    let mut sigma = DMatrix::<f64>::zeros(d + ds, d + ds);
     mu.rows_mut(0, d).copy_from(&wmu);
     sigma.view_mut((0, 0), (d, d)).copy_from(&wsigma);
     if let Some(p) = &pol {
         let p0 = p.initial_state(&traj.y, &traj.u, t0);
         mu.rows_mut(d, ds).copy_from(&p0);
     }
+    let start = StartState {
+        mean: mu,
+        cov: sigma,
+    };
+    let out = rollout_adjoint(
+        gp,
+        spec,
+        &start,
+        StepLoss::Nll(traj),
+        adjoint_policy.as_ref(),
+        t0,
+        traj.len(),
+        adj,
+        log,
+    )?;
+    // the measured window's variance is the observation noise
+    for k in 0..spec.ly {
+        for j in 0..spec.dy {
+            let i = spec.y_index(k, j);
+            adj.sy2[j] += out.start_cov[(i, i)];
+        }
+    }
+    Ok((out.total, out.steps))
+}
 
+/// The adjoint sweep of one rollout from `start` over `t0..horizon`: a forward pass that records
+/// every step, then a backward pass that pulls the step losses' adjoints back through the
+/// moment matching, the window shift and (closed loop) the policy. Open loop (no `policy`) it
+/// follows the inputs of the [`StepLoss::Nll`] trajectory. Adds the GP adjoints to `adj`.
+#[allow(clippy::too_many_arguments)]
+fn rollout_adjoint(
+    gp: &PreparedGp<f64>,
+    spec: &NarxSpec,
+    start: &StartState<f64>,
+    loss: StepLoss<'_>,
+    policy: Option<&AdjointPolicy<'_>>,
+    t0: usize,
+    horizon: usize,
+    adj: &mut GpAdjoint,
+    log: &mut JitterLog,
+) -> Result<RolloutAdjoint> {
+    let d = spec.input_dim();
+    let (dy, du) = (spec.dy, spec.du);
+    let ds = policy.map_or(0, |p| p.policy.state_dim());
+    let layout = Layout { d, ds, dy, du };
+    let (n, x, u) = (layout.n(), layout.x_slot(), layout.u_slot());
+    let len = layout.len();
+    let sel = layout.gather_map(spec);
+    if start.mean.len() != n || start.cov.shape() != (n, n) || horizon <= t0 {
+        return Err(MsgpError::Shape(format!(
+            "adjoint rollout over {t0}..{horizon} from a start state of {} entries; window and \
+             policy state need {n}",
+            start.mean.len()
+        )));
+    }
+    let mut mu = start.mean.clone();
+    let mut sigma = start.cov.clone();
+    let mut theta_bar = vec![0.0; policy.map_or(0, |p| p.theta.len())];
     // forward
     let mut recs: Vec<StepRecord> = Vec::with_capacity(horizon - t0);
-    let mut nll = 0.0;
+    let mut total = 0.0;
     let mut nll_log = JitterLog::default();
     for t in t0..horizon {
         let wsig = sigma.view((0, 0), (d, d)).into_owned();
@@ -588,20 +766,24 @@ fn episode_adjoint(
             (fmean, fcov, v) = (mom.mean, mom.cov, mom.v);
         }
         let (xcov, ycov) = noisy_covariances(gp, &fcov);
-        let yrow: Vec<f64> = (0..dy).map(|j| traj.y[(t, j)]).collect();
-        nll += gaussian_nll(&yrow, &fmean, &ycov, &gp.jitter, &mut nll_log)?;
-        if !nll.is_finite() {
-            return Err(MsgpError::NonFinite(format!(
-                "trajectory likelihood at step {t}"
-            )));
+        match &loss {
+            StepLoss::Nll(traj) => {
+                let yrow: Vec<f64> = (0..dy).map(|j| traj.y[(t, j)]).collect();
+                total += gaussian_nll(&yrow, &fmean, &ycov, &gp.jitter, &mut nll_log)?;
+            }
+            StepLoss::Cost(cost) => {
+                total += cost.moments(&fmean, &ycov, &gp.jitter, &mut nll_log)?.mean;
+            }
         }
-        let resid = DVector::from_fn(dy, |j, _| yrow[j] - fmean[j]);
+        if !total.is_finite() {
+            return Err(MsgpError::NonFinite(format!("rollout loss at step {t}")));
+        }
         let mean = fmean;
         let mut rec = StepRecord {
             sigma: sigma.clone(),
             cache: mm,
             ycov: ycov.clone(),
-            resid,
+            mean: mean.clone(),
             v: v.clone(),
             v_gp,
             wmu,
@@ -609,15 +791,17 @@ fn episode_adjoint(
         };
         if t + 1 < horizon {
             let (mut amu, mut acov) = layout.augmented(&mu, &sigma, &mean, &v, &xcov);
-            match &pol {
+            match policy {
                 None => {
-                    for j in 0..du {
-                        amu[u + j] = traj.u[(t, j)];
+                    if let StepLoss::Nll(traj) = &loss {
+                        for j in 0..du {
+                            amu[u + j] = traj.u[(t, j)];
+                        }
                     }
                 }
                 Some(p) => {
                     let (qm, qc) = layout.policy_input(&amu, &acov, &ycov);
-                    let pm = p.moments(&qm, &qc)?;
+                    let pm = p.policy.moments(&qm, &qc)?;
                     let mut zq = DMatrix::<f64>::zeros(u, dy + ds);
                     zq.view_mut((0, 0), (u, dy))
                         .copy_from(&acov.view((0, x), (u, dy)));
@@ -655,7 +839,7 @@ fn episode_adjoint(
                     acovbar[(sel[i], sel[j])] += sigmabar_next[(i, j)];
                 }
             }
-            if let (Some(pr), Some(pd)) = (&rec.policy, &pol_dual) {
+            if let (Some(pr), Some(pa)) = (&rec.policy, policy) {
                 let no = du + ds;
                 // set_policy_output: mean, cov, and cross = Z_q C
                 let mean_bar = amubar.rows(u, no).into_owned();
@@ -667,7 +851,10 @@ fn episode_adjoint(
                 add_block(&mut acovbar, (0, x), &zq_bar.columns(0, dy).into_owned());
                 add_block(&mut acovbar, (0, d), &zq_bar.columns(dy, ds).into_owned());
                 // the policy's own moment map
-                let (qm_bar, qc_bar) = policy_vjp(pd.as_ref(), pr, &mean_bar, &cov_bar, &c_bar)?;
+                let (qm_bar, qc_bar, th_bar) = policy_vjp(pa, pr, &mean_bar, &cov_bar, &c_bar)?;
+                for (acc, g) in theta_bar.iter_mut().zip(&th_bar) {
+                    *acc += g;
+                }
                 // policy_input: q = [y_{t+1}; p_t]
                 for k in 0..dy {
                     amubar[x + k] += qm_bar[k];
@@ -702,12 +889,23 @@ fn episode_adjoint(
             vbar += rec.sigma.columns(0, d).transpose() * &zxbar;
             xcovbar += acovbar.view((x, x), (dy, dy));
         }
-        // NLL = ½[rᵀV⁻¹r + log|V|]
-        let vch = cholesky(&rec.ycov, &gp.jitter, "predictive covariance")?;
-        let vinv = vch.inverse();
-        let alpha = &vinv * &rec.resid;
-        mbar -= &alpha;
-        ycovbar += (&vinv - &alpha * alpha.transpose()) * 0.5;
+        match &loss {
+            StepLoss::Nll(traj) => {
+                // NLL = ½[rᵀV⁻¹r + log|V|]
+                let t = t0 + s;
+                let resid = DVector::from_fn(dy, |j, _| traj.y[(t, j)] - rec.mean[j]);
+                let vch = cholesky(&rec.ycov, &gp.jitter, "predictive covariance")?;
+                let vinv = vch.inverse();
+                let alpha = &vinv * &resid;
+                mbar -= &alpha;
+                ycovbar += (&vinv - &alpha * alpha.transpose()) * 0.5;
+            }
+            StepLoss::Cost(cost) => {
+                let (gm, gc) = cost_vjp(cost, &rec.mean, &rec.ycov, &gp.jitter)?;
+                mbar += gm;
+                ycovbar += gc;
+            }
+        }
         xcovbar += &ycovbar;
         for j in 0..dy {
             adj.sy2[j] += ycovbar[(j, j)];
@@ -733,13 +931,12 @@ fn episode_adjoint(
         mubar_next = mubar;
         sigmabar_next = sigmabar;
     }
-    for k in 0..spec.ly {
-        for j in 0..dy {
-            let i = spec.y_index(k, j);
-            adj.sy2[j] += sigmabar_next[(i, i)];
-        }
-    }
-    Ok((nll, recs.len()))
+    Ok(RolloutAdjoint {
+        total,
+        steps: recs.len(),
+        theta: theta_bar,
+        start_cov: sigmabar_next,
+    })
 }
 
 /// `m[at..] += b` for a block.
