@@ -16,8 +16,20 @@ pub fn se_ard<T: Scalar>(a: &[T], b: &[T], inv_l2: &[T], sf2: T) -> T {
     sf2 * (-(s * c::<T>(0.5))).exp()
 }
 
-/// Kernel matrix between the rows of `a` (n×D) and the rows of `b` (m×D).
+/// Kernel matrix between the rows of `a` (n×D) and the rows of `b` (m×D). f64 takes a
+/// vectorised path ([`crate::simd::kernel_matrix`]; equal to [`kernel_matrix_generic`] to
+/// rounding), other scalars the generic one.
 pub fn kernel_matrix<T: Scalar>(
+    a: &DMatrix<T>,
+    b: &DMatrix<T>,
+    inv_l2: &[T],
+    sf2: T,
+) -> DMatrix<T> {
+    T::kernel_matrix(a, b, inv_l2, sf2)
+}
+
+/// [`kernel_matrix`] entry by entry with [`se_ard`] (the reference; what dual numbers run).
+pub fn kernel_matrix_generic<T: Scalar>(
     a: &DMatrix<T>,
     b: &DMatrix<T>,
     inv_l2: &[T],

@@ -38,6 +38,16 @@ pub trait Scalar: RealField + Copy + Send + Sync {
     fn spd_inverse(chol: &Cholesky<Self>) -> DMatrix<Self> {
         chol.inverse()
     }
+
+    /// The SE-ARD kernel matrix ([`crate::kernel::kernel_matrix`]).
+    fn kernel_matrix(
+        a: &DMatrix<Self>,
+        b: &DMatrix<Self>,
+        inv_l2: &[Self],
+        sf2: Self,
+    ) -> DMatrix<Self> {
+        crate::kernel::kernel_matrix_generic(a, b, inv_l2, sf2)
+    }
 }
 
 impl Scalar for f64 {
@@ -59,6 +69,10 @@ impl Scalar for f64 {
     }
     fn spd_inverse(chol: &Cholesky<f64>) -> DMatrix<f64> {
         crate::simd::spd_inverse(&chol.l)
+    }
+
+    fn kernel_matrix(a: &DMatrix<f64>, b: &DMatrix<f64>, inv_l2: &[f64], sf2: f64) -> DMatrix<f64> {
+        crate::simd::kernel_matrix(a, b, inv_l2, sf2)
     }
 }
 
