@@ -177,7 +177,7 @@ fn kernel_columns<const F: bool>(
     out: &mut [f64],
 ) {
     let (m, dim) = (b.nrows(), b.ncols());
-    let n = if m == 0 { 0 } else { out.len() / m };
+    let n = out.len().checked_div(m).unwrap_or(0);
     for (j, col) in out.chunks_exact_mut(n.max(1)).take(m).enumerate() {
         for d in 0..dim {
             let (bj, w) = (b[(j, d)], -0.5 * inv_l2[d]);
