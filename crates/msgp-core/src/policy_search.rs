@@ -553,6 +553,40 @@ mod tests {
         }
     }
 
+    #[test]
+    fn the_gradient_refuses_gains_that_do_not_fit_the_mask() {
+        let model = two_output_model(|_, _| 0.0);
+        let problem = PolicyProblem {
+            model: &model,
+            y0_mean: vec![0.0, 0.0],
+            y0_var: vec![0.01, 0.01],
+            u0: vec![0.0],
+            cost: SaturatingCost::with_widths(DVector::zeros(2), &[0.5, 0.5]).expect("cost"),
+            horizon: 5,
+        };
+        let initial = PidPolicy::new(
+            DMatrix::zeros(1, 2),
+            DMatrix::zeros(1, 2),
+            DMatrix::zeros(1, 2),
+            0.1,
+            vec![2.0],
+        )
+        .expect("policy");
+        let mask = PidMask {
+            kp: DMatrix::from_element(1, 2, true),
+            ki: DMatrix::from_element(1, 2, false),
+            kd: DMatrix::from_element(1, 2, true),
+        };
+        let err = problem
+            .gradient(&mask, &initial, &[0.1, 0.2, 0.3])
+            .expect_err("three gains for a mask that frees four");
+        assert!(
+            err.to_string().contains("3 gains given, the mask frees 4"),
+            "{err}"
+        );
+        assert!(problem.gradient(&mask, &initial, &[0.1; 4]).is_ok());
+    }
+
     fn search_gradient_matches_duals_and_finite_differences(mean: MeanFunction) {
         // outputs that follow the input, so the gains matter
         let model = two_output_model_with(|t, _| 0.3 * (t as f64 * 0.31 - 0.4).sin(), mean);
