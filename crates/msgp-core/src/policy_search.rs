@@ -230,11 +230,12 @@ impl PolicyProblem<'_> {
             inner: mask.unpack::<f64>(initial, g),
             normalizer: normalizer.clone(),
         };
-        let lift = |th: &[Dual]| -> Box<dyn FeedbackPolicy<Dual>> {
-            Box::new(Normalized {
+        let moments = |th: &[Dual], qm: &DVector<Dual>, qc: &DMatrix<Dual>| {
+            Normalized {
                 inner: mask.unpack::<Dual>(initial, th),
                 normalizer: normalizer.clone(),
-            })
+            }
+            .moments(qm, qc)
         };
         let start = self.start::<f64>(policy.state_dim());
         let t0 = self.model.spec.warmup();
@@ -243,7 +244,7 @@ impl PolicyProblem<'_> {
             &self.model.spec,
             &start,
             &policy,
-            &lift,
+            &moments,
             g,
             t0,
             t0 + self.horizon,

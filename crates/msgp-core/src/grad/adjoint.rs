@@ -502,17 +502,18 @@ struct PolicyRecord {
     zq: DMatrix<f64>,
 }
 
-/// A policy built from its parameters `θ` given as dual numbers.
-pub type LiftPolicy<'a> = dyn Fn(&[Dual]) -> Box<dyn FeedbackPolicy<Dual>> + Sync + 'a;
+/// A policy's moment map in dual numbers, as a function of its parameters `θ` and of the
+/// moments `(mean, cov)` of its input: `(θ, mean, cov) ↦ policy(θ).moments(mean, cov)`.
+pub type DualPolicyMap<'a> =
+    dyn Fn(&[Dual], &DVector<Dual>, &DMatrix<Dual>) -> Result<PolicyMoments<Dual>> + Sync + 'a;
 
 /// The policy of a closed-loop adjoint rollout, and what the sweep differentiates it by.
 pub(crate) struct AdjointPolicy<'a> {
     /// The policy at its current parameters.
     pub policy: &'a dyn FeedbackPolicy<f64>,
-    /// The same policy with its parameters `θ` given as dual numbers (for the vector–Jacobian
-    /// product of each step's moment map); `θ` may be empty (a fixed policy: the feedback
-    /// episodes of a model fit).
-    pub lift: &'a LiftPolicy<'a>,
+    /// The same policy's moment map in dual numbers (for the vector–Jacobian product of each
+    /// step); `θ` may be empty (a fixed policy: the feedback episodes of a model fit).
+    pub moments: &'a DualPolicyMap<'a>,
     /// The parameter values `θ`.
     pub theta: &'a [f64],
 }
@@ -535,7 +536,7 @@ fn policy_vjp(
     let (_, g) = gradient(&x, &active, 1, |xd: &[Dual]| {
         let qm = DVector::from_column_slice(&xd[..nq]);
         let qc = DMatrix::from_column_slice(nq, nq, &xd[nq..nq + nq * nq]);
-        let pm = (policy.lift)(&xd[nq + nq * nq..]).moments(&qm, &qc)?;
+        let pm = (policy.moments)(&xd[nq + nq * nq..], &qm, &qc)?;
         let mut acc = Dual::from_re(0.0);
         for (o, b) in pm.mean.iter().zip(mean_bar.iter()) {
             acc += *o * *b;
@@ -585,14 +586,14 @@ fn cost_vjp(
 /// ([`crate::policy_cost::closed_loop_cost`]), by the adjoint sweep: reverse mode over the
 /// rollout, forward-mode duals only inside each step's small policy and cost maps. It costs a
 /// few rollouts whatever `|θ|`; duals over `θ` through the whole rollout are the reference it
-/// is tested against. `lift` builds the same policy from dual parameters.
+/// is tested against. `moments` is the same policy's moment map in dual numbers.
 #[allow(clippy::too_many_arguments)]
 pub fn closed_loop_cost_gradient(
     gp: &PreparedGp<f64>,
     spec: &NarxSpec,
     start: &StartState<f64>,
     policy: &dyn FeedbackPolicy<f64>,
-    lift: &LiftPolicy<'_>,
+    moments: &DualPolicyMap<'_>,
     theta: &[f64],
     t0: usize,
     horizon: usize,
@@ -613,7 +614,7 @@ pub fn closed_loop_cost_gradient(
     let mut scratch = GpAdjoint::zeros(m, d, e);
     let adjoint_policy = AdjointPolicy {
         policy,
-        lift,
+        moments,
         theta,
     };
     let out = rollout_adjoint(
@@ -663,13 +664,15 @@ fn episode_adjoint(
     let d = spec.input_dim();
     let t0 = spec.warmup();
     let pol: Option<Box<dyn FeedbackPolicy<f64>>> = policy.map(|p| p.lift::<f64>());
-    let lift;
-    let adjoint_policy = match (policy, pol.as_deref()) {
-        (Some(spec), Some(p)) => {
-            lift = move |_: &[Dual]| spec.lift::<Dual>();
+    // the episode's policy is fixed (no parameters): lifted to duals once
+    let pol_dual: Option<Box<dyn FeedbackPolicy<Dual>>> = policy.map(|p| p.lift::<Dual>());
+    let moments;
+    let adjoint_policy = match (pol.as_deref(), pol_dual.as_deref()) {
+        (Some(p), Some(pd)) => {
+            moments = move |_: &[Dual], qm: &DVector<Dual>, qc: &DMatrix<Dual>| pd.moments(qm, qc);
             Some(AdjointPolicy {
                 policy: p,
-                lift: &lift,
+                moments: &moments,
                 theta: &[],
             })
         }
@@ -733,11 +736,15 @@ fn rollout_adjoint(
     let (n, x, u) = (layout.n(), layout.x_slot(), layout.u_slot());
     let len = layout.len();
     let sel = layout.gather_map(spec);
-    if start.mean.len() != n || start.cov.shape() != (n, n) || horizon <= t0 {
+    if start.mean.len() != n || start.cov.shape() != (n, n) {
         return Err(MsgpError::Shape(format!(
-            "adjoint rollout over {t0}..{horizon} from a start state of {} entries; window and \
-             policy state need {n}",
+            "start state has {} entries; window and policy state need {n}",
             start.mean.len()
+        )));
+    }
+    if horizon <= t0 {
+        return Err(MsgpError::Shape(format!(
+            "an adjoint rollout over {t0}..{horizon} has no step"
         )));
     }
     let mut mu = start.mean.clone();
