@@ -747,6 +747,12 @@ fn rollout_adjoint(
             "an adjoint rollout over {t0}..{horizon} has no step"
         )));
     }
+    // open loop the inputs come from the measured trajectory, which only the NLL has
+    if policy.is_none() && matches!(loss, StepLoss::Cost(_)) {
+        return Err(MsgpError::Shape(
+            "an expected-cost rollout needs a policy to produce its inputs".into(),
+        ));
+    }
     let mut mu = start.mean.clone();
     let mut sigma = start.cov.clone();
     let mut theta_bar = vec![0.0; policy.map_or(0, |p| p.theta.len())];
