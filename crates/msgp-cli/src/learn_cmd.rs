@@ -18,7 +18,7 @@ use msgp_sim::{PendulumParams, write_run};
 use serde_json::{Value, json};
 
 use crate::cost_plot::{CostCurve, plot_costs};
-use crate::fit_cmd::MeanArg;
+use crate::fit_cmd::{MeanArg, OptimizerArg};
 use crate::output::{out, out_json};
 use crate::sim_cmd::PlantArgs;
 
@@ -61,6 +61,9 @@ pub struct BudgetArgs {
     /// gp-narx].
     #[arg(long, value_name = "N")]
     pub fit_iters: Option<usize>,
+    /// Solver of each MSGP model fit.
+    #[arg(long, value_enum, default_value_t = OptimizerArg::Adam)]
+    pub fit_optimizer: OptimizerArg,
     /// Pseudo-inputs of the model.
     #[arg(long, value_name = "M", default_value_t = LearnSettings::default().fit.inducing)]
     pub inducing: usize,
@@ -328,6 +331,7 @@ pub fn settings(
                 (Method::Msgp, Some(n)) => n,
                 _ => d.fit.iterations,
             },
+            optimizer: args.fit_optimizer.into(),
             one_step_iterations: match (method, args.fit_iters) {
                 (Method::Msgp, _) | (_, None) => d.fit.one_step_iterations,
                 (_, Some(n)) => n,

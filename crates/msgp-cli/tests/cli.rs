@@ -312,6 +312,57 @@ fn linear_prior_mean_is_fitted_saved_and_used() {
 }
 
 #[test]
+fn the_msgp_loss_can_be_minimised_by_lbfgs() {
+    let dir = Scratch::new("lbfgs");
+    dir.write("s.csv", &system_csv(160, None));
+    let fit = |optimizer: &str, out: &str| {
+        ok_json(
+            &dir,
+            &[
+                "fit",
+                "--data",
+                "s.csv",
+                "--optimizer",
+                optimizer,
+                "--iters",
+                "15",
+                "--inducing",
+                "10",
+                "--quiet",
+                "--json",
+                "--out",
+                out,
+            ],
+        )
+    };
+    let lbfgs = fit("lbfgs", "l.json");
+    let adam = fit("adam", "a.json");
+    let settings = |name: &str| {
+        let model: Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.path(name)).expect("model file"))
+                .expect("model JSON");
+        model["training"]["settings"].clone()
+    };
+    assert_eq!(settings("l.json")["optimizer"], "lbfgs");
+    assert_eq!(settings("a.json")["optimizer"], "adam");
+    // the same start, two solvers: different models
+    assert_ne!(lbfgs["rmse"], adam["rmse"]);
+    // the saved L-BFGS model evaluates to the numbers its fit reported
+    let e = ok_json(
+        &dir,
+        &[
+            "eval", "--model", "l.json", "--data", "s.csv", "--from", "80", "--json",
+        ],
+    );
+    assert_eq!(e["rmse"], lbfgs["rmse"]);
+    fails(
+        &dir,
+        &["fit", "--data", "s.csv", "--optimizer", "newton"],
+        &["--optimizer"],
+    );
+}
+
+#[test]
 fn an_integrating_output_is_declared_on_the_command_line() {
     let dir = Scratch::new("integrating");
     dir.write("s.csv", &system_csv(160, None));

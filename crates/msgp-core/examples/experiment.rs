@@ -2,6 +2,9 @@
 //! recorded in docs/design.md.
 //!
 //! `cargo run --release -p msgp-core --example experiment -- <sys1..sys5|dryer|...> <method> [iters] [seed] [complexity] [noise: var|std]`
+//!
+//! Environment switches: `LR`, `LBFGS` (the L-BFGS solver), `EVERY`, `PATIENCE`, `VALFRAC`,
+//! `FLOOR`, `INDUCING`, `FREEZE_X`, `ONESTEP` (one-step iterations), `DUMP` (print the settings).
 
 use std::path::Path;
 
@@ -54,6 +57,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Some(v) = env("LR") {
         settings.learning_rate = v.parse()?;
     }
+    if env("LBFGS").is_some() {
+        settings.optimizer = msgp_core::fit::FitOptimizer::Lbfgs;
+    }
+    if let Some(v) = env("EVERY") {
+        settings.eval_every = v.parse()?;
+    }
     if let Some(v) = env("PATIENCE") {
         settings.patience = v.parse()?;
     }
@@ -70,6 +79,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         settings
             .frozen
             .push(msgp_core::gp::ParamGroup::PseudoInputs);
+    }
+    if let Some(v) = env("ONESTEP") {
+        settings.one_step_iterations = v.parse()?;
+    }
+    if env("DUMP").is_some() {
+        eprintln!("{}", serde_json::to_string(&settings)?);
     }
     let (model, report) = fit(std::slice::from_ref(&bench.train), &settings, &mut |p| {
         if let (Some(v), true) = (p.validation, p.iteration % 50 == 0) {

@@ -23,7 +23,7 @@ use crate::kernel::kernel_matrix;
 use crate::kmeans::kmeans;
 use crate::linalg::JitterLog;
 use crate::narx::NarxSpec;
-use crate::optim::{Adam, Flow, Objective, minimize};
+use crate::optim::{Adam, Flow, Objective, Solver, minimize};
 use crate::trajectory::Trajectory;
 
 const LN_2PI: f64 = 1.837_877_066_409_345_3;
@@ -398,10 +398,10 @@ pub fn fit_one_step(
             pilco_std: settings.pilco_penalty.then(|| std.clone()),
             log: JitterLog::default(),
         };
-        let adam = Adam {
+        let adam = Solver::Adam(Adam {
             learning_rate: settings.learning_rate,
             ..Adam::default()
-        };
+        });
         let mut active = vec![true; d + 2];
         for &k in &structure.ignored {
             active[k] = false;

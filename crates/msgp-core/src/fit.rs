@@ -25,7 +25,7 @@ use crate::linalg::JitterLog;
 use crate::loss::{Complexity, gaussian_nll};
 use crate::model::{Method, Model};
 use crate::narx::NarxSpec;
-use crate::optim::{Adam, Flow, Objective, minimize};
+use crate::optim::{Adam, Flow, Lbfgs, Objective, Solver, minimize};
 use crate::policy::PolicySpec;
 use crate::rollout::{Control, rollout};
 use crate::trajectory::{Episode, Excitation, Trajectory};
@@ -41,8 +41,11 @@ pub struct FitSettings {
     pub lu: usize,
     /// Number of pseudo-inputs `m`.
     pub inducing: usize,
-    /// Adam iterations on the MSGP loss.
+    /// Solver iterations on the MSGP loss.
     pub iterations: usize,
+    /// Solver of the MSGP loss.
+    #[serde(default)]
+    pub optimizer: FitOptimizer,
     /// Adam step size for MSGP.
     pub learning_rate: f64,
     /// Seed for every random choice (k-means).
@@ -51,7 +54,8 @@ pub struct FitSettings {
     pub complexity: Complexity,
     /// Fraction of each training trajectory held out for early stopping (MSGP).
     pub validation_fraction: f64,
-    /// Iterations between validation checks.
+    /// Adam iterations between validation checks (L-BFGS checks after every iteration: one of
+    /// its steps goes as far as many of Adam's).
     pub eval_every: usize,
     /// Stop after this many validation checks without improvement.
     pub patience: usize,
@@ -80,6 +84,7 @@ impl Default for FitSettings {
             lu: 2,
             inducing: 100,
             iterations: 400,
+            optimizer: FitOptimizer::Adam,
             learning_rate: 0.002,
             seed: 0,
             complexity: Complexity::PseudoDataNll,
@@ -97,6 +102,33 @@ impl Default for FitSettings {
         }
     }
 }
+
+/// How the MSGP loss is minimised.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FitOptimizer {
+    /// Adam with [`FitSettings::learning_rate`] (the paper's choice): runs every iteration
+    /// (or until early stopping).
+    #[default]
+    Adam,
+    /// L-BFGS with a backtracking line search ([`Lbfgs`]): far fewer iterations on these smooth,
+    /// ill-conditioned losses; stops by itself when converged.
+    Lbfgs,
+}
+
+/// The L-BFGS of [`FitOptimizer::Lbfgs`]: a first step that moves no parameter by more than
+/// 0.01 (as far as a few Adam steps) and no later step by more than 0.3 (log length-scales,
+/// log variances and normalised pseudo-targets alike), so that the validation checks, made
+/// after every L-BFGS iteration, see the path to the training optimum rather than a jump to it.
+pub const FIT_LBFGS: Lbfgs = Lbfgs {
+    memory: 10,
+    max_step: 0.3,
+    first_step: 0.01,
+    c1: 1e-4,
+    max_backtracks: 30,
+    tolerance: 1e-7,
+    patience: 5,
+};
 
 /// Upper bound of the default number of pseudo-inputs ([`FitOptions::inducing`]).
 pub const DEFAULT_MAX_INDUCING: usize = 100;
@@ -126,6 +158,8 @@ pub struct FitOptions {
     pub mean: MeanFunction,
     /// Outputs declared integrating ([`crate::integrator`]; needs the linear mean).
     pub integrators: Vec<Integrator>,
+    /// Solver of the MSGP loss.
+    pub optimizer: FitOptimizer,
 }
 
 impl FitOptions {
@@ -182,6 +216,7 @@ impl FitOptions {
             seed: self.seed,
             mean: self.mean,
             integrators: self.integrators.clone(),
+            optimizer: self.optimizer,
             ..defaults
         })
     }
@@ -231,7 +266,8 @@ struct MsgpObjective<'a> {
     episodes: &'a [Episode],
     complexity: Complexity,
     log: JitterLog,
-    /// The numerical failure that ended training, if any (the loss is then reported as NaN).
+    /// The numerical failure of the latest evaluation, if it failed (the loss is then reported
+    /// as NaN).
     failure: Option<MsgpError>,
 }
 
@@ -253,6 +289,8 @@ impl Objective for MsgpObjective<'_> {
             }
             other => other?,
         };
+        // a line search may step back from a failed trial: only a failure at the end counts
+        self.failure = None;
         let scale = 1.0 / v.steps.max(1) as f64;
         g.iter_mut().for_each(|gi| *gi *= scale);
         Ok((v.total() * scale, g))
@@ -553,20 +591,27 @@ impl Stage<'_, '_> {
             log: JitterLog::default(),
             failure: None,
         };
-        let adam = Adam {
-            learning_rate: self.settings.learning_rate,
-            ..Adam::default()
+        let solver = match self.settings.optimizer {
+            FitOptimizer::Adam => Solver::Adam(Adam {
+                learning_rate: self.settings.learning_rate,
+                ..Adam::default()
+            }),
+            FitOptimizer::Lbfgs => Solver::Lbfgs(FIT_LBFGS),
         };
         let (spec, config, settings, start) = (self.spec, self.config, self.settings, self.start);
-        let every = settings.eval_every.max(1);
+        let every = match settings.optimizer {
+            FitOptimizer::Adam => settings.eval_every.max(1),
+            FitOptimizer::Lbfgs => 1,
+        };
         let mut best: (f64, Vec<f64>, usize) = (f64::INFINITY, init.to_flat(), 0);
         let mut since_best = 0usize;
         let mut good: Option<(Vec<f64>, usize)> = None;
         let report = &mut *self.report;
         let progress = &mut *self.progress;
+        let mut last_it = iterations;
         let (last_x, _) = minimize(
             &mut objective,
-            &adam,
+            &solver,
             init.to_flat(),
             &active,
             iterations + 1,
@@ -576,6 +621,7 @@ impl Stage<'_, '_> {
                     return Ok(Flow::Stop);
                 }
                 good = Some((x.to_vec(), it));
+                last_it = it;
                 let mut validation = None;
                 if !tails.is_empty() && (it % every == 0 || it == iterations) {
                     let p = GpParams::from_flat(shape, x)?;
@@ -618,7 +664,7 @@ impl Stage<'_, '_> {
                     (x, it)
                 }
             }
-            (None, _) if tails.is_empty() => (last_x, iterations),
+            (None, _) if tails.is_empty() => (last_x, last_it),
             (None, _) => (best.1, best.2),
         };
         Ok((GpParams::from_flat(shape, &x)?, it))
@@ -645,6 +691,7 @@ mod tests {
             seed: 7,
             mean: MeanFunction::Zero,
             integrators: Vec::new(),
+            optimizer: FitOptimizer::Adam,
         }
     }
 

@@ -7,16 +7,27 @@ use std::path::{Path, PathBuf};
 use msgp_core::data::Benchmark;
 use msgp_core::data::real::{DATA_DIR_VAR, RealSeries, data_dir};
 use msgp_core::data::{NoiseScale, SyntheticSystem};
-use msgp_core::fit::{FitSettings, fit};
+use msgp_core::fit::{FitOptimizer, FitSettings, fit};
 use msgp_core::model::{Method, Metrics};
 
 fn run(bench: &Benchmark, method: Method, iterations: usize) -> Metrics {
+    run_with(bench, method, iterations, FitOptimizer::Adam).0
+}
+
+/// Metrics and MSGP iterations run.
+fn run_with(
+    bench: &Benchmark,
+    method: Method,
+    iterations: usize,
+    optimizer: FitOptimizer,
+) -> (Metrics, usize) {
     let settings = FitSettings {
         method,
         ly: bench.ly,
         lu: bench.lu,
         iterations,
         seed: 0,
+        optimizer,
         ..FitSettings::default()
     };
     let (model, report) =
@@ -33,7 +44,7 @@ fn run(bench: &Benchmark, method: Method, iterations: usize) -> Metrics {
         report.iterations_run,
         report.train_seconds
     );
-    m
+    (m, report.iterations_run)
 }
 
 /// The real-data folder, or `None` (with a printed reason) when it is absent and not required.
@@ -91,5 +102,67 @@ fn msgp_reaches_paper_accuracy_on_dryer() {
         msgp.coverage_2sigma > 0.8,
         "dryer 2σ coverage {}",
         msgp.coverage_2sigma
+    );
+}
+
+#[test]
+fn msgp_by_lbfgs_reaches_paper_accuracy_on_dryer_in_a_fraction_of_the_iterations() {
+    let Some(dir) = real_data() else { return };
+    let bench = RealSeries::Dryer.load(&dir).expect("load dryer");
+    let (msgp, iterations) = run_with(&bench, Method::Msgp, 400, FitOptimizer::Lbfgs);
+    // paper: MSGP 0.1523; Adam: 400 iterations, 0.1585
+    assert!(msgp.rmse <= 0.155, "dryer RMSE {}", msgp.rmse);
+    assert!(
+        msgp.coverage_2sigma > 0.8,
+        "dryer 2σ coverage {}",
+        msgp.coverage_2sigma
+    );
+    // early stopping (patience 20 validation checks, one per iteration) ends it
+    assert!(iterations < 120, "{iterations} L-BFGS iterations");
+}
+
+/// On the training loss itself (no held-out tail, no early stopping), L-BFGS gets lower in 40
+/// iterations than Adam does, from the same one-step start.
+#[test]
+fn lbfgs_lowers_the_msgp_training_loss_faster_than_adam() {
+    let bench = SyntheticSystem::new(4)
+        .expect("sys")
+        .generate(0, NoiseScale::StdDev)
+        .expect("gen");
+    let last_loss = |optimizer: FitOptimizer| {
+        let settings = FitSettings {
+            ly: bench.ly,
+            lu: bench.lu,
+            inducing: 30,
+            iterations: 40,
+            validation_fraction: 0.0,
+            optimizer,
+            ..FitSettings::default()
+        };
+        let mut losses = Vec::new();
+        fit(std::slice::from_ref(&bench.train), &settings, &mut |p| {
+            losses.push(p.loss)
+        })
+        .expect("fit");
+        losses
+    };
+    let adam = last_loss(FitOptimizer::Adam);
+    let lbfgs = last_loss(FitOptimizer::Lbfgs);
+    println!(
+        "loss per step: start {:.4}; after 40 iterations Adam {:.4}, L-BFGS {:.4} ({} iterations)",
+        adam[0],
+        adam[adam.len() - 1],
+        lbfgs[lbfgs.len() - 1],
+        lbfgs.len() - 1
+    );
+    assert_eq!(adam[0], lbfgs[0], "same start");
+    // L-BFGS only accepts decreasing points
+    assert!(lbfgs.windows(2).all(|w| w[1] < w[0]), "{lbfgs:?}");
+    let (a, l) = (adam[adam.len() - 1], lbfgs[lbfgs.len() - 1]);
+    assert!(
+        adam[0] - l > 1.5 * (adam[0] - a),
+        "decrease: L-BFGS {} vs Adam {}",
+        adam[0] - l,
+        adam[0] - a
     );
 }

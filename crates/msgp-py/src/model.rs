@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use msgp_core::fit::{FitOptions, FitReport, FitSettings, fit};
+use msgp_core::fit::{FitOptimizer, FitOptions, FitReport, FitSettings, fit};
 use msgp_core::gp::MeanFunction;
 use msgp_core::model::{Method, Metrics, Model, pool, score};
 use msgp_core::model_file::{FitRecord, ModelFile};
@@ -121,6 +121,12 @@ impl Msgp {
                 seed: file.training.seed,
                 mean: model.config.mean,
                 integrators: Vec::new(),
+                optimizer: file
+                    .training
+                    .settings
+                    .get("optimizer")
+                    .and_then(|v| serde_json::from_value(v.clone()).ok())
+                    .unwrap_or_default(),
             },
             overrides: None,
             fitted: Some(Arc::new(Fitted {
@@ -273,6 +279,7 @@ impl Msgp {
             seed,
             mean: MeanFunction::Zero,
             integrators: Vec::new(),
+            optimizer: FitOptimizer::Adam,
         };
         let overrides = match settings.filter(|s| !s.is_none()) {
             None => None,

@@ -13,7 +13,7 @@ TOL = 1e-12
 METRICS = ("rmse", "nll", "coverage_2sigma")
 
 
-def cli_fit(cli, csv, out, train, history, method="msgp", iters=20, inducing=None):
+def cli_fit(cli, csv, out, train, history, method="msgp", iters=20, inducing=None, extra=()):
     """Starts `msgp fit` in the background (it runs while Python fits); call the result to wait."""
     args = [
         "fit", "--data", csv, "--train", train, "--history", f"{history[0]},{history[1]}",
@@ -21,7 +21,7 @@ def cli_fit(cli, csv, out, train, history, method="msgp", iters=20, inducing=Non
     ]
     if inducing is not None:
         args += ["--inducing", inducing]
-    return cli.start(*args)
+    return cli.start(*args, *extra)
 
 
 def assert_same_fit(report, model, metrics, out):
@@ -67,6 +67,19 @@ def test_dryer_msgp_matches_cli(dryer, cli, tmp_path):
     report = cli_fit(cli, path, out, 500, (2, 2), inducing=20)
     model = msgp.Msgp(history=(2, 2), inducing=20, iterations=20, seed=0).fit(u[:500], y[:500])
     report = report()
+    assert_same_fit(report, model, model.score(u[500:], y[500:]), out)
+
+
+def test_dryer_msgp_by_lbfgs_matches_cli(dryer, cli, tmp_path):
+    """`settings={"optimizer": "lbfgs"}` in Python is `--optimizer lbfgs` on the command line."""
+    path, u, y = dryer
+    out = tmp_path / "dryer.model.json"
+    report = cli_fit(cli, path, out, 500, (2, 2), inducing=20, extra=("--optimizer", "lbfgs"))
+    model = msgp.Msgp(
+        history=(2, 2), inducing=20, iterations=20, seed=0, settings={"optimizer": "lbfgs"}
+    ).fit(u[:500], y[:500])
+    report = report()
+    assert json.loads(model.to_json())["training"]["settings"]["optimizer"] == "lbfgs"
     assert_same_fit(report, model, model.score(u[500:], y[500:]), out)
 
 
