@@ -64,6 +64,10 @@ pub struct BudgetArgs {
     /// Solver of each MSGP model fit.
     #[arg(long, value_enum, default_value_t = OptimizerArg::Adam)]
     pub fit_optimizer: OptimizerArg,
+    /// From the second iteration on, continue the previous MSGP model for N solver iterations
+    /// (same normaliser and pseudo-inputs) instead of fitting from scratch [default: off].
+    #[arg(long, value_name = "N")]
+    pub warm_start: Option<usize>,
     /// Pseudo-inputs of the model.
     #[arg(long, value_name = "M", default_value_t = LearnSettings::default().fit.inducing)]
     pub inducing: usize,
@@ -338,6 +342,7 @@ pub fn settings(
             },
             ..d.fit.clone()
         },
+        warm_start: args.warm_start,
         search: msgp_core::policy_search::PolicySearchSettings {
             iterations: args.search_iters,
             candidates: args.candidates,

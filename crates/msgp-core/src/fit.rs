@@ -364,6 +364,60 @@ pub fn fit_episodes(
     settings: &FitSettings,
     progress: &mut dyn FnMut(&FitProgress),
 ) -> Result<(Model, FitReport)> {
+    fit_episodes_from(episodes, settings, None, progress)
+}
+
+/// Continues training an MSGP model fitted earlier (a *warm start*), typically on fewer of the
+/// same episodes, as a policy-search loop adds one episode per iteration: `settings.iterations`
+/// solver steps on `episodes` from `previous`'s parameters, in `previous`'s normalised units
+/// and with its pseudo-inputs, instead of a new normaliser, one-step fit and k-means. The
+/// settings must describe the same model (method MSGP, history, outputs and inputs, pseudo-input
+/// count and prior mean).
+pub fn refit_episodes(
+    episodes: &[TrainingEpisode],
+    settings: &FitSettings,
+    previous: &Model,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<(Model, FitReport)> {
+    let refuse = |what: String| {
+        Err(MsgpError::InvalidSetting {
+            name: "warm start",
+            reason: what,
+        })
+    };
+    if settings.method != Method::Msgp || previous.method != Method::Msgp {
+        return refuse(format!(
+            "only MSGP fits continue from a previous model (settings: {}, model: {})",
+            settings.method.name(),
+            previous.method.name()
+        ));
+    }
+    if (settings.ly, settings.lu) != (previous.spec.ly, previous.spec.lu)
+        || settings.inducing != previous.params.pseudo_inputs.nrows()
+        || settings.mean != previous.config.mean
+    {
+        return refuse(format!(
+            "the previous model has history ({}, {}), {} pseudo-inputs and a {:?} mean; the \
+             settings ask for ({}, {}), {} and {:?}",
+            previous.spec.ly,
+            previous.spec.lu,
+            previous.params.pseudo_inputs.nrows(),
+            previous.config.mean,
+            settings.ly,
+            settings.lu,
+            settings.inducing,
+            settings.mean
+        ));
+    }
+    fit_episodes_from(episodes, settings, Some(previous), progress)
+}
+
+fn fit_episodes_from(
+    episodes: &[TrainingEpisode],
+    settings: &FitSettings,
+    previous: Option<&Model>,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<(Model, FitReport)> {
     let start = Instant::now();
     let train: Vec<Trajectory> = episodes.iter().map(|e| e.traj.clone()).collect();
     let first = train
@@ -387,8 +441,22 @@ pub fn fit_episodes(
             reason: "need at least one pseudo-input".into(),
         });
     }
+    if let Some(p) = previous
+        && (p.spec.dy, p.spec.du) != (spec.dy, spec.du)
+    {
+        return Err(MsgpError::InvalidSetting {
+            name: "warm start",
+            reason: format!(
+                "the previous model has {} outputs and {} inputs, the data {} and {}",
+                p.spec.dy, p.spec.du, spec.dy, spec.du
+            ),
+        });
+    }
     let refs: Vec<&Trajectory> = train.iter().collect();
-    let normalizer = Normalizer::fit(&refs)?;
+    let normalizer = match previous {
+        Some(p) => p.normalizer.clone(),
+        None => Normalizer::fit(&refs)?,
+    };
     let norm: Vec<Trajectory> = train.iter().map(|t| normalizer.apply(t)).collect();
     let mut report = FitReport::default();
     let one_step = OneStepSettings {
@@ -462,13 +530,19 @@ pub fn fit_episodes(
         progress,
         report: &mut report,
     };
-    let init = stage.initial(&head_eps, &one_step)?;
+    let init = match previous {
+        Some(p) => p.params.clone(),
+        None => stage.initial(&head_eps, &one_step)?,
+    };
     let (mut chosen, best_iteration) =
         stage.train(init, &head_eps, &tails, settings.iterations, 1)?;
     stage.report.best_iteration = best_iteration;
     if settings.refit && !tails.is_empty() {
         // stage 2: the same number of iterations on the whole training data
-        let init = stage.initial(&all_eps, &one_step)?;
+        let init = match previous {
+            Some(p) => p.params.clone(),
+            None => stage.initial(&all_eps, &one_step)?,
+        };
         chosen = if best_iteration == 0 {
             init
         } else {
@@ -692,6 +766,87 @@ mod tests {
             mean: MeanFunction::Zero,
             integrators: Vec::new(),
             optimizer: FitOptimizer::Adam,
+        }
+    }
+
+    /// A warm start continues the previous model: zero iterations give it back unchanged (same
+    /// parameters and normaliser, although the new data would normalise differently), more
+    /// iterations lower the loss on the new data from there, and a model of another shape is
+    /// refused.
+    #[test]
+    fn a_warm_start_continues_the_previous_model() {
+        let first: Vec<TrainingEpisode> = [traj(60), traj(50)]
+            .into_iter()
+            .map(|traj| TrainingEpisode { traj, policy: None })
+            .collect();
+        let settings = FitSettings {
+            ly: 2,
+            lu: 2,
+            inducing: 12,
+            iterations: 15,
+            validation_fraction: 0.0,
+            ..FitSettings::default()
+        };
+        let (previous, _) = fit_episodes(&first, &settings, &mut |_| {}).expect("first fit");
+        // more data, with another mean and scale
+        let mut more = first.clone();
+        let u: Vec<f64> = (0..70).map(|i| 2.0 + (i as f64 * 0.17).sin()).collect();
+        let y: Vec<f64> = (0..70)
+            .map(|i| 1.0 + 3.0 * (i as f64 * 0.11).cos())
+            .collect();
+        more.push(TrainingEpisode {
+            traj: Trajectory::siso(&u, &y).expect("finite"),
+            policy: None,
+        });
+        let zero = FitSettings {
+            iterations: 0,
+            ..settings.clone()
+        };
+        let (same, _) = refit_episodes(&more, &zero, &previous, &mut |_| {}).expect("refit 0");
+        assert_eq!(same.params, previous.params);
+        assert_eq!(same.normalizer, previous.normalizer);
+        let mut losses = Vec::new();
+        let (cont, report) =
+            refit_episodes(&more, &settings, &previous, &mut |p| losses.push(p.loss))
+                .expect("refit");
+        assert_eq!(report.iterations_run, 16);
+        assert_eq!(cont.normalizer, previous.normalizer);
+        assert_eq!(cont.params.pseudo_inputs, previous.params.pseudo_inputs);
+        assert!(
+            losses[losses.len() - 1] < losses[0] - 1e-3,
+            "{} → {}",
+            losses[0],
+            losses[losses.len() - 1]
+        );
+        // from scratch on the same data, the start is the one-step fit: another first loss
+        let mut scratch = Vec::new();
+        fit_episodes(&more, &zero, &mut |p| scratch.push(p.loss)).expect("scratch");
+        assert_ne!(scratch[0], losses[0]);
+        for (bad, needle) in [
+            (
+                FitSettings {
+                    inducing: 13,
+                    ..settings.clone()
+                },
+                "13",
+            ),
+            (
+                FitSettings {
+                    method: Method::GpNarx,
+                    ..settings.clone()
+                },
+                "only MSGP",
+            ),
+            (
+                FitSettings {
+                    lu: 3,
+                    ..settings.clone()
+                },
+                "(2, 3)",
+            ),
+        ] {
+            let e = refit_episodes(&more, &bad, &previous, &mut |_| {}).expect_err("refused");
+            assert!(e.to_string().contains(needle), "{e}");
         }
     }
 

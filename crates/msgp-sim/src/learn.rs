@@ -16,7 +16,7 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use msgp_core::cost::SaturatingCost;
-use msgp_core::fit::{FitSettings, TrainingEpisode, fit_episodes};
+use msgp_core::fit::{FitSettings, TrainingEpisode, fit_episodes, refit_episodes};
 use msgp_core::gp::MeanFunction;
 use msgp_core::integrator::Integrator;
 use msgp_core::model::Method;
@@ -75,6 +75,12 @@ pub struct LearnSettings {
     /// Typical gain magnitudes `[kp_x, ki_x, kd_x, kp_θ, kd_θ]`: the first policy's gains and
     /// the optimiser's coordinate scales (units of the problem, not a solution).
     pub gain_scale: [f64; 5],
+    /// Warm starts (MSGP only): from the second iteration on, each fit continues the previous
+    /// iteration's model for this many solver iterations ([`refit_episodes`]: its normaliser,
+    /// pseudo-inputs and parameters) instead of starting over from a one-step fit; `None`
+    /// starts over every time.
+    #[serde(default)]
+    pub warm_start: Option<usize>,
 }
 
 impl Default for LearnSettings {
@@ -112,6 +118,7 @@ impl Default for LearnSettings {
             cost_widths: [0.1, 0.3],
             ff_segment: Some(30),
             gain_scale: [1.0, 0.3, 1.0, 10.0, 2.0],
+            warm_start: None,
         }
     }
 }
@@ -372,6 +379,7 @@ pub fn learn_policy(
         .map(f64::abs)
         .collect();
     let mut reports = Vec::new();
+    let mut previous_model: Option<msgp_core::model::Model> = None;
     for it in 1..=settings.iterations {
         let fit_settings = FitSettings {
             method: settings.method,
@@ -379,7 +387,19 @@ pub fn learn_policy(
             ..settings.fit.clone()
         };
         let clock = std::time::Instant::now();
-        let (model, mut fit_report) = match fit_episodes(&training, &fit_settings, &mut |_| {}) {
+        let fitted = match (&previous_model, settings.warm_start) {
+            (Some(prev), Some(n)) if settings.method == Method::Msgp => refit_episodes(
+                &training,
+                &FitSettings {
+                    iterations: n,
+                    ..fit_settings.clone()
+                },
+                prev,
+                &mut |_| {},
+            ),
+            _ => fit_episodes(&training, &fit_settings, &mut |_| {}),
+        };
+        let (model, mut fit_report) = match fitted {
             Ok(fitted) => fitted,
             // the MSGP start (the one-step model rolled out over every episode) can already
             // fail numerically; the iteration then runs on that one-step model
@@ -401,6 +421,8 @@ pub fn learn_policy(
             Err(e) => return Err(e.into()),
         };
         let fit_seconds = clock.elapsed().as_secs_f64();
+        // a one-step fallback model is not continued: the next fit starts over
+        previous_model = (model.method == Method::Msgp).then(|| model.clone());
         let problem = PolicyProblem {
             model: &model,
             y0_mean: vec![0.0, 0.0],

@@ -67,3 +67,44 @@ fn one_small_iteration_runs_and_is_reproducible() {
     );
     assert!(r.fit_seconds > 0.0 && r.search_seconds > 0.0);
 }
+
+/// Warm starts change nothing in the first iteration (there is no previous model) and continue
+/// the first model in the second: its predictions then differ from a fit that starts over.
+#[test]
+fn a_warm_started_loop_continues_its_previous_model() {
+    let settings = LearnSettings {
+        iterations: 2,
+        random_rollouts: 2,
+        episode_seconds: 1.0,
+        fit: FitSettings {
+            ly: 2,
+            lu: 2,
+            inducing: 20,
+            iterations: 10,
+            validation_fraction: 0.0,
+            ..FitSettings::default()
+        },
+        search: PolicySearchSettings {
+            iterations: 3,
+            restarts: 0,
+            ..PolicySearchSettings::default()
+        },
+        ..LearnSettings::default()
+    };
+    let params = PendulumParams::default();
+    let cold = learn_policy(&params, &settings, &mut |_| {}).expect("cold");
+    let warm_settings = LearnSettings {
+        warm_start: Some(3),
+        ..settings
+    };
+    let warm = learn_policy(&params, &warm_settings, &mut |_| {}).expect("warm");
+    let (c, w) = (&cold.iterations, &warm.iterations);
+    assert_eq!(c[0].predicted_cost, w[0].predicted_cost);
+    assert_eq!(c[0].gains, w[0].gains);
+    assert_ne!(c[1].predicted_cost, w[1].predicted_cost);
+    assert!(w[1].predicted_cost.is_finite() && w[1].actual_cost.is_finite());
+    // reproducible like a cold run
+    let again = learn_policy(&params, &warm_settings, &mut |_| {}).expect("warm again");
+    assert_eq!(again.iterations[1].predicted_cost, w[1].predicted_cost);
+    assert_eq!(again.iterations[1].gains, w[1].gains);
+}
