@@ -325,12 +325,14 @@ mod tests {
     /// Rosenbrock's valley, counting evaluations; NaN where `x₀ > wall`.
     struct Rosenbrock {
         evaluations: usize,
+        failed: usize,
         wall: f64,
     }
     impl Objective for Rosenbrock {
         fn value_and_gradient(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>)> {
             self.evaluations += 1;
             if x[0] > self.wall {
+                self.failed += 1;
                 return Ok((f64::NAN, vec![0.0; x.len()]));
             }
             let (a, b) = (1.0 - x[0], x[1] - x[0] * x[0]);
@@ -345,18 +347,30 @@ mod tests {
         }
     }
 
-    #[test]
-    fn lbfgs_solves_rosenbrock_in_few_evaluations_where_adam_needs_thousands() {
+    /// What [`lbfgs_on_rosenbrock`] saw.
+    struct Run {
+        x: Vec<f64>,
+        value: f64,
+        /// Accepted `(iteration, value)` pairs, in the order the callback saw them.
+        seen: Vec<(usize, f64)>,
+        evaluations: usize,
+        /// Evaluations beyond the wall (NaN).
+        failed: usize,
+    }
+
+    /// L-BFGS (default settings, up to 500 iterations) on Rosenbrock's valley with a NaN wall.
+    fn lbfgs_on_rosenbrock(x0: Vec<f64>, active: &[bool], wall: f64) -> Run {
         let mut problem = Rosenbrock {
             evaluations: 0,
-            wall: f64::INFINITY,
+            failed: 0,
+            wall,
         };
         let mut seen = Vec::new();
         let (x, v) = minimize(
             &mut problem,
             &Solver::Lbfgs(Lbfgs::default()),
-            vec![-1.2, 1.0],
-            &[true, true],
+            x0,
+            active,
             500,
             |it, v, _| {
                 seen.push((it, v));
@@ -364,15 +378,29 @@ mod tests {
             },
         )
         .expect("runs");
+        Run {
+            x,
+            value: v,
+            seen,
+            evaluations: problem.evaluations,
+            failed: problem.failed,
+        }
+    }
+
+    #[test]
+    fn lbfgs_solves_rosenbrock_in_few_evaluations() {
+        let Run {
+            x,
+            value: v,
+            seen,
+            evaluations,
+            ..
+        } = lbfgs_on_rosenbrock(vec![-1.2, 1.0], &[true, true], f64::INFINITY);
         assert!(
             (x[0] - 1.0).abs() < 1e-5 && (x[1] - 1.0).abs() < 1e-5,
             "{x:?} {v}"
         );
-        assert!(
-            problem.evaluations < 150,
-            "{} evaluations",
-            problem.evaluations
-        );
+        assert!(evaluations < 150, "{evaluations} evaluations");
         // every accepted point decreased the value, and the callback saw them in order
         assert!(
             seen.windows(2)
@@ -388,41 +416,20 @@ mod tests {
     #[test]
     fn lbfgs_keeps_frozen_coordinates_and_backs_off_where_the_objective_fails() {
         // frozen third coordinate
-        let mut problem = Rosenbrock {
-            evaluations: 0,
-            wall: f64::INFINITY,
-        };
-        let (x, _) = minimize(
-            &mut problem,
-            &Solver::Lbfgs(Lbfgs::default()),
-            vec![-1.2, 1.0, 0.5],
-            &[true, true, false],
-            500,
-            |_, _, _| Ok(Flow::Continue),
-        )
-        .expect("runs");
+        let x = lbfgs_on_rosenbrock(vec![-1.2, 1.0, 0.5], &[true, true, false], f64::INFINITY).x;
         assert_eq!(x[2], 0.5);
         assert!((x[0] - 1.0).abs() < 1e-5, "{x:?}");
         // the objective is NaN beyond x₀ = 0.5: the solver never accepts a point there and ends
         // on the wall, at the constrained minimum's neighbourhood
-        let mut problem = Rosenbrock {
-            evaluations: 0,
-            wall: 0.5,
-        };
-        let mut values = Vec::new();
-        let (x, v) = minimize(
-            &mut problem,
-            &Solver::Lbfgs(Lbfgs::default()),
-            vec![-1.2, 1.0],
-            &[true, true],
-            500,
-            |_, v, _| {
-                values.push(v);
-                Ok(Flow::Continue)
-            },
-        )
-        .expect("runs");
-        assert!(values.iter().all(|v| v.is_finite()));
+        let Run {
+            x,
+            value: v,
+            seen,
+            failed,
+            ..
+        } = lbfgs_on_rosenbrock(vec![-1.2, 1.0], &[true, true], 0.5);
+        assert!(failed > 0, "the line search never tried beyond the wall");
+        assert!(seen.iter().all(|s| s.1.is_finite()));
         assert!(x[0] <= 0.5 && x[0] > 0.45, "{x:?}");
         // the constrained minimum is (0.5, 0.25) with value 0.25; an unconstrained method stalls
         // against the wall near it (from the start, the value was 24.2)

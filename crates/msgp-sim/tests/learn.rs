@@ -6,10 +6,11 @@ use msgp_core::policy_search::PolicySearchSettings;
 use msgp_sim::PendulumParams;
 use msgp_sim::learn::{LearnSettings, learn_policy};
 
-#[test]
-fn one_small_iteration_runs_and_is_reproducible() {
-    let settings = LearnSettings {
-        iterations: 1,
+/// `iterations` of a loop small enough for a test: two 1 s random rollouts, m = 20, 10 fit
+/// and 3 search iterations.
+fn small(iterations: usize) -> LearnSettings {
+    LearnSettings {
+        iterations,
         random_rollouts: 2,
         episode_seconds: 1.0,
         fit: FitSettings {
@@ -26,7 +27,12 @@ fn one_small_iteration_runs_and_is_reproducible() {
             ..PolicySearchSettings::default()
         },
         ..LearnSettings::default()
-    };
+    }
+}
+
+#[test]
+fn one_small_iteration_runs_and_is_reproducible() {
+    let settings = small(1);
     let params = PendulumParams::default();
     let mut seen = 0;
     let a = learn_policy(&params, &settings, &mut |_| seen += 1).expect("learn");
@@ -72,25 +78,7 @@ fn one_small_iteration_runs_and_is_reproducible() {
 /// the first model in the second: its predictions then differ from a fit that starts over.
 #[test]
 fn a_warm_started_loop_continues_its_previous_model() {
-    let settings = LearnSettings {
-        iterations: 2,
-        random_rollouts: 2,
-        episode_seconds: 1.0,
-        fit: FitSettings {
-            ly: 2,
-            lu: 2,
-            inducing: 20,
-            iterations: 10,
-            validation_fraction: 0.0,
-            ..FitSettings::default()
-        },
-        search: PolicySearchSettings {
-            iterations: 3,
-            restarts: 0,
-            ..PolicySearchSettings::default()
-        },
-        ..LearnSettings::default()
-    };
+    let settings = small(2);
     let params = PendulumParams::default();
     let cold = learn_policy(&params, &settings, &mut |_| {}).expect("cold");
     let warm_settings = LearnSettings {
