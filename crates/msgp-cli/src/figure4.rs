@@ -57,7 +57,9 @@ impl Run {
 /// A run already in `dir` (its `summary.json`, written last, as `msgp learn-policy --out DIR`
 /// writes it) made with the same model and exactly the same settings (seed, budget, fit and
 /// search settings, integrators, all of them); runs can so be split over several processes and
-/// collected afterwards. A summary without the settings (older runs) is not reused.
+/// collected afterwards. The stored settings are read back as [`LearnSettings`], so a setting
+/// added after the run was made takes its default, which is what the run used; a summary
+/// without any settings (older runs) is not reused.
 fn finished_run(
     dir: &std::path::Path,
     model: ModelArg,
@@ -68,8 +70,9 @@ fn finished_run(
     let v: serde_json::Value = serde_json::from_str(&text).ok()?;
     let iterations: Vec<IterationReport> =
         serde_json::from_value(v.get("iterations")?.clone()).ok()?;
+    let stored: LearnSettings = serde_json::from_value(v.get("settings")?.clone()).ok()?;
     let same = v["model"] == model_name(model)
-        && v.get("settings") == Some(&serde_json::to_value(settings).ok()?)
+        && stored == *settings
         && iterations.len() == settings.iterations;
     same.then(|| Run {
         model,

@@ -65,9 +65,10 @@ pub struct BudgetArgs {
     #[arg(long, value_enum, default_value_t = OptimizerArg::Adam)]
     pub fit_optimizer: OptimizerArg,
     /// From the second iteration on, continue the previous MSGP model for N solver iterations
-    /// (same normaliser and pseudo-inputs) instead of fitting from scratch [default: off].
-    #[arg(long, value_name = "N")]
-    pub warm_start: Option<usize>,
+    /// (same normaliser and pseudo-inputs) instead of fitting from scratch; 0 (the default):
+    /// always from scratch.
+    #[arg(long, value_name = "N", default_value_t = LearnSettings::default().warm_start.unwrap_or(0))]
+    pub warm_start: usize,
     /// Pseudo-inputs of the model.
     #[arg(long, value_name = "M", default_value_t = LearnSettings::default().fit.inducing)]
     pub inducing: usize,
@@ -342,7 +343,7 @@ pub fn settings(
             },
             ..d.fit.clone()
         },
-        warm_start: args.warm_start,
+        warm_start: (args.warm_start > 0).then_some(args.warm_start),
         search: msgp_core::policy_search::PolicySearchSettings {
             iterations: args.search_iters,
             candidates: args.candidates,

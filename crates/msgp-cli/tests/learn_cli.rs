@@ -204,6 +204,25 @@ fn figure4_reuses_a_run_only_when_every_setting_matches() {
     assert!(reused(&base), "the same settings reuse the finished run");
     // the same budget, seed and model, but the end effector not declared an integrator
     assert!(!reused(&[&base[..], &["--free-position"]].concat()));
+    // … or another solver, or warm starts
+    assert!(!reused(
+        &[&base[..], &["--fit-optimizer", "lbfgs"]].concat()
+    ));
+    assert!(!reused(&[&base[..], &["--warm-start", "5"]].concat()));
+    // a run recorded before the solver and warm-start settings existed used their defaults
+    assert!(!reused(&base), "the warm-start run took the run's place");
+    let path = dir.join("fig/msgp-seed0/summary.json");
+    let mut summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).expect("summary")).expect("JSON");
+    let settings = summary["settings"].as_object_mut().expect("settings");
+    assert!(settings.remove("warm_start").is_some());
+    let fit = settings["fit"].as_object_mut().expect("fit settings");
+    assert!(fit.remove("optimizer").is_some());
+    std::fs::write(&path, summary.to_string()).expect("write");
+    assert!(
+        reused(&base),
+        "an older summary with today's defaults is reused"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -79,6 +79,7 @@ fn one_small_iteration_runs_and_is_reproducible() {
 #[test]
 fn a_warm_started_loop_continues_its_previous_model() {
     let settings = small(2);
+    assert_eq!(settings.warm_start, None, "off by default");
     let params = PendulumParams::default();
     let cold = learn_policy(&params, &settings, &mut |_| {}).expect("cold");
     let warm_settings = LearnSettings {
