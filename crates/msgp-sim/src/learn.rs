@@ -425,7 +425,9 @@ pub fn learn_policy(
         };
         let fit_seconds = clock.elapsed().as_secs_f64();
         // a one-step fallback model is not continued: the next fit starts over
-        previous_model = (model.method == Method::Msgp).then(|| model.clone());
+        if settings.warm_start.is_some() {
+            previous_model = (model.method == Method::Msgp).then(|| model.clone());
+        }
         let problem = PolicyProblem {
             model: &model,
             y0_mean: vec![0.0, 0.0],
