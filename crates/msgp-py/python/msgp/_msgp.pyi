@@ -44,7 +44,7 @@ class Msgp:
     settings: other fields of `defaults("fit")` to override (advanced), e.g.
         `{"mean": "linear", "integrators": [{"output": 0, "order": 2}]}` declares output 0 a
         pure double integrator (`msgp fit --integrating 0:2`; add `"linear": True` for
-        `0:2:linear`).
+        `0:2:linear`); `{"optimizer": "lbfgs"}` fits by L-BFGS (`msgp fit --optimizer lbfgs`).
     """
 
     def __init__(
