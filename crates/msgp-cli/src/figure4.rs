@@ -10,6 +10,7 @@ use msgp_sim::PendulumParams;
 use msgp_sim::learn::{IterationReport, LearnSettings};
 
 use crate::cost_plot::plot_cost_bands;
+use crate::fit_cmd::OptimizerArg;
 use crate::learn_cmd::{
     BudgetArgs, ModelArg, learn, model_name, settings, summary_json, write_outputs,
 };
@@ -166,8 +167,16 @@ fn render(args: &Figure4Args, runs: &[Run], seconds: f64, plot: &std::path::Path
         args.out.display(),
         args.dir.display()
     ));
+    let solver = match d.fit_optimizer {
+        OptimizerArg::Adam => "Adam",
+        OptimizerArg::Lbfgs => "L-BFGS",
+    };
+    let warm = match d.warm_start {
+        0 => String::new(),
+        n => format!(", from the second iteration on warm-started for {n} iterations"),
+    };
     s.push_str(&format!(
-        "- Budget per iteration: model fit {} Adam iterations (m = {}), policy search: {} random gain candidates screened, {} Adam steps per start\n",
+        "- Budget per iteration: model fit {} {solver} iterations{warm} (m = {}), policy search: {} random gain candidates screened, {} Adam steps per start\n",
         d.fit_iters.map_or_else(|| "default".to_string(), |n| n.to_string()),
         d.inducing,
         d.candidates,

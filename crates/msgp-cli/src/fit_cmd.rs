@@ -329,8 +329,12 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         report.train_seconds,
     );
     if method == Method::Msgp {
+        let solver = match args.optimizer {
+            OptimizerArg::Adam => "Adam",
+            OptimizerArg::Lbfgs => "L-BFGS",
+        };
         text.push_str(&format!(
-            " ({} Adam iterations, kept iteration {})",
+            " ({} {solver} iterations, kept iteration {})",
             report.iterations_run, report.best_iteration
         ));
     }

@@ -57,8 +57,8 @@ pub struct BudgetArgs {
     /// Length of every interaction episode [s].
     #[arg(long, default_value_t = LearnSettings::default().episode_seconds)]
     pub episode_seconds: f64,
-    /// Adam iterations of each model fit [default: 300 for msgp; the one-step fit's 300 for
-    /// gp-narx].
+    /// Solver iterations of each model fit [default: 300 for msgp; the one-step fit's 300 Adam
+    /// iterations for gp-narx].
     #[arg(long, value_name = "N")]
     pub fit_iters: Option<usize>,
     /// Solver of each MSGP model fit.

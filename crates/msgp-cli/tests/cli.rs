@@ -355,6 +355,24 @@ fn the_msgp_loss_can_be_minimised_by_lbfgs() {
         ],
     );
     assert_eq!(e["rmse"], lbfgs["rmse"]);
+    let text = ok(
+        &dir,
+        &[
+            "fit",
+            "--data",
+            "s.csv",
+            "--optimizer",
+            "lbfgs",
+            "--iters",
+            "5",
+            "--inducing",
+            "10",
+            "--quiet",
+            "--out",
+            "t.json",
+        ],
+    );
+    assert!(text.contains("L-BFGS iterations, kept iteration"), "{text}");
     fails(
         &dir,
         &["fit", "--data", "s.csv", "--optimizer", "newton"],
