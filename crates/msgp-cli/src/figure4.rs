@@ -6,11 +6,11 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
+use msgp_core::fit::FitOptimizer;
 use msgp_sim::PendulumParams;
 use msgp_sim::learn::{IterationReport, LearnSettings};
 
 use crate::cost_plot::plot_cost_bands;
-use crate::fit_cmd::OptimizerArg;
 use crate::learn_cmd::{
     BudgetArgs, ModelArg, learn, model_name, settings, summary_json, write_outputs,
 };
@@ -167,10 +167,7 @@ fn render(args: &Figure4Args, runs: &[Run], seconds: f64, plot: &std::path::Path
         args.out.display(),
         args.dir.display()
     ));
-    let solver = match d.fit_optimizer {
-        OptimizerArg::Adam => "Adam",
-        OptimizerArg::Lbfgs => "L-BFGS",
-    };
+    let solver = FitOptimizer::from(d.fit_optimizer).name();
     let warm = match d.warm_start {
         0 => String::new(),
         n => format!(", from the second iteration on warm-started for {n} iterations"),

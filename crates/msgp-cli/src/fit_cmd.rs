@@ -329,10 +329,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         report.train_seconds,
     );
     if method == Method::Msgp {
-        let solver = match args.optimizer {
-            OptimizerArg::Adam => "Adam",
-            OptimizerArg::Lbfgs => "L-BFGS",
-        };
+        let solver = FitOptimizer::from(args.optimizer).name();
         text.push_str(&format!(
             " ({} {solver} iterations, kept iteration {})",
             report.iterations_run, report.best_iteration

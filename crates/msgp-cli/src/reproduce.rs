@@ -10,7 +10,7 @@ use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 use msgp_core::data::real::{RealSeries, data_dir};
 use msgp_core::data::{Benchmark, NoiseScale, SyntheticSystem};
-use msgp_core::fit::{FitProgress, FitSettings, fit};
+use msgp_core::fit::{FitOptimizer, FitProgress, FitSettings, fit};
 use msgp_core::model::{Method, Metrics};
 use serde_json::json;
 
@@ -393,10 +393,7 @@ fn render(
          units) and the fraction of test outputs inside mean ± 2σ, with the training time.\n\n\
          | Task | method | RMSE | NLL/step | 2σ coverage | train s | {} iterations (kept) |\n\
          |---|---|---:|---:|---:|---:|---:|\n",
-        match args.optimizer {
-            OptimizerArg::Adam => "Adam",
-            OptimizerArg::Lbfgs => "L-BFGS",
-        }
+        FitOptimizer::from(args.optimizer).name()
     );
     for (task, _, cells) in rows {
         for (i, c) in cells.iter().enumerate() {

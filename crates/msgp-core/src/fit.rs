@@ -116,6 +116,16 @@ pub enum FitOptimizer {
     Lbfgs,
 }
 
+impl FitOptimizer {
+    /// Display name: "Adam" or "L-BFGS".
+    pub fn name(&self) -> &'static str {
+        match self {
+            FitOptimizer::Adam => "Adam",
+            FitOptimizer::Lbfgs => "L-BFGS",
+        }
+    }
+}
+
 /// The L-BFGS of [`FitOptimizer::Lbfgs`]: a first step that moves no parameter by more than
 /// 0.01 (as far as a few Adam steps) and no later step by more than 0.3 (log length-scales,
 /// log variances and normalised pseudo-targets alike), so that the validation checks, made

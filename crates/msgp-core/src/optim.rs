@@ -230,8 +230,9 @@ fn minimize_lbfgs(
             d = g.iter().map(|v| -v).collect();
             slope = dot(&g, &d);
         }
+        // after a restart the slope is −|g|², negative unless the gradient vanishes
         let dmax = d.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        if dmax == 0.0 || slope.is_nan() || slope >= 0.0 {
+        if dmax == 0.0 {
             return Ok((x, f)); // stationary on the active coordinates
         }
         let mut step = if pairs.is_empty() {
@@ -256,7 +257,8 @@ fn minimize_lbfgs(
         let s: Vec<f64> = xn.iter().zip(&x).map(|(a, b)| a - b).collect();
         let y: Vec<f64> = gn.iter().zip(&g).map(|(a, b)| a - b).collect();
         let sy = dot(&s, &y);
-        if sy > 1e-12 * dot(&y, &y).sqrt() * dot(&s, &s).sqrt() && sy > 0.0 {
+        // keep only pairs with positive curvature, so H stays positive definite
+        if sy > 1e-12 * dot(&y, &y).sqrt() * dot(&s, &s).sqrt() {
             if pairs.len() == lbfgs.memory.max(1) {
                 pairs.pop_front();
             }
