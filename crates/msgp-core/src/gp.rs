@@ -265,6 +265,9 @@ pub struct OutputGp<T: Scalar> {
     pub kinv: DMatrix<T>,
     /// Cholesky factor of `K̃`.
     pub chol: Cholesky<T>,
+    /// For f64: the weights `ββᵀ − K̃⁻¹` of the f64 kernel's variance reduction, laid out for
+    /// its lower-triangle pass over `Q` (`mm_f64::sym_weights`); empty for dual numbers.
+    pub q_weights: Vec<T>,
 }
 
 /// A GP ready for prediction: the parameters plus per-output factorisations.
@@ -301,6 +304,7 @@ impl<T: Scalar> PreparedGp<T> {
             let target = DVector::from_column_slice(params.pseudo_targets.column(a).as_slice());
             let beta = chol.solve_vec(&target);
             let kinv = T::spd_inverse(&chol);
+            let q_weights = T::q_weights(&beta, &kinv);
             outputs.push(OutputGp {
                 inv_l2,
                 sf2,
@@ -309,6 +313,7 @@ impl<T: Scalar> PreparedGp<T> {
                 beta,
                 kinv,
                 chol,
+                q_weights,
             });
         }
         Ok(Self {

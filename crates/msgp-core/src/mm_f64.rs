@@ -6,11 +6,12 @@
 //!   triangular solves with `m` right-hand sides are axpys over whole rows instead of
 //!   `m` column-by-column solves, and `N B̃ = B̃ − S̃⁻¹B̃` costs two such solves.
 //! - The `m × m` block `Q_ij = exp(u^a_i + u^b_j + Ã_iᵀ N B̃_j)` is never formed for the loss:
-//!   four columns at a time, the product `Ãᵀ (N B̃)` is accumulated in registers (a small GEMM
-//!   micro-kernel), the exponent written to a buffer of `4·mp`, exponentiated by the vectorised
-//!   polynomial [`crate::simd::exp1`], and reduced at once into `β_aᵀ Q β_b` and `tr(K̃⁻¹Q)`.
-//!   The adjoint recomputes `Q` column by column with the same code ([`q_block`] with an
-//!   output buffer) instead of storing it for every step.
+//!   in tiles of four columns by eight rows ([`q_tile`]), the product `Ãᵀ (N B̃)` is accumulated
+//!   in registers (a small GEMM micro-kernel), exponentiated by the vectorised polynomial
+//!   [`crate::simd::exp_q`] and reduced at once: `Σ (ββᵀ − K̃⁻¹) ∘ Q` over the lower triangle for
+//!   a diagonal pair ([`q_reduce_sym`], weights prepared once per loss), `β_aᵀ Q β_b` for the
+//!   others ([`q_reduce_pair`]). The adjoint recomputes `Q` with the same tiles ([`q_matrix`])
+//!   instead of storing it for every step.
 //! - Buffers live in an [`MmState`] that is reused from step to step (thread-local for the
 //!   rollout path), so a step allocates only its small outputs.
 //!
@@ -26,7 +27,8 @@ use crate::gp::PreparedGp;
 use crate::linalg::{JitterLog, cholesky};
 use crate::moments::Moments;
 use crate::simd::{
-    Kernel, dispatch, dot, exp_slice, madd, padded, solve_lower_rows, solve_upper_rows, sum,
+    Kernel, dispatch, dot, exp_q, exp_slice, madd, padded, solve_lower_rows,
+    solve_upper_rows, sum,
 };
 
 /// Per-output intermediates (output `a`), `D × mp` row blocks unless noted.
@@ -48,6 +50,8 @@ pub(crate) struct OutBufs {
     pub acc: Vec<f64>,
     /// `log k_a(x̄_i, μ)` (mp).
     pub lk: Vec<f64>,
+    /// `β` padded with zeros to mp.
+    pub beta_p: Vec<f64>,
 }
 
 /// Per output-pair intermediates.
@@ -80,7 +84,7 @@ pub(crate) struct MmState {
     pub nu_t: Vec<f64>,
     pub outs: Vec<OutBufs>,
     pub pairs: Vec<PairBufs>,
-    /// `4 · mp` exponent / `Q` column buffer.
+    /// `4 · mp` buffer of `Q`'s exponents.
     ebuf: Vec<f64>,
     /// `D × mp` scratch.
     tmp: Vec<f64>,
@@ -172,7 +176,7 @@ impl MmState {
                 row[i] = xk[i] - muk;
             }
         }
-        resize(&mut self.ebuf, 4 * mp);
+        resize(&mut self.ebuf, NJ * mp);
         resize(&mut self.tmp, d * mp);
         self.outs.resize_with(e, OutBufs::default);
         self.mean = DVector::zeros(e);
@@ -226,6 +230,8 @@ impl MmState {
             exp_slice::<F>(&mut ob.q);
             resize(&mut ob.bq, mp);
             let beta = o.beta.as_slice();
+            resize(&mut ob.beta_p, mp);
+            ob.beta_p[..m].copy_from_slice(beta);
             for i in 0..m {
                 ob.bq[i] = beta[i] * ob.q[i];
             }
@@ -297,25 +303,50 @@ impl MmState {
                         pb.ub[i] = lkb[i] + pb.ub[i] * 0.5 - logdet_r * 0.5;
                     }
                 }
-                let kinv = if diag { Some(oa.kinv.as_slice()) } else { None };
-                let (ebb, tr) = q_block::<F>(
-                    m,
-                    mp,
-                    d,
-                    &pb.at,
-                    &pb.nb,
-                    &pb.ua,
-                    &pb.ub,
-                    oa.beta.as_slice(),
-                    obp.beta.as_slice(),
-                    kinv,
-                    &mut self.ebuf,
-                    None,
-                );
-                let mut v = ebb - self.mean[a] * self.mean[b];
-                if diag {
-                    v += oa.sf2 - tr;
-                }
+                let v = if diag {
+                    let red = if oa.q_weights.len() == m.div_ceil(NJ) * NJ * mp {
+                        q_reduce_sym::<F>(
+                            m,
+                            mp,
+                            d,
+                            &pb.at,
+                            &pb.nb,
+                            &pb.ua,
+                            &pb.ub,
+                            &oa.q_weights,
+                            &mut self.ebuf,
+                        )
+                    } else {
+                        // a GP prepared without the weights (not built by PreparedGp::new)
+                        let w = sym_weights(&oa.beta, &oa.kinv);
+                        q_reduce_sym::<F>(
+                            m,
+                            mp,
+                            d,
+                            &pb.at,
+                            &pb.nb,
+                            &pb.ua,
+                            &pb.ub,
+                            &w,
+                            &mut self.ebuf,
+                        )
+                    };
+                    red - self.mean[a] * self.mean[b] + oa.sf2
+                } else {
+                    let ebb = q_reduce_pair::<F>(
+                        m,
+                        mp,
+                        d,
+                        &pb.at,
+                        &pb.nb,
+                        &pb.ua,
+                        &pb.ub,
+                        &self.outs[a].beta_p,
+                        &self.outs[b].beta_p,
+                        &mut self.ebuf,
+                    );
+                    ebb - self.mean[a] * self.mean[b]
+                };
                 self.cov[(a, b)] = v;
                 self.cov[(b, a)] = v;
             }
@@ -357,12 +388,125 @@ fn apply_n<const F: bool>(
     }
 }
 
-/// The fused `Q` pass: for blocks of four columns `j`, `G = Ãᵀ Y` (`Y = N B̃`) in registers,
-/// the exponent `u^a_i + u^b_j + G_ij`, its exp, and the reductions `β_aᵀ Q β_b` and (when
-/// `kinv` is given) `Σ_ij K̃⁻¹_ij Q_ij`. `Q` is copied to `q_out` (m × m, column-major) if given.
+/// Columns of `Q` per block of the fused passes.
+const NJ: usize = 4;
+/// Rows of `Q` per tile: one vector of the dispatched instruction set.
+const LANES: usize = crate::simd::CHUNK;
+
+/// The exponents of `Q` for columns `j0..j0 + NJ`, rows `i0..mp` in tiles of [`LANES`]:
+/// `u^a_i + u^b_j + (Ãᵀ Y)_ij` with `Y = N B̃`, the product accumulated in registers, written
+/// to `ebuf[jj·mp + i]`. Every pass over `Q` (the loss's reductions and the adjoint's
+/// recomputation) exponentiates what this function writes with [`exp_q`], so they all see the
+/// same bits.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn q_block<const F: bool>(
+fn q_exponents<const F: bool>(
+    d: usize,
+    mp: usize,
+    at: &[f64],
+    y: &[f64],
+    ua: &[f64],
+    ub: &[f64],
+    i0: usize,
+    j0: usize,
+    ebuf: &mut [f64],
+) {
+    let mut i0 = i0;
+    while i0 < mp {
+        let mut acc = [[0.0f64; LANES]; NJ];
+        for k in 0..d {
+            let a = &at[k * mp + i0..k * mp + i0 + LANES];
+            let yk = &y[k * mp + j0..k * mp + j0 + NJ];
+            for jj in 0..NJ {
+                let yv = yk[jj];
+                for l in 0..LANES {
+                    acc[jj][l] = madd::<F>(a[l], yv, acc[jj][l]);
+                }
+            }
+        }
+        let uai = &ua[i0..i0 + LANES];
+        for jj in 0..NJ {
+            let ubj = ub[j0 + jj];
+            let out = &mut ebuf[jj * mp + i0..jj * mp + i0 + LANES];
+            for l in 0..LANES {
+                out[l] = uai[l] + ubj + acc[jj][l];
+            }
+        }
+        i0 += LANES;
+    }
+}
+
+/// The first row of the tiles of column block `j0` in a symmetric pass: the start of the
+/// row chunk that holds the diagonal (rows above it are not needed, `Q` being symmetric).
+#[inline(always)]
+fn sym_start(j0: usize) -> usize {
+    j0 / LANES * LANES
+}
+
+/// `x ← e^x` by [`exp_q`] (a plain loop over the slice, which the compiler vectorises).
+#[inline(always)]
+fn exp_q_slice<const F: bool>(x: &mut [f64]) {
+    for v in x.iter_mut() {
+        *v = exp_q::<F>(*v);
+    }
+}
+
+/// The reduction weights of a diagonal output pair, for [`q_reduce_sym`]: the variance of a
+/// moment-matched output is `σ_f² − μ² + Σ_ij (β_i β_j − K̃⁻¹_ij) Q_ij`, a sum over the
+/// symmetric `Q` that the pass takes over its lower triangle. Column `j` (at `j·mp`, `m`
+/// rounded up to [`NJ`] columns) holds `2 (β_i β_j − K̃⁻¹_ij)` below the diagonal, the plain
+/// weight on it and zero above it and in the padding. Built once per loss with the GP's
+/// factorisations ([`crate::gp::OutputGp::q_weights`]).
+pub(crate) fn sym_weights(beta: &DVector<f64>, kinv: &DMatrix<f64>) -> Vec<f64> {
+    let m = beta.len();
+    let mp = padded(m);
+    let mut w = vec![0.0; m.div_ceil(NJ) * NJ * mp];
+    for j in 0..m {
+        let col = &mut w[j * mp..j * mp + m];
+        col[j] = beta[j] * beta[j] - kinv[(j, j)];
+        for i in (j + 1)..m {
+            col[i] = 2.0 * (beta[i] * beta[j] - kinv[(i, j)]);
+        }
+    }
+    w
+}
+
+/// `Σ_ij W_ij Q_ij` for a diagonal output pair (`Q` symmetric), with `W` from
+/// [`sym_weights`]: only the tiles on or below the diagonal are computed, and each column is
+/// exponentiated and reduced while in L1 (`Q` is never stored). `ebuf` holds `NJ · mp`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn q_reduce_sym<const F: bool>(
+    m: usize,
+    mp: usize,
+    d: usize,
+    at: &[f64],
+    y: &[f64],
+    ua: &[f64],
+    ub: &[f64],
+    w: &[f64],
+    ebuf: &mut [f64],
+) -> f64 {
+    let mut total = 0.0;
+    let mut j0 = 0;
+    while j0 < m {
+        let start = sym_start(j0);
+        q_exponents::<F>(d, mp, at, y, ua, ub, start, j0, ebuf);
+        for jj in 0..NJ {
+            let (c, e) = ((j0 + jj) * mp, &mut ebuf[jj * mp + start..(jj + 1) * mp]);
+            exp_q_slice::<F>(e);
+            total += dot::<F>(e, &w[c + start..c + mp]);
+        }
+        j0 += NJ;
+    }
+    total
+}
+
+/// `β_aᵀ Q β_b` for an off-diagonal output pair; `beta_a` and `beta_b` are padded with zeros
+/// to `mp` entries. `ebuf` holds `NJ · mp`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn q_reduce_pair<const F: bool>(
     m: usize,
     mp: usize,
     d: usize,
@@ -372,80 +516,58 @@ pub(crate) fn q_block<const F: bool>(
     ub: &[f64],
     beta_a: &[f64],
     beta_b: &[f64],
-    kinv: Option<&[f64]>,
     ebuf: &mut [f64],
-    mut q_out: Option<&mut Vec<f64>>,
-) -> (f64, f64) {
-    const NJ: usize = 4;
-    const L: usize = crate::simd::CHUNK;
-    // a diagonal pair (a = b, the one that carries K̃⁻¹) has a symmetric Q: only rows i ≥ j
-    // (from the start of j's row chunk) are computed, off-diagonal entries count twice
-    let sym = kinv.is_some();
+) -> f64 {
     let mut ebb = 0.0;
-    let mut tr = 0.0;
     let mut j0 = 0;
     while j0 < m {
-        // rows of Y hold mp ≥ j0 + NJ entries (m ≤ mp, both multiples of 4 apart from m)
-        let start = if sym { j0 / L * L } else { 0 };
-        let mut i0 = start;
-        while i0 < mp {
-            let mut acc = [[0.0f64; L]; NJ];
-            for k in 0..d {
-                let a = &at[k * mp + i0..k * mp + i0 + L];
-                let yk = &y[k * mp + j0..k * mp + j0 + NJ];
-                for jj in 0..NJ {
-                    let yv = yk[jj];
-                    for l in 0..L {
-                        acc[jj][l] = madd::<F>(a[l], yv, acc[jj][l]);
-                    }
-                }
-            }
-            let uai = &ua[i0..i0 + L];
-            for jj in 0..NJ {
-                let ubj = ub[j0 + jj];
-                let out = &mut ebuf[jj * mp + i0..jj * mp + i0 + L];
-                for l in 0..L {
-                    out[l] = uai[l] + ubj + acc[jj][l];
-                }
-            }
-            i0 += L;
+        q_exponents::<F>(d, mp, at, y, ua, ub, 0, j0, ebuf);
+        exp_q_slice::<F>(&mut ebuf[..NJ * mp]);
+        for jj in 0..NJ {
+            ebb += dot::<F>(&ebuf[jj * mp..(jj + 1) * mp], beta_a) * beta_b[j0 + jj];
         }
-        if sym {
-            for jj in 0..NJ {
-                exp_slice::<F>(&mut ebuf[jj * mp + start..(jj + 1) * mp]);
-            }
-        } else {
-            exp_slice::<F>(ebuf);
-        }
-        let nj = NJ.min(m - j0);
-        for jj in 0..nj {
+        j0 += NJ;
+    }
+    ebb
+}
+
+/// `Q` itself (m × m, column-major, into `q`), for the adjoint's backward pass: the same
+/// exponents and exponential as the forward's reductions, bit for bit. A symmetric pass
+/// computes the lower triangle and mirrors it. `ebuf` holds `NJ · mp`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn q_matrix<const F: bool>(
+    m: usize,
+    mp: usize,
+    d: usize,
+    at: &[f64],
+    y: &[f64],
+    ua: &[f64],
+    ub: &[f64],
+    sym: bool,
+    ebuf: &mut [f64],
+    q: &mut [f64],
+) {
+    let mut j0 = 0;
+    while j0 < m {
+        let start = if sym { sym_start(j0) } else { 0 };
+        q_exponents::<F>(d, mp, at, y, ua, ub, start, j0, ebuf);
+        for jj in 0..NJ.min(m - j0) {
             let j = j0 + jj;
-            let col = &ebuf[jj * mp..jj * mp + m];
-            if let Some(kinv) = kinv {
-                let kcol = &kinv[j * m..(j + 1) * m];
-                let below = &col[j + 1..];
-                ebb += (beta_a[j] * col[j] + 2.0 * dot::<F>(&beta_a[j + 1..m], below)) * beta_b[j];
-                tr += kcol[j] * col[j] + 2.0 * dot::<F>(&kcol[j + 1..], below);
-                if let Some(q) = q_out.as_deref_mut() {
-                    q[j * m + j..(j + 1) * m].copy_from_slice(&col[j..]);
-                }
-            } else {
-                ebb += dot::<F>(beta_a, col) * beta_b[j];
-                if let Some(q) = q_out.as_deref_mut() {
-                    q[j * m..(j + 1) * m].copy_from_slice(col);
-                }
+            let (col, e) = (&mut q[j * m + start..(j + 1) * m], &ebuf[jj * mp + start..jj * mp + m]);
+            for (qv, ev) in col.iter_mut().zip(e) {
+                *qv = exp_q::<F>(*ev);
             }
         }
         j0 += NJ;
     }
-    if sym && let Some(q) = q_out {
+    if sym {
         for j in 0..m {
             for i in (j + 1)..m {
                 q[i * m + j] = q[j * m + i];
             }
         }
     }
-    (ebb, tr)
 }
 
 thread_local! {

@@ -39,6 +39,12 @@ pub trait Scalar: RealField + Copy + Send + Sync {
         chol.inverse()
     }
 
+    /// What the f64 moment-matching kernel needs of a diagonal output pair, prepared once per
+    /// loss ([`crate::gp::OutputGp::q_weights`]); nothing for other scalars.
+    fn q_weights(_beta: &DVector<Self>, _kinv: &DMatrix<Self>) -> Vec<Self> {
+        Vec::new()
+    }
+
     /// The SE-ARD kernel matrix ([`crate::kernel::kernel_matrix`]).
     fn kernel_matrix(
         a: &DMatrix<Self>,
@@ -69,6 +75,10 @@ impl Scalar for f64 {
     }
     fn spd_inverse(chol: &Cholesky<f64>) -> DMatrix<f64> {
         crate::simd::spd_inverse(&chol.l)
+    }
+
+    fn q_weights(beta: &DVector<f64>, kinv: &DMatrix<f64>) -> Vec<f64> {
+        crate::mm_f64::sym_weights(beta, kinv)
     }
 
     fn kernel_matrix(a: &DMatrix<f64>, b: &DMatrix<f64>, inv_l2: &[f64], sf2: f64) -> DMatrix<f64> {

@@ -22,7 +22,7 @@ use crate::kernel::kernel_matrix;
 use crate::linalg::{JitterLog, JitterPolicy, cholesky, symmetrize};
 use crate::loss::{Complexity, LossValue, complexity_term, gaussian_nll};
 use crate::mean_fn::{add_linear_mean, linear_mean_backward};
-use crate::mm_f64::{MmState, q_block};
+use crate::mm_f64::{MmState, q_matrix};
 use crate::moments::Moments;
 use crate::narx::NarxSpec;
 use crate::policy::{FeedbackPolicy, PolicyMoments, PolicySpec};
@@ -219,10 +219,10 @@ fn mm_backward_impl<const F: bool>(bw: Backward<'_>) -> (DVector<f64>, DMatrix<f
         }
         // Q again, by the forward's own code (bit-identical to what the forward used): cheaper
         // than keeping 8·m² bytes per step and pair
-        // (q_block overwrites every entry it reads: no zero fill)
+        // (q_matrix overwrites every entry: no zero fill)
         w.q.resize(m * m, 0.0);
         w.ebuf.resize(4 * mp, 0.0);
-        q_block::<F>(
+        q_matrix::<F>(
             m,
             mp,
             d,
@@ -230,11 +230,9 @@ fn mm_backward_impl<const F: bool>(bw: Backward<'_>) -> (DVector<f64>, DMatrix<f
             &pc.nb,
             &pc.ua,
             &pc.ub,
-            beta_a,
-            beta_b,
-            if diag { Some(oa.kinv.as_slice()) } else { None },
+            diag,
             &mut w.ebuf,
-            Some(&mut w.q),
+            &mut w.q,
         );
         // Ē as m columns of stride mp: rows < m are written below, the padding is zeroed here
         w.ebar.resize(m * mp, 0.0);
