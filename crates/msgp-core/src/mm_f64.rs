@@ -27,7 +27,7 @@ use crate::gp::PreparedGp;
 use crate::linalg::{JitterLog, cholesky};
 use crate::moments::Moments;
 use crate::simd::{
-    Kernel, dispatch, dot, exp_q, exp_slice, madd, padded, solve_lower_rows,
+    Kernel, dispatch, dot, dot_into, exp_q, exp_slice, hsum, madd, padded, solve_lower_rows,
     solve_upper_rows, sum,
 };
 
@@ -487,7 +487,7 @@ pub(crate) fn q_reduce_sym<const F: bool>(
     w: &[f64],
     ebuf: &mut [f64],
 ) -> f64 {
-    let mut total = 0.0;
+    let mut total = [0.0f64; crate::simd::CHUNK];
     let mut j0 = 0;
     while j0 < m {
         let start = sym_start(j0);
@@ -495,11 +495,11 @@ pub(crate) fn q_reduce_sym<const F: bool>(
         for jj in 0..NJ {
             let (c, e) = ((j0 + jj) * mp, &mut ebuf[jj * mp + start..(jj + 1) * mp]);
             exp_q_slice::<F>(e);
-            total += dot::<F>(e, &w[c + start..c + mp]);
+            dot_into::<F>(e, &w[c + start..c + mp], &mut total);
         }
         j0 += NJ;
     }
-    total
+    hsum(&total)
 }
 
 /// `β_aᵀ Q β_b` for an off-diagonal output pair; `beta_a` and `beta_b` are padded with zeros
@@ -554,7 +554,10 @@ pub(crate) fn q_matrix<const F: bool>(
         q_exponents::<F>(d, mp, at, y, ua, ub, start, j0, ebuf);
         for jj in 0..NJ.min(m - j0) {
             let j = j0 + jj;
-            let (col, e) = (&mut q[j * m + start..(j + 1) * m], &ebuf[jj * mp + start..jj * mp + m]);
+            let (col, e) = (
+                &mut q[j * m + start..(j + 1) * m],
+                &ebuf[jj * mp + start..jj * mp + m],
+            );
             for (qv, ev) in col.iter_mut().zip(e) {
                 *qv = exp_q::<F>(*ev);
             }

@@ -238,6 +238,18 @@ pub(crate) fn dot<const F: bool>(a: &[f64], b: &[f64]) -> f64 {
     s
 }
 
+/// `acc_l += Σ_k a_{8k+l} b_{8k+l}`: [`dot`] without its horizontal sum and tail, for
+/// reductions over many slices whose lengths are multiples of [`CHUNK`].
+#[inline(always)]
+pub(crate) fn dot_into<const F: bool>(a: &[f64], b: &[f64], acc: &mut [f64; CHUNK]) {
+    debug_assert!(a.len() % CHUNK == 0 && a.len() == b.len());
+    for (ca, cb) in a.chunks_exact(CHUNK).zip(b.chunks_exact(CHUNK)) {
+        for l in 0..CHUNK {
+            acc[l] = madd::<F>(ca[l], cb[l], acc[l]);
+        }
+    }
+}
+
 /// `Σ a_i` with [`CHUNK`] independent partial sums.
 #[inline(always)]
 pub(crate) fn sum(a: &[f64]) -> f64 {
@@ -283,9 +295,10 @@ pub(crate) fn solve_lower_rows<const F: bool>(
         for k in 0..i {
             axpy::<F>(-l[(i, k)], &done[k * mp..(k + 1) * mp], xi);
         }
-        let lii = l[(i, i)];
+        // one division per row, not per entry (a vector division costs ≈ 16 multiplications)
+        let inv = 1.0 / l[(i, i)];
         for v in xi.iter_mut() {
-            *v /= lii;
+            *v *= inv;
         }
     }
 }
@@ -304,9 +317,10 @@ pub(crate) fn solve_upper_rows<const F: bool>(
         for k in (i + 1)..d {
             axpy::<F>(-l[(k, i)], &tail[(k - i - 1) * mp..(k - i) * mp], xi);
         }
-        let lii = l[(i, i)];
+        // one division per row, not per entry (a vector division costs ≈ 16 multiplications)
+        let inv = 1.0 / l[(i, i)];
         for v in xi.iter_mut() {
-            *v /= lii;
+            *v *= inv;
         }
     }
 }

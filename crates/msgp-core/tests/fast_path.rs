@@ -73,6 +73,14 @@ fn single_steps_match_generic() {
             let fast = moment_match(&gp, &mu, &sigma, &mut l1).expect("fast");
             let slow = moment_match_generic(&gp, &mu, &sigma, &mut l2).expect("generic");
             assert_eq!(l1, l2, "jitter decisions differ");
+            // a GP whose variance weights were not prepared (built field by field rather than
+            // by PreparedGp::new) gets them made on the fly: the same bits
+            let mut bare = gp.clone();
+            for o in &mut bare.outputs {
+                o.q_weights.clear();
+            }
+            let again = moment_match(&bare, &mu, &sigma, &mut JitterLog::default()).expect("bare");
+            assert_eq!(again.cov, fast.cov, "m {m} D {d} E {e}: unprepared weights");
             // a variance is a difference of terms of the size of σ_f² (σ_f² − tr(K̃⁻¹Q), βᵀQβ − M²):
             // its rounding error is relative to σ_f², not to the (possibly tiny) result
             let sf2 = gp.outputs.iter().fold(0.0f64, |m, o| m.max(o.sf2));
