@@ -246,9 +246,13 @@ fn mm_backward_impl<const F: bool>(bw: Backward<'_>) -> (DVector<f64>, DMatrix<f
             let kinv = oa.kinv.as_slice();
             let adj_kinv = adj.kinv[a].as_mut_slice();
             let adj_beta_b = adj.beta[b].as_mut_slice();
+            // a diagonal pair's Q and Ē are symmetric: Qᵀβ_a = Qβ_b and Ē's row sums are its
+            // column sums, so two of the column pass's streams are skipped (taken after it)
             for j in 0..m {
                 let qcol = &w.q[j * m..(j + 1) * m];
-                adj_beta_b[j] += vb * dot::<F>(beta_a, qcol);
+                if !diag {
+                    adj_beta_b[j] += vb * dot::<F>(beta_a, qcol);
+                }
                 axpy::<F>(beta_b[j], qcol, &mut w.qb);
                 let ecol = &mut w.ebar[j * mp..j * mp + m];
                 let f = vb * beta_b[j];
@@ -271,12 +275,19 @@ fn mm_backward_impl<const F: bool>(bw: Backward<'_>) -> (DVector<f64>, DMatrix<f
                     }
                 }
                 w.ubbar[j] = sum(ecol);
-                for (u, e) in w.uabar.iter_mut().zip(ecol.iter()) {
-                    *u += e;
+                if !diag {
+                    for (u, e) in w.uabar.iter_mut().zip(ecol.iter()) {
+                        *u += e;
+                    }
                 }
             }
             let adj_beta_a = adj.beta[a].as_mut_slice();
-            axpy::<F>(vb, &w.qb, adj_beta_a);
+            if diag {
+                axpy::<F>(2.0 * vb, &w.qb, adj_beta_a);
+                w.uabar[..m].copy_from_slice(&w.ubbar[..m]);
+            } else {
+                axpy::<F>(vb, &w.qb, adj_beta_a);
+            }
         }
         // G = Ãᵀ Y, Y = N B̃: Ã̄ = Y Ēᵀ, Ȳ = Ã Ē. For a diagonal pair Ē is symmetric and
         // Y = N Ã, so Ã̄ = N Ȳ (formed below with B̃̄ = N Ȳ): one m × m product instead of two.
