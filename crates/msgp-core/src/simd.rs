@@ -242,7 +242,7 @@ pub(crate) fn dot<const F: bool>(a: &[f64], b: &[f64]) -> f64 {
 /// reductions over many slices whose lengths are multiples of [`CHUNK`].
 #[inline(always)]
 pub(crate) fn dot_into<const F: bool>(a: &[f64], b: &[f64], acc: &mut [f64; CHUNK]) {
-    debug_assert!(a.len() % CHUNK == 0 && a.len() == b.len());
+    debug_assert!(a.len().is_multiple_of(CHUNK) && a.len() == b.len());
     for (ca, cb) in a.chunks_exact(CHUNK).zip(b.chunks_exact(CHUNK)) {
         for l in 0..CHUNK {
             acc[l] = madd::<F>(ca[l], cb[l], acc[l]);
