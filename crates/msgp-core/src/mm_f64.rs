@@ -304,33 +304,26 @@ impl MmState {
                     }
                 }
                 let v = if diag {
-                    let red = if oa.q_weights.len() == m.div_ceil(NJ) * NJ * mp {
-                        q_reduce_sym::<F>(
-                            m,
-                            mp,
-                            d,
-                            &pb.at,
-                            &pb.nb,
-                            &pb.ua,
-                            &pb.ub,
-                            &oa.q_weights,
-                            &mut self.ebuf,
-                        )
+                    // a GP prepared without the weights (not built by PreparedGp::new) gets
+                    // them made here
+                    let made;
+                    let weights: &[f64] = if oa.q_weights.len() == m.div_ceil(NJ) * NJ * mp {
+                        &oa.q_weights
                     } else {
-                        // a GP prepared without the weights (not built by PreparedGp::new)
-                        let w = sym_weights(&oa.beta, &oa.kinv);
-                        q_reduce_sym::<F>(
-                            m,
-                            mp,
-                            d,
-                            &pb.at,
-                            &pb.nb,
-                            &pb.ua,
-                            &pb.ub,
-                            &w,
-                            &mut self.ebuf,
-                        )
+                        made = sym_weights(&oa.beta, &oa.kinv);
+                        &made
                     };
+                    let red = q_reduce_sym::<F>(
+                        m,
+                        mp,
+                        d,
+                        &pb.at,
+                        &pb.nb,
+                        &pb.ua,
+                        &pb.ub,
+                        weights,
+                        &mut self.ebuf,
+                    );
                     red - self.mean[a] * self.mean[b] + oa.sf2
                 } else {
                     let ebb = q_reduce_pair::<F>(

@@ -86,15 +86,11 @@ fn pow2(n: f64) -> f64 {
     f64::from_bits((n + (1023.0 + SHIFT)).to_bits() << 52)
 }
 
-/// `e^x` to within about one ulp of the correctly rounded value (tested against `f64::exp`),
-/// branch-free so that loops over it vectorise. `x = n ln 2 + r` with `|r| ≤ ½ ln 2`
-/// (Cody–Waite), a degree-13 polynomial for `e^r`, and `2^n` applied as two exact power-of-two
-/// factors so that subnormal results and overflow to `+∞` come out right. NaN propagates;
-/// `x < −746` gives 0 and `x > 710` gives `+∞`.
+/// `(e^r, n)` with `e^x = e^r 2ⁿ`, `|r| ≤ ½ ln 2`, for `x` clamped above at 710 (`n ≤ 1024`):
+/// Cody–Waite reduction and a degree-13 polynomial, the part [`exp1`] and [`exp_q`] share.
 #[inline(always)]
-pub(crate) fn exp1<const F: bool>(x: f64) -> f64 {
+fn exp_reduced<const F: bool>(x: f64) -> (f64, f64) {
     // comparisons are false for NaN, which therefore passes through
-    let x = if x < -746.0 { -746.0 } else { x };
     let x = if x > 710.0 { 710.0 } else { x };
     let t = madd::<F>(x, LOG2E, SHIFT);
     let n = t - SHIFT;
@@ -105,7 +101,19 @@ pub(crate) fn exp1<const F: bool>(x: f64) -> f64 {
         p = madd::<F>(p, r, C[k]);
     }
     // e^r = 1 + (r + r² p(r)): the small part first, one rounding into the final sum
-    let y = 1.0 + madd::<F>(r * r, p, r);
+    (1.0 + madd::<F>(r * r, p, r), n)
+}
+
+/// `e^x` to within about one ulp of the correctly rounded value (tested against `f64::exp`),
+/// branch-free so that loops over it vectorise. `x = n ln 2 + r` with `|r| ≤ ½ ln 2`
+/// (Cody–Waite), a degree-13 polynomial for `e^r`, and `2^n` applied as two exact power-of-two
+/// factors so that subnormal results and overflow to `+∞` come out right. NaN propagates;
+/// `x < −746` gives 0 and `x > 710` gives `+∞`.
+#[inline(always)]
+pub(crate) fn exp1<const F: bool>(x: f64) -> f64 {
+    // comparisons are false for NaN, which therefore passes through
+    let x = if x < -746.0 { -746.0 } else { x };
+    let (y, n) = exp_reduced::<F>(x);
     // n ∈ [−1077, 1025]: split into two halves that are each a normal power of two
     let n1 = (n * 0.5 + SHIFT) - SHIFT;
     let n2 = n - n1;
@@ -121,16 +129,7 @@ pub(crate) fn exp1<const F: bool>(x: f64) -> f64 {
 pub(crate) fn exp_q<const F: bool>(x: f64) -> f64 {
     let flush = x < -708.0;
     // n ≤ 1024 (2¹⁰²⁴ is +∞'s bit pattern) and, unless flushed, n ≥ −1021
-    let x = if x > 710.0 { 710.0 } else { x };
-    let t = madd::<F>(x, LOG2E, SHIFT);
-    let n = t - SHIFT;
-    let r = madd::<F>(n, -LN2_HI, x);
-    let r = madd::<F>(n, -LN2_LO, r);
-    let mut p = C[11];
-    for k in (0..11).rev() {
-        p = madd::<F>(p, r, C[k]);
-    }
-    let y = 1.0 + madd::<F>(r * r, p, r);
+    let (y, n) = exp_reduced::<F>(x);
     let v = y * pow2(n);
     if flush { 0.0 } else { v }
 }
