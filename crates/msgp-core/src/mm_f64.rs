@@ -6,12 +6,13 @@
 //!   triangular solves with `m` right-hand sides are axpys over whole rows instead of
 //!   `m` column-by-column solves, and `N B̃ = B̃ − S̃⁻¹B̃` costs two such solves.
 //! - The `m × m` block `Q_ij = exp(u^a_i + u^b_j + Ã_iᵀ N B̃_j)` is never formed for the loss:
-//!   in tiles of four columns by eight rows ([`q_tile`]), the product `Ãᵀ (N B̃)` is accumulated
-//!   in registers (a small GEMM micro-kernel), exponentiated by the vectorised polynomial
-//!   [`crate::simd::exp_q`] and reduced at once: `Σ (ββᵀ − K̃⁻¹) ∘ Q` over the lower triangle for
-//!   a diagonal pair ([`q_reduce_sym`], weights prepared once per loss), `β_aᵀ Q β_b` for the
-//!   others ([`q_reduce_pair`]). The adjoint recomputes `Q` with the same tiles ([`q_matrix`])
-//!   instead of storing it for every step.
+//!   for blocks of four columns, the exponents are formed in tiles of eight rows with the
+//!   product `Ãᵀ (N B̃)` accumulated in registers (a small GEMM micro-kernel, [`q_exponents`]),
+//!   written to a buffer of `4·mp`, exponentiated there by the vectorised polynomial
+//!   [`crate::simd::exp_q`] and reduced while in L1: `Σ (ββᵀ − K̃⁻¹) ∘ Q` over the lower
+//!   triangle for a diagonal pair ([`q_reduce_sym`], weights prepared once per loss),
+//!   `β_aᵀ Q β_b` for the others ([`q_reduce_pair`]). The adjoint recomputes `Q` with the same
+//!   code ([`q_matrix`]) instead of storing it for every step.
 //! - Buffers live in an [`MmState`] that is reused from step to step (thread-local for the
 //!   rollout path), so a step allocates only its small outputs.
 //!
@@ -50,7 +51,7 @@ pub(crate) struct OutBufs {
     pub acc: Vec<f64>,
     /// `log k_a(x̄_i, μ)` (mp).
     pub lk: Vec<f64>,
-    /// `β` padded with zeros to mp.
+    /// `β` padded with zeros to mp (only with two or more outputs).
     pub beta_p: Vec<f64>,
 }
 
@@ -230,8 +231,11 @@ impl MmState {
             exp_slice::<F>(&mut ob.q);
             resize(&mut ob.bq, mp);
             let beta = o.beta.as_slice();
-            resize(&mut ob.beta_p, mp);
-            ob.beta_p[..m].copy_from_slice(beta);
+            // only the off-diagonal pairs' reduction reads β padded
+            if e > 1 {
+                resize(&mut ob.beta_p, mp);
+                ob.beta_p[..m].copy_from_slice(beta);
+            }
             for i in 0..m {
                 ob.bq[i] = beta[i] * ob.q[i];
             }
