@@ -17,7 +17,7 @@ pub fn se_ard<T: Scalar>(a: &[T], b: &[T], inv_l2: &[T], sf2: T) -> T {
 }
 
 /// Kernel matrix between the rows of `a` (n×D) and the rows of `b` (m×D). f64 takes a
-/// vectorised path ([`crate::simd::kernel_matrix`]; equal to [`kernel_matrix_generic`] to
+/// vectorised path (`simd::kernel_matrix`; equal to [`kernel_matrix_generic`] to
 /// rounding), other scalars the generic one.
 pub fn kernel_matrix<T: Scalar>(
     a: &DMatrix<T>,

@@ -296,7 +296,7 @@ fn policy_gradient(
     Ok((value, grad))
 }
 
-/// [`policy_gradient`] by duals with as many lanes as free gains (up to [`LANES`]; more gains
+/// `policy_gradient` (the search's adjoint gradient) by duals with as many lanes as free gains (up to [`LANES`]; more gains
 /// take several chunks of `LANES`): the reference the adjoint is tested against.
 pub fn policy_gradient_duals(
     problem: &PolicyProblem<'_>,

@@ -1,6 +1,6 @@
-//! Numeric tables with named columns: CSV files with a header (and, through
-//! [`crate::data::mcap`], aligned MCAP signals). Every error names the file and, for a cell,
-//! its line and column.
+//! Numeric tables with named columns: CSV files with a header (and, through `data::mcap`
+//! with the `mcap` feature, aligned MCAP signals). Every error names the file and, for a
+//! cell, its line and column.
 //!
 //! Rules of the CSV reader:
 //! - the first line is the header; names are trimmed, must be non-empty and unique;
