@@ -13,6 +13,7 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 use msgp_core::model::Method;
+use msgp_core::start_window::StartWindow;
 use msgp_sim::learn::{IterationReport, LearnOutcome, LearnSettings, learn_policy};
 use msgp_sim::{PendulumParams, write_run};
 use serde_json::{Value, json};
@@ -69,6 +70,14 @@ pub struct BudgetArgs {
     /// always from scratch.
     #[arg(long, value_name = "N", default_value_t = LearnSettings::default().warm_start.unwrap_or(0))]
     pub warm_start: usize,
+    /// MSGP: start each training trajectory's predicted rollout from a quadratic fitted to its
+    /// first N samples (the window's covariance is what that estimate really has), instead of
+    /// from its measured window; 0: the measured window (docs/design.md).
+    #[arg(long, value_name = "N", default_value_t = match LearnSettings::default().fit.start_window {
+        StartWindow::Smoothed { samples, .. } => samples,
+        StartWindow::Measured => 0,
+    })]
+    pub start_smoothing: usize,
     /// Pseudo-inputs of the model.
     #[arg(long, value_name = "M", default_value_t = LearnSettings::default().fit.inducing)]
     pub inducing: usize,
@@ -337,6 +346,10 @@ pub fn settings(
                 _ => d.fit.iterations,
             },
             optimizer: args.fit_optimizer.into(),
+            start_window: match args.start_smoothing {
+                0 => StartWindow::Measured,
+                samples => StartWindow::Smoothed { samples, degree: 2 },
+            },
             one_step_iterations: match (method, args.fit_iters) {
                 (Method::Msgp, _) | (_, None) => d.fit.one_step_iterations,
                 (_, Some(n)) => n,

@@ -27,7 +27,8 @@ use crate::model::{Method, Model};
 use crate::narx::NarxSpec;
 use crate::optim::{Adam, Flow, Lbfgs, Objective, Solver, minimize};
 use crate::policy::PolicySpec;
-use crate::rollout::{Control, rollout};
+use crate::rollout::{Control, rollout_started};
+use crate::start_window::StartWindow;
 use crate::trajectory::{Episode, Excitation, Trajectory};
 
 /// Everything that controls a fit.
@@ -74,6 +75,9 @@ pub struct FitSettings {
     /// linear mean, whose coefficients on their own lags they fix.
     #[serde(default)]
     pub integrators: Vec<Integrator>,
+    /// How the MSGP loss starts each training trajectory's rollout ([`StartWindow`]).
+    #[serde(default)]
+    pub start_window: StartWindow,
 }
 
 impl Default for FitSettings {
@@ -99,6 +103,7 @@ impl Default for FitSettings {
             refit: false,
             mean: MeanFunction::Zero,
             integrators: Vec::new(),
+            start_window: StartWindow::Measured,
         }
     }
 }
@@ -320,12 +325,13 @@ fn validation_nll(
     let mut steps = 0usize;
     for ep in episodes {
         let mut row = vec![0.0; spec.dy];
-        rollout(
+        rollout_started(
             &gp,
             spec,
             &ep.traj,
             &Control::FeedForward,
             ep.traj.len(),
+            gp.start,
             &mut log,
             |p| {
                 for j in 0..spec.dy {
@@ -441,6 +447,7 @@ fn fit_episodes_from(
     };
     spec.validate()?;
     integrator::validate(&settings.integrators, &spec, settings.mean)?;
+    settings.start_window.validate(spec.warmup())?;
     for (k, t) in train.iter().enumerate() {
         t.check(&spec)
             .map_err(|e| MsgpError::Data(format!("training trajectory {k}: {e}")))?;
@@ -530,6 +537,7 @@ fn fit_episodes_from(
     let config = GpConfig {
         noise_floor: settings.noise_floor,
         mean: settings.mean,
+        start: settings.start_window,
         ..GpConfig::default()
     };
     let mut stage = Stage {
@@ -758,6 +766,7 @@ impl Stage<'_, '_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::rollout::rollout;
 
     fn traj(n: usize) -> Trajectory {
         let u: Vec<f64> = (0..n).map(|i| (i as f64 * 0.3).sin()).collect();

@@ -19,6 +19,7 @@ use crate::error::{MsgpError, Result};
 use crate::kernel::kernel_matrix;
 use crate::linalg::{Cholesky, JitterLog, JitterPolicy, cholesky};
 use crate::scalar::{Scalar, c};
+use crate::start_window::StartWindow;
 
 /// Every differentiable parameter of the model (the paper's `θ`).
 #[derive(Clone, Debug, PartialEq)]
@@ -68,6 +69,10 @@ pub struct GpConfig {
     /// Prior mean function.
     #[serde(default)]
     pub mean: MeanFunction,
+    /// How the MSGP training loss starts the rollout of a measured trajectory (predictions from
+    /// data always start from the measured window). A training setting: not in model files.
+    #[serde(default)]
+    pub start: StartWindow,
 }
 
 impl Default for GpConfig {
@@ -76,6 +81,7 @@ impl Default for GpConfig {
             noise_floor: 1e-6,
             jitter: JitterPolicy::default(),
             mean: MeanFunction::Zero,
+            start: StartWindow::Measured,
         }
     }
 }
@@ -281,6 +287,8 @@ pub struct PreparedGp<T: Scalar> {
     pub jitter: JitterPolicy,
     /// `A` (E × D) of the linear prior mean; `None` for [`MeanFunction::Zero`].
     pub linear_mean: Option<DMatrix<T>>,
+    /// How the training loss starts rollouts of measured trajectories.
+    pub start: StartWindow,
 }
 
 impl<T: Scalar> PreparedGp<T> {
@@ -321,6 +329,7 @@ impl<T: Scalar> PreparedGp<T> {
             outputs,
             jitter: config.jitter,
             linear_mean: (config.mean == MeanFunction::Linear).then(|| params.linear_mean.clone()),
+            start: config.start,
         })
     }
 

@@ -41,6 +41,7 @@ pub mod rollout;
 pub mod saturation;
 pub mod scalar;
 mod simd;
+pub mod start_window;
 pub mod trajectory;
 
 pub use error::{MsgpError, Result};

@@ -29,7 +29,7 @@ use crate::gp::{GpConfig, GpParams, PreparedGp};
 use crate::linalg::{JitterLog, JitterPolicy, cholesky};
 use crate::narx::NarxSpec;
 use crate::policy::FeedbackPolicy;
-use crate::rollout::{Control, rollout};
+use crate::rollout::{Control, rollout_started};
 use crate::scalar::{Scalar, c};
 use crate::trajectory::{Episode, Excitation};
 
@@ -132,14 +132,23 @@ pub fn msgp_loss<T: Scalar>(
         let y = &ep.traj.y;
         let mut row = vec![0.0; spec.dy];
         let mut nll_log = JitterLog::default();
-        rollout(&gp, spec, &ep.traj, &control, ep.traj.len(), log, |p| {
-            for j in 0..spec.dy {
-                row[j] = y[(p.t, j)];
-            }
-            nll += gaussian_nll(&row, &p.mean, &p.cov, &config.jitter, &mut nll_log)?;
-            steps += 1;
-            Ok(())
-        })?;
+        rollout_started(
+            &gp,
+            spec,
+            &ep.traj,
+            &control,
+            ep.traj.len(),
+            gp.start,
+            log,
+            |p| {
+                for j in 0..spec.dy {
+                    row[j] = y[(p.t, j)];
+                }
+                nll += gaussian_nll(&row, &p.mean, &p.cov, &config.jitter, &mut nll_log)?;
+                steps += 1;
+                Ok(())
+            },
+        )?;
         log.merge(&nll_log);
     }
     let complexity = complexity_term(params, &gp, complexity);

@@ -448,6 +448,7 @@ impl ModelFile {
                 } else {
                     MeanFunction::Zero
                 },
+                ..GpConfig::default()
             },
             normalizer: Normalizer {
                 u_mean: n.u_mean.clone(),

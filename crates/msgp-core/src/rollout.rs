@@ -10,7 +10,8 @@
 //!    on `y_{t+1}` (closed loop, correlated with the window through the policy's `C`).
 //!
 //! The rollout starts at `t0 = max(l_y, l_u)` from the first `t0` measured samples: latent
-//! outputs `x ~ N(y, Σ_y)` (independent), inputs as measured.
+//! outputs `x ~ N(y, Σ_y)` (independent), inputs as measured. The training loss can start it
+//! from a smoothed window instead ([`crate::start_window`]).
 
 use nalgebra::{DMatrix, DVector};
 
@@ -22,6 +23,7 @@ use crate::moments::moment_match;
 use crate::narx::NarxSpec;
 use crate::policy::{FeedbackPolicy, PolicyMoments};
 use crate::scalar::{Scalar, c};
+use crate::start_window::StartWindow;
 use crate::trajectory::Trajectory;
 
 /// Where the inputs of a rollout come from.
@@ -64,6 +66,31 @@ pub fn rollout<T: Scalar>(
     log: &mut JitterLog,
     visit: impl FnMut(StepPrediction<T>) -> Result<()>,
 ) -> Result<()> {
+    rollout_started(
+        gp,
+        spec,
+        traj,
+        control,
+        horizon,
+        StartWindow::Measured,
+        log,
+        visit,
+    )
+}
+
+/// [`rollout`] from the start `how` (the training loss's [`PreparedGp::start`]): predictions
+/// begin at [`TrajectoryStart::t0`].
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn rollout_started<T: Scalar>(
+    gp: &PreparedGp<T>,
+    spec: &NarxSpec,
+    traj: &Trajectory,
+    control: &Control<'_, T>,
+    horizon: usize,
+    how: StartWindow,
+    log: &mut JitterLog,
+    visit: impl FnMut(StepPrediction<T>) -> Result<()>,
+) -> Result<()> {
     let d = spec.input_dim();
     let (dy, du) = (spec.dy, spec.du);
     if gp.input_dim() != d || gp.output_dim() != dy {
@@ -75,7 +102,17 @@ pub fn rollout<T: Scalar>(
             dy
         )));
     }
-    let t0 = spec.warmup();
+    if traj.len() < spec.warmup() || traj.u.nrows() < spec.warmup() {
+        return Err(MsgpError::Data(format!(
+            "a rollout needs {} initial samples with their inputs; the trajectory has {} outputs \
+             and {} inputs",
+            spec.warmup(),
+            traj.len(),
+            traj.u.nrows()
+        )));
+    }
+    let first = initial_window(gp, spec, traj, how);
+    let t0 = first.t0;
     let needed_u = match control {
         Control::FeedForward => horizon.saturating_sub(1),
         Control::Feedback(p) => {
@@ -102,7 +139,7 @@ pub fn rollout<T: Scalar>(
         Control::Feedback(p) => p.state_dim(),
     };
     let n = d + ds;
-    let (wmu, wsigma) = initial_window(gp, spec, traj);
+    let (wmu, wsigma) = (first.mean, first.cov);
     let mut mu = DVector::<T>::zeros(n);
     let mut sigma = DMatrix::<T>::zeros(n, n);
     mu.rows_mut(0, d).copy_from(&wmu);
@@ -227,22 +264,49 @@ pub fn rollout_from<T: Scalar>(
     Ok(())
 }
 
-/// Moments of the window at time `t0 − 1` from the first `t0` measured samples: latent outputs
-/// `N(y, σ_y²)` (independent), inputs as measured (zero variance).
+/// The Gaussian window a measured trajectory's rollout starts from.
+pub(crate) struct TrajectoryStart<T: Scalar> {
+    /// First predicted step: `max(l_y, l_u)` from the measured window, the smoother's sample
+    /// count from a smoothed one.
+    pub t0: usize,
+    /// Window mean (D).
+    pub mean: DVector<T>,
+    /// Window covariance (D × D).
+    pub cov: DMatrix<T>,
+    /// The output lags' covariance per unit `σ_{y,j}²`, the same for every output `j`
+    /// (l_y × l_y): the identity for the measured window, `H Hᵀ` for a smoothed one.
+    pub pattern: DMatrix<f64>,
+}
+
+/// The window at time `t0 − 1`: latent outputs from the measured samples `N(y, σ_y²)`
+/// (independent) or, under [`StartWindow::Smoothed`], from the smoother `N(H y, σ_y² H Hᵀ)`;
+/// inputs as measured (zero variance).
 pub(crate) fn initial_window<T: Scalar>(
     gp: &PreparedGp<T>,
     spec: &NarxSpec,
     traj: &Trajectory,
-) -> (DVector<T>, DMatrix<T>) {
+    how: StartWindow,
+) -> TrajectoryStart<T> {
     let d = spec.input_dim();
-    let t0 = spec.warmup();
+    let smoother = how.smoother(spec.warmup(), spec.ly, traj.len().min(traj.u.nrows()));
+    let t0 = smoother.as_ref().map_or(spec.warmup(), |s| s.samples);
+    let pattern = smoother.as_ref().map_or_else(
+        || DMatrix::identity(spec.ly, spec.ly),
+        |s| s.pattern.clone(),
+    );
     let mut mu = DVector::<T>::zeros(d);
     let mut sigma = DMatrix::<T>::zeros(d, d);
-    for k in 0..spec.ly {
-        for j in 0..spec.dy {
+    for j in 0..spec.dy {
+        let smoothed = smoother.as_ref().map(|s| s.window(&traj.y, j));
+        for k in 0..spec.ly {
             let i = spec.y_index(k, j);
-            mu[i] = c(traj.y[(t0 - 1 - k, j)]);
-            sigma[(i, i)] = gp.outputs[j].sy2;
+            mu[i] = c(smoothed.as_ref().map_or(traj.y[(t0 - 1 - k, j)], |w| w[k]));
+            for k2 in 0..spec.ly {
+                let i2 = spec.y_index(k2, j);
+                if pattern[(k, k2)] != 0.0 {
+                    sigma[(i, i2)] = gp.outputs[j].sy2 * c::<T>(pattern[(k, k2)]);
+                }
+            }
         }
     }
     for k in 0..spec.lu {
@@ -250,7 +314,12 @@ pub(crate) fn initial_window<T: Scalar>(
             mu[spec.u_index(k, j)] = c(traj.u[(t0 - 1 - k, j)]);
         }
     }
-    (mu, sigma)
+    TrajectoryStart {
+        t0,
+        mean: mu,
+        cov: sigma,
+        pattern,
+    }
 }
 
 /// Positions in the augmented vector `[x̃_t (D), p_t (d_p), x_{t+1} (d_y), u_{t+1} (d_u),

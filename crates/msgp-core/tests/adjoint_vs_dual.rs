@@ -13,6 +13,7 @@ use msgp_core::linalg::JitterLog;
 use msgp_core::loss::{Complexity, msgp_loss};
 use msgp_core::narx::NarxSpec;
 use msgp_core::policy::PolicySpec;
+use msgp_core::start_window::StartWindow;
 use msgp_core::trajectory::{Episode, Excitation, Trajectory};
 use nalgebra::DMatrix;
 
@@ -104,6 +105,38 @@ fn linear_prior_mean_open_and_closed_loop() {
         &linear_feedback_episodes(&traj),
         Complexity::PseudoDataNll,
     );
+}
+
+/// The smoothed start window (`σ_y² H Hᵀ`, correlated across lags; rollouts start after the
+/// smoother's samples): open and closed loop, two outputs, a linear prior mean.
+#[test]
+fn smoothed_start_window_open_and_closed_loop() {
+    let mut r = rng(25);
+    let spec = NarxSpec {
+        ly: 2,
+        lu: 1,
+        dy: 2,
+        du: 1,
+    };
+    let mut params = random_gp(&mut r, 9, spec.input_dim(), 2);
+    params.linear_mean = DMatrix::from_fn(2, spec.input_dim(), |a, k| {
+        if k == a { 0.8 } else { 0.1 * normal(&mut r) }
+    });
+    let traj = two_output_trajectory(&mut r, 55);
+    // 12 samples of a quadratic; the second episode is shorter than that (uses 7)
+    let mut eps = linear_feedback_episodes(&traj);
+    eps.push(Episode::feed_forward(traj.slice(10, 18)));
+    for mean in [MeanFunction::Zero, MeanFunction::Linear] {
+        let cfg = GpConfig {
+            mean,
+            start: StartWindow::Smoothed {
+                samples: 12,
+                degree: 2,
+            },
+            ..config()
+        };
+        compare_with(&params, &cfg, &spec, &eps, Complexity::PseudoDataNll);
+    }
 }
 
 #[test]

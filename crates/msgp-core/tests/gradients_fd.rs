@@ -17,6 +17,7 @@ use msgp_core::linalg::JitterLog;
 use msgp_core::loss::{Complexity, msgp_loss};
 use msgp_core::narx::NarxSpec;
 use msgp_core::scalar::Scalar;
+use msgp_core::start_window::StartWindow;
 use msgp_core::trajectory::Episode;
 use nalgebra::DMatrix;
 
@@ -147,4 +148,24 @@ fn closed_loop_gradients_match_finite_differences() {
         &linear_feedback_episodes(&traj),
         Complexity::PseudoDataNll,
     );
+}
+
+/// The smoothed start window: the observation noise now enters the start as `σ_y² H Hᵀ`.
+#[test]
+fn smoothed_start_gradients_match_finite_differences() {
+    let mut r = rng(13);
+    let spec = NarxSpec::siso(2, 1);
+    let (params, traj) = sys4_problem(&mut r, 3, 8, &spec, 60);
+    let episodes = vec![
+        Episode::feed_forward(traj.clone()),
+        Episode::feed_forward(traj.slice(10, 60)),
+    ];
+    let cfg = GpConfig {
+        start: StartWindow::Smoothed {
+            samples: 10,
+            degree: 2,
+        },
+        ..config()
+    };
+    check_gradients_with(&params, &cfg, &spec, &episodes, Complexity::PseudoDataNll);
 }

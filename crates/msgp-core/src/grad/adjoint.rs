@@ -671,7 +671,13 @@ fn episode_adjoint(
     log: &mut JitterLog,
 ) -> Result<(f64, usize)> {
     let d = spec.input_dim();
-    let t0 = spec.warmup();
+    if traj.len() < spec.warmup() || traj.u.nrows() < spec.warmup() {
+        return Err(MsgpError::Data(format!(
+            "a rollout needs {} initial samples with their inputs; the trajectory has {}",
+            spec.warmup(),
+            traj.len()
+        )));
+    }
     let pol: Option<Box<dyn FeedbackPolicy<f64>>> = policy.map(|p| p.lift::<f64>());
     // the episode's policy is fixed (no parameters): lifted to duals once
     let pol_dual: Option<Box<dyn FeedbackPolicy<Dual>>> = policy.map(|p| p.lift::<Dual>());
@@ -688,11 +694,13 @@ fn episode_adjoint(
         _ => None,
     };
     let ds = pol.as_ref().map_or(0, |p| p.state_dim());
-    let (wmu, wsigma) = initial_window(gp, spec, traj);
+    let first = initial_window(gp, spec, traj, gp.start);
+    let t0 = first.t0;
+    let (wmu, wsigma) = (&first.mean, &first.cov);
     let mut mu = DVector::<f64>::zeros(d + ds);
     let mut sigma = DMatrix::<f64>::zeros(d + ds, d + ds);
-    mu.rows_mut(0, d).copy_from(&wmu);
-    sigma.view_mut((0, 0), (d, d)).copy_from(&wsigma);
+    mu.rows_mut(0, d).copy_from(wmu);
+    sigma.view_mut((0, 0), (d, d)).copy_from(wsigma);
     if let Some(p) = &pol {
         let p0 = p.initial_state(&traj.y, &traj.u, t0);
         mu.rows_mut(d, ds).copy_from(&p0);
@@ -712,11 +720,15 @@ fn episode_adjoint(
         adj,
         log,
     )?;
-    // the measured window's variance is the observation noise
-    for k in 0..spec.ly {
-        for j in 0..spec.dy {
-            let i = spec.y_index(k, j);
-            adj.sy2[j] += out.start_cov[(i, i)];
+    // the start window's output covariance is the observation noise times its pattern
+    for j in 0..spec.dy {
+        for k in 0..spec.ly {
+            for k2 in 0..spec.ly {
+                let w = first.pattern[(k, k2)];
+                if w != 0.0 {
+                    adj.sy2[j] += w * out.start_cov[(spec.y_index(k, j), spec.y_index(k2, j))];
+                }
+            }
         }
     }
     Ok((out.total, out.steps))
