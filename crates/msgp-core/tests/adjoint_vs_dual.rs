@@ -79,9 +79,10 @@ fn open_loop_single_output() {
     }
 }
 
-#[test]
-fn linear_prior_mean_open_and_closed_loop() {
-    let mut r = rng(24);
+/// Two outputs, one input, `(2, 1)` windows: a random GP over a stable ARX part (mostly the
+/// last output, a little of the rest) and a two-output trajectory of 55 samples.
+fn two_output_arx_problem(seed: u64) -> (NarxSpec, GpParams<f64>, Trajectory) {
+    let mut r = rng(seed);
     let spec = NarxSpec {
         ly: 2,
         lu: 1,
@@ -89,15 +90,20 @@ fn linear_prior_mean_open_and_closed_loop() {
         du: 1,
     };
     let mut params = random_gp(&mut r, 9, spec.input_dim(), 2);
-    // a stable ARX part: mostly the last output, a little of the rest
     params.linear_mean = DMatrix::from_fn(2, spec.input_dim(), |a, k| {
         if k == a { 0.8 } else { 0.1 * normal(&mut r) }
     });
+    let traj = two_output_trajectory(&mut r, 55);
+    (spec, params, traj)
+}
+
+#[test]
+fn linear_prior_mean_open_and_closed_loop() {
+    let (spec, params, traj) = two_output_arx_problem(24);
     let cfg = GpConfig {
         mean: MeanFunction::Linear,
         ..config()
     };
-    let traj = two_output_trajectory(&mut r, 55);
     compare_with(
         &params,
         &cfg,
@@ -108,22 +114,11 @@ fn linear_prior_mean_open_and_closed_loop() {
 }
 
 /// The smoothed start window (`σ_y² H Hᵀ`, correlated across lags; rollouts start after the
-/// smoother's samples): open and closed loop, two outputs, a linear prior mean.
+/// smoother's samples): open and closed loop, two outputs, zero and linear prior means.
 #[test]
 fn smoothed_start_window_open_and_closed_loop() {
-    let mut r = rng(25);
-    let spec = NarxSpec {
-        ly: 2,
-        lu: 1,
-        dy: 2,
-        du: 1,
-    };
-    let mut params = random_gp(&mut r, 9, spec.input_dim(), 2);
-    params.linear_mean = DMatrix::from_fn(2, spec.input_dim(), |a, k| {
-        if k == a { 0.8 } else { 0.1 * normal(&mut r) }
-    });
-    let traj = two_output_trajectory(&mut r, 55);
-    // 12 samples of a quadratic; the second episode is shorter than that (uses 7)
+    let (spec, params, traj) = two_output_arx_problem(25);
+    // 12 samples of a quadratic; the last episode is shorter than that (uses 7)
     let mut eps = linear_feedback_episodes(&traj);
     eps.push(Episode::feed_forward(traj.slice(10, 18)));
     for mean in [MeanFunction::Zero, MeanFunction::Linear] {
