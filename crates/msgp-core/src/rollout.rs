@@ -102,16 +102,7 @@ pub(crate) fn rollout_started<T: Scalar>(
             dy
         )));
     }
-    if traj.len() < spec.warmup() || traj.u.nrows() < spec.warmup() {
-        return Err(MsgpError::Data(format!(
-            "a rollout needs {} initial samples with their inputs; the trajectory has {} outputs \
-             and {} inputs",
-            spec.warmup(),
-            traj.len(),
-            traj.u.nrows()
-        )));
-    }
-    let first = initial_window(gp, spec, traj, how);
+    let first = initial_window(gp, spec, traj, how)?;
     let t0 = first.t0;
     let needed_u = match control {
         Control::FeedForward => horizon.saturating_sub(1),
@@ -280,13 +271,22 @@ pub(crate) struct TrajectoryStart<T: Scalar> {
 
 /// The window at time `t0 − 1`: latent outputs from the measured samples `N(y, σ_y²)`
 /// (independent) or, under [`StartWindow::Smoothed`], from the smoother `N(H y, σ_y² H Hᵀ)`;
-/// inputs as measured (zero variance).
+/// inputs as measured (zero variance). Fails on a trajectory shorter than the window.
 pub(crate) fn initial_window<T: Scalar>(
     gp: &PreparedGp<T>,
     spec: &NarxSpec,
     traj: &Trajectory,
     how: StartWindow,
-) -> TrajectoryStart<T> {
+) -> Result<TrajectoryStart<T>> {
+    if traj.len() < spec.warmup() || traj.u.nrows() < spec.warmup() {
+        return Err(MsgpError::Data(format!(
+            "a rollout needs {} initial samples with their inputs; the trajectory has {} outputs \
+             and {} inputs",
+            spec.warmup(),
+            traj.len(),
+            traj.u.nrows()
+        )));
+    }
     let d = spec.input_dim();
     let smoother = how.smoother(spec.warmup(), spec.ly, traj.len().min(traj.u.nrows()));
     let t0 = smoother.as_ref().map_or(spec.warmup(), |s| s.samples);
@@ -314,12 +314,12 @@ pub(crate) fn initial_window<T: Scalar>(
             mu[spec.u_index(k, j)] = c(traj.u[(t0 - 1 - k, j)]);
         }
     }
-    TrajectoryStart {
+    Ok(TrajectoryStart {
         t0,
         mean: mu,
         cov: sigma,
         pattern,
-    }
+    })
 }
 
 /// Positions in the augmented vector `[x̃_t (D), p_t (d_p), x_{t+1} (d_y), u_{t+1} (d_u),

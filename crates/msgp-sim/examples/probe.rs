@@ -12,9 +12,10 @@
 use msgp_core::cost::SaturatingCost;
 use msgp_core::fit::{TrainingEpisode, fit_episodes};
 use msgp_core::policy::PolicySpec;
-use msgp_core::policy_search::PolicyProblem;
 use msgp_core::start_window::StartWindow;
-use msgp_sim::learn::{LearnSettings, episode_trajectory, modelled_policy, segments};
+use msgp_sim::learn::{
+    LearnSettings, episode_trajectory, modelled_policy, pendulum_problem, segments,
+};
 use msgp_sim::{
     EpisodeConfig, PendulumParams, PidPdGains, PidPdPolicy, RandomExcitation, Saturation,
     run_episode,
@@ -160,14 +161,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let cost = SaturatingCost::with_widths(DVector::from_element(2, 0.0), &settings.cost_widths)?;
     let horizon = 250;
-    let problem = PolicyProblem {
-        model: &model,
-        y0_mean: vec![0.0, 0.0],
-        y0_var: vec![params.initial_theta_std.powi(2), 1e-8],
-        u0: vec![0.0],
-        cost: cost.clone(),
-        horizon,
-    };
+    let problem = pendulum_problem(&model, &params, cost.clone(), horizon);
     let probes = [
         ("hand-tuned", hand),
         (

@@ -268,6 +268,24 @@ pub fn modelled_policy(
     )?)
 }
 
+/// The policy problem of the loop on `model`: the pole at rest upright with the plant's spread
+/// of initial angles, the end effector at 0 and no command, over `horizon` steps.
+pub fn pendulum_problem<'a>(
+    model: &'a msgp_core::model::Model,
+    params: &PendulumParams,
+    cost: SaturatingCost,
+    horizon: usize,
+) -> PolicyProblem<'a> {
+    PolicyProblem {
+        model,
+        y0_mean: vec![0.0, 0.0],
+        y0_var: vec![params.initial_theta_std.powi(2), 1e-8],
+        u0: vec![0.0],
+        cost,
+        horizon,
+    }
+}
+
 fn gains_from(p: &PidPolicy<f64>) -> PidPdGains {
     PidPdGains {
         kp_theta: p.kp[(0, 0)],
@@ -428,14 +446,7 @@ pub fn learn_policy(
         if settings.warm_start.is_some() {
             previous_model = (model.method == Method::Msgp).then(|| model.clone());
         }
-        let problem = PolicyProblem {
-            model: &model,
-            y0_mean: vec![0.0, 0.0],
-            y0_var: vec![params.initial_theta_std.powi(2), 1e-8],
-            u0: vec![0.0],
-            cost: cost.clone(),
-            horizon: policy_horizon,
-        };
+        let problem = pendulum_problem(&model, params, cost.clone(), policy_horizon);
         let search = PolicySearchSettings {
             seed: settings
                 .search

@@ -671,13 +671,6 @@ fn episode_adjoint(
     log: &mut JitterLog,
 ) -> Result<(f64, usize)> {
     let d = spec.input_dim();
-    if traj.len() < spec.warmup() || traj.u.nrows() < spec.warmup() {
-        return Err(MsgpError::Data(format!(
-            "a rollout needs {} initial samples with their inputs; the trajectory has {}",
-            spec.warmup(),
-            traj.len()
-        )));
-    }
     let pol: Option<Box<dyn FeedbackPolicy<f64>>> = policy.map(|p| p.lift::<f64>());
     // the episode's policy is fixed (no parameters): lifted to duals once
     let pol_dual: Option<Box<dyn FeedbackPolicy<Dual>>> = policy.map(|p| p.lift::<Dual>());
@@ -694,7 +687,7 @@ fn episode_adjoint(
         _ => None,
     };
     let ds = pol.as_ref().map_or(0, |p| p.state_dim());
-    let first = initial_window(gp, spec, traj, gp.start);
+    let first = initial_window(gp, spec, traj, gp.start)?;
     let t0 = first.t0;
     let (wmu, wsigma) = (&first.mean, &first.cov);
     let mut mu = DVector::<f64>::zeros(d + ds);
