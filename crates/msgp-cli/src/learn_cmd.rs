@@ -317,6 +317,13 @@ pub fn settings(
         anyhow::bail!("--inducing must be at least 1");
     }
     let d = LearnSettings::default();
+    let start_window = match args.start_smoothing {
+        0 => StartWindow::Measured,
+        samples => StartWindow::Smoothed { samples, degree: 2 },
+    };
+    start_window
+        .validate(d.fit.ly.max(d.fit.lu))
+        .with_context(|| format!("--start-smoothing {}", args.start_smoothing))?;
     let excitation = msgp_sim::ExcitationConfig {
         max_hz: args.excitation_max_hz,
         ..d.excitation
@@ -346,10 +353,7 @@ pub fn settings(
                 _ => d.fit.iterations,
             },
             optimizer: args.fit_optimizer.into(),
-            start_window: match args.start_smoothing {
-                0 => StartWindow::Measured,
-                samples => StartWindow::Smoothed { samples, degree: 2 },
-            },
+            start_window,
             one_step_iterations: match (method, args.fit_iters) {
                 (Method::Msgp, _) | (_, None) => d.fit.one_step_iterations,
                 (_, Some(n)) => n,

@@ -271,6 +271,16 @@ fn bad_learning_options_fail_with_a_message() {
             vec!["learn-policy", "--sim", "pendulum", "--pole-length=-1"],
             "pole",
         ),
+        (
+            vec![
+                "learn-policy",
+                "--sim",
+                "pendulum",
+                "--start-smoothing",
+                "2",
+            ],
+            "--start-smoothing 2",
+        ),
     ] {
         let o = run(&dir, &args);
         assert!(!o.status.success(), "{args:?} should fail");
