@@ -10,7 +10,7 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum SimError {
     /// Model learning or policy search failed.
-    #[error("model: {0}")]
+    #[error("model")]
     Model(#[from] msgp_core::MsgpError),
     /// A plant parameter, controller gain or episode setting is out of range.
     #[error("invalid {name} = {value}: {reason}")]
