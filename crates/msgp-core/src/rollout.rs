@@ -302,10 +302,7 @@ pub(crate) fn initial_window<T: Scalar>(
             let i = spec.y_index(k, j);
             mu[i] = c(smoothed.as_ref().map_or(traj.y[(t0 - 1 - k, j)], |w| w[k]));
             for k2 in 0..spec.ly {
-                let i2 = spec.y_index(k2, j);
-                if pattern[(k, k2)] != 0.0 {
-                    sigma[(i, i2)] = gp.outputs[j].sy2 * c::<T>(pattern[(k, k2)]);
-                }
+                sigma[(i, spec.y_index(k2, j))] = gp.outputs[j].sy2 * c::<T>(pattern[(k, k2)]);
             }
         }
     }

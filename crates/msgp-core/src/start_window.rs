@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{MsgpError, Result};
 
-/// The start of a trajectory's rollout (a non-optimised setting of the model).
+/// The start of a measured trajectory's rollout in the training loss (a setting, not optimised).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum StartWindow {
@@ -27,8 +27,8 @@ pub enum StartWindow {
     /// A polynomial of `degree` in time, fitted by least squares to each output's first `samples`
     /// measurements and evaluated at the window's times; covariance `σ_y² h_k·h_k'` between lags
     /// `k`, `k'` (rows `h` of the smoother). The rollout starts at sample `samples`. A trajectory
-    /// shorter than `samples + 1` uses what it has, down to `degree + 2` samples; one shorter still
-    /// starts from its measured window.
+    /// shorter than `samples + 1` uses all but its last sample, down to `max(l_y, l_u, degree + 2)`
+    /// samples; one shorter still starts from its measured window.
     Smoothed {
         /// Samples the polynomial is fitted to.
         samples: usize,

@@ -129,6 +129,21 @@ fn open_loop_gradients_match_finite_differences() {
         Episode::feed_forward(traj.slice(10, 60)),
     ];
     check_gradients(&params, &spec, &episodes, Complexity::PseudoDataNll);
+    // the smoothed start window: the observation noise enters the start as `σ_y² H Hᵀ`
+    let smoothed = GpConfig {
+        start: StartWindow::Smoothed {
+            samples: 10,
+            degree: 2,
+        },
+        ..config()
+    };
+    check_gradients_with(
+        &params,
+        &smoothed,
+        &spec,
+        &episodes,
+        Complexity::PseudoDataNll,
+    );
 }
 
 #[test]
@@ -148,24 +163,4 @@ fn closed_loop_gradients_match_finite_differences() {
         &linear_feedback_episodes(&traj),
         Complexity::PseudoDataNll,
     );
-}
-
-/// The smoothed start window: the observation noise now enters the start as `σ_y² H Hᵀ`.
-#[test]
-fn smoothed_start_gradients_match_finite_differences() {
-    let mut r = rng(13);
-    let spec = NarxSpec::siso(2, 1);
-    let (params, traj) = sys4_problem(&mut r, 3, 8, &spec, 60);
-    let episodes = vec![
-        Episode::feed_forward(traj.clone()),
-        Episode::feed_forward(traj.slice(10, 60)),
-    ];
-    let cfg = GpConfig {
-        start: StartWindow::Smoothed {
-            samples: 10,
-            degree: 2,
-        },
-        ..config()
-    };
-    check_gradients_with(&params, &cfg, &spec, &episodes, Complexity::PseudoDataNll);
 }

@@ -717,10 +717,8 @@ fn episode_adjoint(
     for j in 0..spec.dy {
         for k in 0..spec.ly {
             for k2 in 0..spec.ly {
-                let w = first.pattern[(k, k2)];
-                if w != 0.0 {
-                    adj.sy2[j] += w * out.start_cov[(spec.y_index(k, j), spec.y_index(k2, j))];
-                }
+                adj.sy2[j] += first.pattern[(k, k2)]
+                    * out.start_cov[(spec.y_index(k, j), spec.y_index(k2, j))];
             }
         }
     }
