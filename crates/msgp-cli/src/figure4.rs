@@ -148,24 +148,47 @@ pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
     crate::output::out(&markdown)
 }
 
+/// This process's arguments after the binary, quoted for a POSIX shell where needed: the
+/// section names exactly what made it, budget flags included.
+fn invocation() -> String {
+    std::env::args_os()
+        .skip(1)
+        .map(|a| {
+            let a = a.to_string_lossy().into_owned();
+            let plain = !a.is_empty()
+                && a.chars()
+                    .all(|c| c.is_ascii_alphanumeric() || "-_=.,/:+@%".contains(c));
+            if plain {
+                a
+            } else {
+                format!("'{}'", a.replace('\'', "'\\''"))
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
 fn render(args: &Figure4Args, runs: &[Run], seconds: f64, plot: &std::path::Path) -> String {
     let d = &args.budget;
     let models: Vec<&str> = args.models.iter().map(|&m| model_name(m)).collect();
     let mut s = String::from("# PILCO on the simulated pendulum (the paper's Figure 4)\n\n");
     s.push_str(&format!(
-        "Learning to balance the pole on the robot's end effector (`msgp-sim`, default plant: noise, one-step delay, 30 ms lag) from scratch: {} random-excitation rollouts, then per iteration fit the model on all data, optimise the PID + PD gains on it, run them for one {} s episode. After every iteration the simulator's stability test (5 starts × 3 noise draws, 10 s each; not interaction, not training data) judges the gains. Interaction seconds count every episode so far, random rollouts included. Models: {}; seeds 0–{}; {} iterations per run.\n\n",
-        d.random_rollouts,
+        "Learning to balance the pole on the robot's end effector (`msgp-sim`, default plant: noise, one-step delay, 30 ms lag) from scratch: {} rollouts, then per iteration fit the model on all data, optimise the PID + PD gains on it, run them for one {} s episode. After every iteration the simulator's stability test (5 starts × 3 noise draws, 10 s each; not interaction, not training data) judges the gains. Interaction seconds count every episode so far, random rollouts included. Models: {}; seeds 0–{}; {} iterations per run.\n\n",
+        match d.random_policies {
+            0 => format!("{} random-excitation", d.random_rollouts),
+            k => format!(
+                "{} random-excitation and {k} random-policy (gains drawn uniformly in [0, 2 × typical])",
+                d.random_rollouts - k
+            ),
+        },
         d.episode_seconds,
         models.join(", "),
         args.seeds.saturating_sub(1),
         args.iterations
     ));
     s.push_str(&format!(
-        "- Command: `cargo run --release --locked --bin msgp -- reproduce figure4 --seeds {} --iterations {} --out {} --dir {}`\n",
-        args.seeds,
-        args.iterations,
-        args.out.display(),
-        args.dir.display()
+        "- Command: `cargo run --release --locked --bin msgp -- {}`\n",
+        invocation()
     ));
     let solver = FitOptimizer::from(d.fit_optimizer).name();
     let warm = match d.warm_start {

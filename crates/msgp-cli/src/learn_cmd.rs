@@ -55,6 +55,11 @@ pub struct BudgetArgs {
     /// Random-excitation episodes before the first policy.
     #[arg(long, default_value_t = LearnSettings::default().random_rollouts)]
     pub random_rollouts: usize,
+    /// How many of the random rollouts run a random policy (PID + PD gains drawn uniformly
+    /// between 0 and twice their typical magnitudes) instead of the random excitation; each
+    /// drawn gain set also gets the stability test, reported beside the iterations.
+    #[arg(long, value_name = "K", default_value_t = LearnSettings::default().random_policies)]
+    pub random_policies: usize,
     /// Length of every interaction episode [s].
     #[arg(long, default_value_t = LearnSettings::default().episode_seconds)]
     pub episode_seconds: f64,
@@ -176,6 +181,10 @@ pub fn summary_json(
         "model": model_name(model),
         "seed": settings.seed,
         "random_rollouts": settings.random_rollouts,
+        "random_policies": outcome.random_policies.iter().map(|(g, stable)| json!({
+            "gains": g,
+            "stable": stable,
+        })).collect::<Vec<_>>(),
         "episode_seconds": settings.episode_seconds,
         "settings": settings,
         "iterations": outcome.iterations.iter().map(iteration_json).collect::<Vec<_>>(),
@@ -252,7 +261,9 @@ pub fn write_outputs(
         iterations_csv(&outcome.iterations).as_bytes(),
     )?;
     for (k, ep) in outcome.episodes.iter().enumerate() {
-        let kind = if k < settings.random_rollouts {
+        let kind = if k < settings.random_policies.min(settings.random_rollouts) {
+            "random-policy".to_string()
+        } else if k < settings.random_rollouts {
             "random".to_string()
         } else {
             format!("policy-it{}", k + 1 - settings.random_rollouts)
@@ -313,6 +324,13 @@ pub fn settings(
     if args.random_rollouts == 0 {
         anyhow::bail!("--random-rollouts must be at least 1 (the first model needs data)");
     }
+    if args.random_policies > args.random_rollouts {
+        anyhow::bail!(
+            "--random-policies ({}) cannot exceed --random-rollouts ({})",
+            args.random_policies,
+            args.random_rollouts
+        );
+    }
     if args.inducing == 0 {
         anyhow::bail!("--inducing must be at least 1");
     }
@@ -336,6 +354,7 @@ pub fn settings(
         method,
         iterations,
         random_rollouts: args.random_rollouts,
+        random_policies: args.random_policies,
         episode_seconds: args.episode_seconds,
         policy_horizon_seconds: args.policy_horizon,
         excitation,
@@ -415,6 +434,20 @@ pub fn learn(
         }
     })
     .context("policy learning failed")?;
+    if !quiet {
+        for (k, (g, stable)) in outcome.random_policies.iter().enumerate() {
+            eprintln!(
+                "random policy {}: kp_x {:.3}, ki_x {:.3}, kd_x {:.3}, kp_theta {:.2}, kd_theta {:.2}; stability test {}",
+                k + 1,
+                g.kp_x,
+                g.ki_x,
+                g.kd_x,
+                g.kp_theta,
+                g.kd_theta,
+                if *stable { "passed" } else { "failed" }
+            );
+        }
+    }
     Ok((outcome, started.elapsed().as_secs_f64()))
 }
 

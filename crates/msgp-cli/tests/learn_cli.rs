@@ -91,6 +91,11 @@ fn learn_policy_writes_policy_table_episodes_plot_and_json() {
         assert!(it["stable"].is_boolean());
     }
     assert!(v.get("first_stable_iteration").is_some());
+    assert_eq!(
+        v["random_policies"],
+        serde_json::json!([]),
+        "excitation only"
+    );
     assert!(v.get("interaction_seconds_to_stable").is_some());
     let best = v["best_iteration"].as_u64().expect("best_iteration") as usize;
     assert!((1..=2).contains(&best), "{best}");
@@ -154,6 +159,52 @@ fn learn_policy_writes_policy_table_episodes_plot_and_json() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `--random-policies 1`: the first random episode runs drawn gains, labelled as such, and the
+/// summary records them with their stability verdict.
+#[test]
+fn random_policy_rollouts_are_recorded() {
+    let dir = scratch("random-policies");
+    let mut args = vec![
+        "learn-policy",
+        "--sim",
+        "pendulum",
+        "--iterations",
+        "1",
+        "--random-policies",
+        "1",
+        "--out",
+        "out",
+        "--json",
+    ];
+    args.extend(TINY);
+    let o = run(&dir, &args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    let rp = v["random_policies"].as_array().expect("random_policies");
+    assert_eq!(rp.len(), 1);
+    assert!(rp[0]["stable"].is_boolean());
+    assert!(
+        rp[0]["gains"]["kp_theta"]
+            .as_f64()
+            .is_some_and(|g| (0.0..=20.0).contains(&g))
+    );
+    let mut names: Vec<String> = std::fs::read_dir(dir.join("out/episodes"))
+        .expect("episodes")
+        .filter_map(Result::ok)
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(
+        names,
+        [
+            "00-random-policy.mcap",
+            "01-random.mcap",
+            "02-policy-it1.mcap"
+        ]
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// `msgp reproduce figure4` for `models`, one seed and one iteration on the tiny budget, into
 /// `fig/`, then `extra`.
 fn figure4_args<'a>(models: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
@@ -186,6 +237,16 @@ fn figure4_writes_its_section_and_keeps_the_others() {
     assert!(md.contains("TABLE ONE"), "table 1 kept");
     assert!(md.contains("msgp:figure4:begin") && md.contains("| msgp | 0 |"));
     assert!(md.contains("| gp-narx | 0 |"));
+    // the section names the command that made it, budget flags included
+    let command = format!(
+        "- Command: `cargo run --release --locked --bin msgp -- {}`",
+        figure4_args("msgp,gp-narx", &["--quiet"]).join(" ")
+    );
+    assert!(md.contains(&command), "{command}\n{md}");
+    assert!(
+        md.contains("from scratch: 2 random-excitation rollouts"),
+        "{md}"
+    );
     assert!(dir.join("fig/figure4.png").is_file());
     assert!(dir.join("fig/msgp-seed0/policy.json").is_file());
     let _ = std::fs::remove_dir_all(&dir);
@@ -280,6 +341,18 @@ fn bad_learning_options_fail_with_a_message() {
                 "2",
             ],
             "--start-smoothing 2",
+        ),
+        (
+            vec![
+                "learn-policy",
+                "--sim",
+                "pendulum",
+                "--random-rollouts",
+                "2",
+                "--random-policies",
+                "3",
+            ],
+            "--random-policies (3) cannot exceed --random-rollouts (2)",
         ),
     ] {
         let o = run(&dir, &args);

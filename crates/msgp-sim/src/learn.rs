@@ -40,8 +40,17 @@ pub struct LearnSettings {
     pub method: Method,
     /// Policy-learning iterations after the random rollouts.
     pub iterations: usize,
-    /// Random-excitation episodes before the first policy.
+    /// Random episodes before the first policy.
     pub random_rollouts: usize,
+    /// How many of the `random_rollouts` run a *random policy* instead of open-loop
+    /// excitation: PID + PD gains drawn uniformly in `[0, 2 × gain_scale]` each (the box the
+    /// first policy search's trust region spans), so that the first model sees the loop closed
+    /// with gains of the kind the search will ask about. They enter the model loss under their
+    /// gains (the paper's `L_fb`), like the loop's own episodes. 0 (the default): the paper's
+    /// smooth random signals only. Whether a drawn gain set would pass the stability test is
+    /// recorded ([`LearnOutcome::random_policies`]), so that luck is not read as learning.
+    #[serde(default)]
+    pub random_policies: usize,
     /// The smooth random signal of those episodes. Its band reaches 10 Hz: a NARX model at
     /// 50 Hz only learns how the pole answers quick changes of the command (the inputs' lags
     /// differ) if the first data have them, and every feedback policy makes them (its
@@ -92,6 +101,7 @@ impl Default for LearnSettings {
             method: Method::Msgp,
             iterations: 8,
             random_rollouts: 4,
+            random_policies: 0,
             excitation: learn_excitation(),
             episode_seconds: 3.0,
             policy_horizon_seconds: 5.0,
@@ -190,6 +200,9 @@ pub struct LearnOutcome {
     pub episodes: Vec<Episode>,
     /// The last gains.
     pub final_gains: PidPdGains,
+    /// The random policies' gains and whether each passed the stability test (which, as after
+    /// every iteration, is neither interaction nor training data).
+    pub random_policies: Vec<(PidPdGains, bool)>,
 }
 
 impl LearnOutcome {
@@ -341,8 +354,37 @@ pub fn learn_policy(
     let mut episodes: Vec<Episode> = Vec::new();
     let mut training: Vec<TrainingEpisode> = Vec::new();
     let mut seconds = 0.0;
+    if settings.random_policies > settings.random_rollouts {
+        return Err(SimError::invalid(
+            "random_policies",
+            settings.random_policies as f64,
+            "at most random_rollouts of the random episodes can run a random policy",
+        ));
+    }
+    let mut random_policies = Vec::new();
     for k in 0..settings.random_rollouts {
         let seed = settings.seed.wrapping_mul(1000).wrapping_add(k as u64);
+        if k < settings.random_policies {
+            let gains = random_gains(seed, &settings.gain_scale);
+            let mut controller = PidPdPolicy::new(gains, params)?;
+            let ep = interact(
+                params,
+                &mut controller,
+                settings.episode_seconds,
+                seed,
+                &mut seconds,
+            )?;
+            training.push(TrainingEpisode {
+                traj: episode_trajectory(&ep)?,
+                policy: Some(PolicySpec::Pid(modelled_policy(&gains, params)?)),
+            });
+            episodes.push(ep);
+            let stable =
+                stability_test(params, &gains, settings.seed, &StabilityCriteria::default())?
+                    .passed;
+            random_policies.push((gains, stable));
+            continue;
+        }
         let mut excitation = RandomExcitation::new(seed, &settings.excitation)?;
         let ep = interact(
             params,
@@ -524,7 +566,25 @@ pub fn learn_policy(
         iterations: reports,
         episodes,
         final_gains: gains,
+        random_policies,
     })
+}
+
+/// A random policy's gains: each drawn uniformly in `[0, 2 scale]`, sine saturation.
+pub fn random_gains(seed: u64, scale: &[f64; 5]) -> PidPdGains {
+    use rand::{RngExt, SeedableRng};
+    let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(crate::seed::rng_for(
+        seed,
+        crate::seed::Stream::RandomGains,
+    ));
+    let mut g = [0.0; 5];
+    for (gk, s) in g.iter_mut().zip(scale) {
+        *gk = rng.random_range(0.0..=2.0 * s.abs());
+    }
+    PidPdGains {
+        saturation: Saturation::Sine,
+        ..PidPdGains::from_array(g)
+    }
 }
 
 #[cfg(test)]
@@ -559,6 +619,7 @@ mod tests {
             iterations,
             episodes: Vec::new(),
             final_gains: PidPdGains::hand_tuned(),
+            random_policies: Vec::new(),
         }
     }
 

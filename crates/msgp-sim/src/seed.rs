@@ -10,6 +10,8 @@ pub enum Stream {
     MeasurementNoise,
     /// Random excitation signal.
     Excitation,
+    /// The gains of a random-policy rollout.
+    RandomGains,
     /// Stability-test start number `i` (its own episode seed); its first noise draw.
     StabilityStart(u32),
     /// Further noise draws of a stability-test start (`repeat ≥ 1`, below 65 536).
@@ -27,6 +29,7 @@ impl Stream {
             Stream::InitialState => 1,
             Stream::MeasurementNoise => 2,
             Stream::Excitation => 3,
+            Stream::RandomGains => 4,
             Stream::StabilityStart(i) => 0x1000 + u64::from(i),
             Stream::StabilityRepeat { start, repeat } => {
                 (1 << 48) + (u64::from(start) << 16) + u64::from(repeat & 0xFFFF)

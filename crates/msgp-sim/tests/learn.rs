@@ -97,3 +97,64 @@ fn a_warm_started_loop_continues_its_previous_model() {
     assert_eq!(again.iterations[1].predicted_cost, w[1].predicted_cost);
     assert_eq!(again.iterations[1].gains, w[1].gains);
 }
+
+/// Random-policy rollouts: the first `random_policies` of the random episodes run drawn gains
+/// (inside the first search's box, recorded with their stability verdict), the rest the
+/// excitation; the draws follow the seed, and more policies than random episodes is an error.
+#[test]
+fn random_policy_rollouts_run_drawn_gains_and_record_them() {
+    let params = PendulumParams::default();
+    let settings = LearnSettings {
+        random_policies: 1,
+        ..small(1)
+    };
+    let a = learn_policy(&params, &settings, &mut |_| {}).expect("learn");
+    assert_eq!(a.random_policies.len(), 1);
+    assert_eq!(a.episodes.len(), 3);
+    let (g, stable) = a.random_policies[0];
+    let drawn = [g.kp_x, g.ki_x, g.kd_x, g.kp_theta, g.kd_theta];
+    for (v, s) in drawn.iter().zip(settings.gain_scale) {
+        assert!((0.0..=2.0 * s).contains(v), "{v} outside [0, {}]", 2.0 * s);
+    }
+    // the gains the episode ran are those recorded: same seed, same controller, same episode
+    let mut controller = msgp_sim::PidPdPolicy::new(g, &params).expect("policy");
+    let replay = msgp_sim::run_episode(
+        &params,
+        &mut controller,
+        &msgp_sim::EpisodeConfig {
+            seconds: settings.episode_seconds,
+            seed: settings.seed.wrapping_mul(1000),
+            initial_theta: None,
+        },
+    )
+    .expect("replay");
+    assert_eq!(replay.samples, a.episodes[0].samples);
+    assert_eq!(
+        stable,
+        msgp_sim::stability_test(
+            &params,
+            &g,
+            settings.seed,
+            &msgp_sim::StabilityCriteria::default()
+        )
+        .expect("test")
+        .passed
+    );
+    // a different seed draws different gains; the same seed the same
+    let other = msgp_sim::learn::random_gains(1000, &settings.gain_scale);
+    assert_ne!(other, g);
+    assert_eq!(msgp_sim::learn::random_gains(0, &settings.gain_scale), g);
+    // the excitation-only default records nothing
+    assert!(
+        learn_policy(&params, &small(1), &mut |_| {})
+            .expect("default")
+            .random_policies
+            .is_empty()
+    );
+    let too_many = LearnSettings {
+        random_policies: 3,
+        ..small(1)
+    };
+    let err = learn_policy(&params, &too_many, &mut |_| {}).expect_err("3 of 2");
+    assert!(err.to_string().contains("random_policies"), "{err}");
+}
