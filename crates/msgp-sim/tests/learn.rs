@@ -158,3 +158,41 @@ fn random_policy_rollouts_run_drawn_gains_and_record_them() {
     let err = learn_policy(&params, &too_many, &mut |_| {}).expect_err("3 of 2");
     assert!(err.to_string().contains("random_policies"), "{err}");
 }
+
+/// A dithered loop runs every policy episode with the seeded dither on top of the learned
+/// gains: replaying the gains with the same dither reproduces the episode sample for sample,
+/// and without it the commands differ.
+#[test]
+fn a_dithered_loop_adds_the_seeded_dither_to_the_policy_episodes() {
+    let params = PendulumParams::default();
+    let dither = msgp_sim::ExcitationConfig {
+        rms: 0.5,
+        ..msgp_sim::learn::learn_excitation()
+    };
+    let settings = LearnSettings {
+        dither: Some(dither),
+        ..small(1)
+    };
+    let out = learn_policy(&params, &settings, &mut |_| {}).expect("learn");
+    let gains = out.iterations[0].gains;
+    let ep = &out.episodes[2];
+    let seed = settings.seed.wrapping_mul(1000).wrapping_add(501);
+    let config = msgp_sim::EpisodeConfig {
+        seconds: settings.episode_seconds,
+        seed,
+        initial_theta: None,
+    };
+    let policy = msgp_sim::PidPdPolicy::new(gains, &params).expect("policy");
+    let mut dithered = msgp_sim::Dithered::new(
+        policy.clone(),
+        msgp_sim::RandomExcitation::new(seed, &dither).expect("dither"),
+    );
+    let replay = msgp_sim::run_episode(&params, &mut dithered, &config).expect("replay");
+    assert_eq!(replay.samples, ep.samples);
+    let mut plain = policy;
+    let undithered = msgp_sim::run_episode(&params, &mut plain, &config).expect("plain");
+    assert_ne!(undithered.samples[5].command, ep.samples[5].command);
+    // the same seed, the same dither
+    let again = learn_policy(&params, &settings, &mut |_| {}).expect("again");
+    assert_eq!(again.episodes[2].samples, ep.samples);
+}

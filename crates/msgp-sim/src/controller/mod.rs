@@ -1,8 +1,10 @@
-//! Controllers: the paper's PID + PD policy and smooth random excitation.
+//! Controllers: the paper's PID + PD policy, smooth random excitation, and the two added.
 
+mod dither;
 mod excitation;
 mod pid_pd;
 
+pub use dither::Dithered;
 pub use excitation::{ExcitationConfig, RandomExcitation};
 pub use pid_pd::{APOLLO_LQR_GAINS, PidPdGains, PidPdPolicy, Saturation};
 
