@@ -366,7 +366,7 @@ pub fn settings(
         iterations,
         random_rollouts: args.random_rollouts,
         random_policies: args.random_policies,
-        dither: (args.dither_rms > 0.0).then(|| msgp_sim::ExcitationConfig {
+        dither: (args.dither_rms > 0.0).then_some(msgp_sim::ExcitationConfig {
             rms: args.dither_rms,
             ..excitation
         }),
