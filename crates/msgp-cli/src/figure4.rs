@@ -173,7 +173,7 @@ fn render(args: &Figure4Args, runs: &[Run], seconds: f64, plot: &std::path::Path
     let models: Vec<&str> = args.models.iter().map(|&m| model_name(m)).collect();
     let mut s = String::from("# PILCO on the simulated pendulum (the paper's Figure 4)\n\n");
     s.push_str(&format!(
-        "Learning to balance the pole on the robot's end effector (`msgp-sim`, default plant: noise, one-step delay, 30 ms lag) from scratch: {} rollouts, then per iteration fit the model on all data, optimise the PID + PD gains on it, run them for one {} s episode{}. After every iteration the simulator's stability test (5 starts × 3 noise draws, 10 s each; not interaction, not training data) judges the gains. Interaction seconds count every episode so far, random rollouts included. Models: {}; seeds 0–{}; {} iterations per run.\n\n",
+        "Learning to balance the pole on the robot's end effector (`msgp-sim`, default plant: noise, one-step delay, 30 ms lag) from scratch: {} rollouts, then per iteration fit the model on all data, optimise the PID + PD gains on it, run them for one {} s episode. After every iteration the simulator's stability test (5 starts × 3 noise draws, 10 s each; not interaction, not training data) judges the gains. Interaction seconds count every episode so far, random rollouts included. Models: {}; seeds 0–{}; {} iterations per run.\n\n",
         match d.random_policies {
             0 => format!("{} random-excitation", d.random_rollouts),
             k => format!(
@@ -182,14 +182,6 @@ fn render(args: &Figure4Args, runs: &[Run], seconds: f64, plot: &std::path::Path
             ),
         },
         d.episode_seconds,
-        if d.dither_rms > 0.0 {
-            format!(
-                " with a random dither of {} m/s² RMS on the command (such episodes train the model feed-forward)",
-                d.dither_rms
-            )
-        } else {
-            String::new()
-        },
         models.join(", "),
         args.seeds.saturating_sub(1),
         args.iterations

@@ -60,11 +60,6 @@ pub struct BudgetArgs {
     /// drawn gain set also gets the stability test, reported beside the iterations.
     #[arg(long, value_name = "K", default_value_t = LearnSettings::default().random_policies)]
     pub random_policies: usize,
-    /// Add a smooth random dither of this RMS [m/s²] (the random rollouts' band) to the command
-    /// of every policy episode; such episodes then train the model feed-forward, with their
-    /// measured commands, instead of under their gains. 0 (the default): no dither.
-    #[arg(long, value_name = "A", default_value_t = 0.0)]
-    pub dither_rms: f64,
     /// Length of every interaction episode [s].
     #[arg(long, default_value_t = LearnSettings::default().episode_seconds)]
     pub episode_seconds: f64,
@@ -336,12 +331,6 @@ pub fn settings(
             args.random_rollouts
         );
     }
-    if !(args.dither_rms.is_finite() && args.dither_rms >= 0.0) {
-        anyhow::bail!(
-            "--dither-rms must be finite and at least 0, got {}",
-            args.dither_rms
-        );
-    }
     if args.inducing == 0 {
         anyhow::bail!("--inducing must be at least 1");
     }
@@ -366,10 +355,6 @@ pub fn settings(
         iterations,
         random_rollouts: args.random_rollouts,
         random_policies: args.random_policies,
-        dither: (args.dither_rms > 0.0).then_some(msgp_sim::ExcitationConfig {
-            rms: args.dither_rms,
-            ..excitation
-        }),
         episode_seconds: args.episode_seconds,
         policy_horizon_seconds: args.policy_horizon,
         excitation,

@@ -26,7 +26,7 @@ use msgp_core::policy_search::{PidMask, PolicyProblem, PolicySearchSettings, opt
 use msgp_core::trajectory::Trajectory;
 
 use crate::controller::{
-    Controller, Dithered, ExcitationConfig, PidPdGains, PidPdPolicy, RandomExcitation, Saturation,
+    Controller, ExcitationConfig, PidPdGains, PidPdPolicy, RandomExcitation, Saturation,
 };
 use crate::episode::{Episode, EpisodeConfig, run_episode};
 use crate::error::SimError;
@@ -51,15 +51,6 @@ pub struct LearnSettings {
     /// recorded ([`LearnOutcome::random_policies`]), so that luck is not read as learning.
     #[serde(default)]
     pub random_policies: usize,
-    /// A *dither*: a smooth random signal added to the command of every policy episode (seeded
-    /// per episode). In closed loop the command is a function of the measurements the model's
-    /// window holds, so without it a feedback episode cannot separate the plant's answer to
-    /// the command from its own motion. Dithered episodes enter the model loss like the random
-    /// rollouts, feed-forward with their measured commands (in segments for MSGP), not under
-    /// the gains (the modelled closed loop has no dither). The stability test runs the gains
-    /// without it. `None` (the default): plain feedback episodes under `L_fb`.
-    #[serde(default)]
-    pub dither: Option<ExcitationConfig>,
     /// The smooth random signal of those episodes. Its band reaches 10 Hz: a NARX model at
     /// 50 Hz only learns how the pole answers quick changes of the command (the inputs' lags
     /// differ) if the first data have them, and every feedback policy makes them (its
@@ -111,7 +102,6 @@ impl Default for LearnSettings {
             iterations: 8,
             random_rollouts: 4,
             random_policies: 0,
-            dither: None,
             excitation: learn_excitation(),
             episode_seconds: 3.0,
             policy_horizon_seconds: 5.0,
@@ -333,26 +323,6 @@ fn episode_cost(ep: &Episode, cost: &SaturatingCost, from: usize, steps: usize) 
     measured.iter().sum::<f64>() + (steps - measured.len()) as f64
 }
 
-/// An episode as feed-forward training data: with its measured commands, in overlapping
-/// segments of [`LearnSettings::ff_segment`] samples for MSGP (whole for one-step fits, which
-/// see every pair once anyway).
-fn feed_forward_parts(
-    ep: &Episode,
-    settings: &LearnSettings,
-) -> Result<Vec<TrainingEpisode>, SimError> {
-    let traj = episode_trajectory(ep)?;
-    let parts = match settings.ff_segment {
-        Some(len) if settings.method == Method::Msgp => {
-            segments(&traj, len, settings.fit.ly.max(settings.fit.lu) + 5)?
-        }
-        _ => vec![traj],
-    };
-    Ok(parts
-        .into_iter()
-        .map(|traj| TrainingEpisode { traj, policy: None })
-        .collect())
-}
-
 /// One interaction episode from a random initial angle; adds its duration to `seconds`.
 fn interact(
     params: &PendulumParams,
@@ -423,7 +393,19 @@ pub fn learn_policy(
             seed,
             &mut seconds,
         )?;
-        training.extend(feed_forward_parts(&ep, settings)?);
+        let traj = episode_trajectory(&ep)?;
+        let parts = match settings.ff_segment {
+            // one-step fits see every pair once: segments would duplicate the overlaps
+            Some(len) if settings.method == Method::Msgp => {
+                segments(&traj, len, settings.fit.ly.max(settings.fit.lu) + 5)?
+            }
+            _ => vec![traj],
+        };
+        training.extend(
+            parts
+                .into_iter()
+                .map(|traj| TrainingEpisode { traj, policy: None }),
+        );
         episodes.push(ep);
     }
     let cost = SaturatingCost::with_widths(DVector::from_element(2, 0.0), &settings.cost_widths)?;
@@ -547,39 +529,20 @@ pub fn learn_policy(
             .seed
             .wrapping_mul(1000)
             .wrapping_add(500 + it as u64);
-        let policy = PidPdPolicy::new(gains, params)?;
-        let ep = match &settings.dither {
-            Some(config) => {
-                let mut controller = Dithered::new(policy, RandomExcitation::new(seed, config)?);
-                interact(
-                    params,
-                    &mut controller,
-                    settings.episode_seconds,
-                    seed,
-                    &mut seconds,
-                )?
-            }
-            None => {
-                let mut controller = policy;
-                interact(
-                    params,
-                    &mut controller,
-                    settings.episode_seconds,
-                    seed,
-                    &mut seconds,
-                )?
-            }
-        };
+        let mut controller = PidPdPolicy::new(gains, params)?;
+        let ep = interact(
+            params,
+            &mut controller,
+            settings.episode_seconds,
+            seed,
+            &mut seconds,
+        )?;
         let warm = settings.fit.ly.max(settings.fit.lu);
         let actual = episode_cost(&ep, &cost, warm, horizon);
-        if settings.dither.is_some() {
-            training.extend(feed_forward_parts(&ep, settings)?);
-        } else {
-            training.push(TrainingEpisode {
-                traj: episode_trajectory(&ep)?,
-                policy: Some(PolicySpec::Pid(modelled_policy(&gains, params)?)),
-            });
-        }
+        training.push(TrainingEpisode {
+            traj: episode_trajectory(&ep)?,
+            policy: Some(PolicySpec::Pid(modelled_policy(&gains, params)?)),
+        });
         episodes.push(ep);
         let stable =
             stability_test(params, &gains, settings.seed, &StabilityCriteria::default())?.passed;

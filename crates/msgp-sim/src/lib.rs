@@ -42,8 +42,8 @@ pub mod seed;
 pub mod stability;
 
 pub use controller::{
-    APOLLO_LQR_GAINS, Controller, Dithered, ExcitationConfig, PidPdGains, PidPdPolicy,
-    RandomExcitation, Saturation,
+    APOLLO_LQR_GAINS, Controller, ExcitationConfig, PidPdGains, PidPdPolicy, RandomExcitation,
+    Saturation,
 };
 pub use episode::{Episode, EpisodeConfig, EpisodeInfo, Sample, Termination, run_episode};
 pub use error::SimError;

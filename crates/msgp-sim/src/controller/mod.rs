@@ -1,10 +1,8 @@
-//! Controllers: the paper's PID + PD policy, smooth random excitation, and the two added.
+//! Controllers: the paper's PID + PD policy and smooth random excitation.
 
-mod dither;
 mod excitation;
 mod pid_pd;
 
-pub use dither::Dithered;
 pub use excitation::{ExcitationConfig, RandomExcitation};
 pub use pid_pd::{APOLLO_LQR_GAINS, PidPdGains, PidPdPolicy, Saturation};
 
