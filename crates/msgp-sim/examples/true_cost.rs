@@ -1,0 +1,127 @@
+//! What the loop's objective asks for on the plant itself: the expected saturating cost of
+//! PID + PD gains over a horizon, estimated by simulated episodes (the plant as a perfect
+//! model), minimised by a cross-entropy search; the minimiser then gets the stability test.
+//! A diagnostic for docs/design.md: if the true cost's minimiser fails the test, no model can
+//! make the loop pass it except by luck.
+//!
+//! `cargo run --release -p msgp-sim --example true_cost -- [horizon_s] [w_theta,w_x] [seed]`
+use msgp_core::cost::SaturatingCost;
+use msgp_sim::{
+    EpisodeConfig, PendulumParams, PidPdGains, PidPdPolicy, Saturation, StabilityCriteria,
+    run_episode, stability_test,
+};
+use nalgebra::DVector;
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
+
+fn cost_of(
+    params: &PendulumParams,
+    g: &PidPdGains,
+    cost: &SaturatingCost,
+    horizon: f64,
+    episodes: u64,
+) -> f64 {
+    let steps = (horizon * params.control_rate_hz).round() as usize;
+    let mut total = 0.0;
+    for s in 0..episodes {
+        let Ok(mut c) = PidPdPolicy::new(*g, params) else {
+            return f64::INFINITY;
+        };
+        let Ok(ep) = run_episode(
+            params,
+            &mut c,
+            &EpisodeConfig {
+                seconds: horizon,
+                seed: 10_000 + s,
+                initial_theta: None,
+            },
+        ) else {
+            return f64::INFINITY;
+        };
+        let seen: Vec<f64> = ep
+            .samples
+            .iter()
+            .take(steps)
+            .map(|x| cost.at(&[x.measurement.theta, x.measurement.x]))
+            .collect();
+        total += seen.iter().sum::<f64>() + (steps - seen.len()) as f64;
+    }
+    total / episodes as f64
+}
+
+fn gains(v: &[f64]) -> PidPdGains {
+    PidPdGains {
+        saturation: Saturation::Sine,
+        ..PidPdGains::from_array([v[0], v[1], v[2], v[3], v[4]])
+    }
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    let horizon: f64 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(5.0);
+    let widths: Vec<f64> = args
+        .get(2)
+        .map(|s| s.split(',').filter_map(|v| v.parse().ok()).collect())
+        .unwrap_or_else(|| vec![0.1, 0.3]);
+    let seed: u64 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(0);
+    let params = PendulumParams::default();
+    let cost = SaturatingCost::with_widths(DVector::zeros(2), &widths)?;
+    let episodes = 6;
+    let hand = PidPdGains {
+        saturation: Saturation::Sine,
+        ..PidPdGains::hand_tuned()
+    };
+    println!(
+        "horizon {horizon} s, widths {widths:?}: hand-tuned cost {:.2}",
+        cost_of(&params, &hand, &cost, horizon, episodes)
+    );
+    // cross-entropy search from the loop's start, spread two typical magnitudes
+    let mut mean = vec![1.0, 0.3, 1.0, 10.0, 2.0];
+    let mut std = vec![2.0, 0.6, 2.0, 20.0, 4.0];
+    let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed);
+    let (pop, elite) = (40, 8);
+    for generation in 0..12 {
+        let mut scored: Vec<(f64, Vec<f64>)> = (0..pop)
+            .map(|_| {
+                let v: Vec<f64> = mean
+                    .iter()
+                    .zip(&std)
+                    .map(|(m, s)| Normal::new(*m, *s).map_or(*m, |n| n.sample(&mut rng)))
+                    .collect();
+                (cost_of(&params, &gains(&v), &cost, horizon, episodes), v)
+            })
+            .collect();
+        scored.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for j in 0..5 {
+            let vals: Vec<f64> = scored[..elite].iter().map(|(_, v)| v[j]).collect();
+            let m = vals.iter().sum::<f64>() / elite as f64;
+            let var = vals.iter().map(|x| (x - m).powi(2)).sum::<f64>() / elite as f64;
+            mean[j] = m;
+            std[j] = var.sqrt().max(1e-3);
+        }
+        let best = &scored[0];
+        println!(
+            "generation {generation:2}: best {:.2} at [{:.2}, {:.2}, {:.2}, {:.1}, {:.2}], elite mean cost {:.2}",
+            best.0,
+            best.1[0],
+            best.1[1],
+            best.1[2],
+            best.1[3],
+            best.1[4],
+            scored[..elite].iter().map(|s| s.0).sum::<f64>() / elite as f64
+        );
+    }
+    let g = gains(&mean);
+    let c = cost_of(&params, &g, &cost, horizon, episodes);
+    let stable = stability_test(&params, &g, 0, &StabilityCriteria::default())?.passed;
+    println!(
+        "CEM mean [{:.2}, {:.2}, {:.2}, {:.1}, {:.2}]: cost {c:.2}, stability test {}",
+        mean[0],
+        mean[1],
+        mean[2],
+        mean[3],
+        mean[4],
+        if stable { "passed" } else { "failed" }
+    );
+    Ok(())
+}
