@@ -344,6 +344,23 @@ fn interact(
     Ok(ep)
 }
 
+/// One episode of `gains` and its training entry: the trajectory under those gains (`L_fb`).
+fn feedback_episode(
+    params: &PendulumParams,
+    gains: &PidPdGains,
+    length: f64,
+    seed: u64,
+    seconds: &mut f64,
+) -> Result<(Episode, TrainingEpisode), SimError> {
+    let mut controller = PidPdPolicy::new(*gains, params)?;
+    let ep = interact(params, &mut controller, length, seed, seconds)?;
+    let entry = TrainingEpisode {
+        traj: episode_trajectory(&ep)?,
+        policy: Some(PolicySpec::Pid(modelled_policy(gains, params)?)),
+    };
+    Ok((ep, entry))
+}
+
 /// Runs the loop; `progress` sees each iteration as it completes.
 pub fn learn_policy(
     params: &PendulumParams,
@@ -366,18 +383,9 @@ pub fn learn_policy(
         let seed = settings.seed.wrapping_mul(1000).wrapping_add(k as u64);
         if k < settings.random_policies {
             let gains = random_gains(seed, &settings.gain_scale);
-            let mut controller = PidPdPolicy::new(gains, params)?;
-            let ep = interact(
-                params,
-                &mut controller,
-                settings.episode_seconds,
-                seed,
-                &mut seconds,
-            )?;
-            training.push(TrainingEpisode {
-                traj: episode_trajectory(&ep)?,
-                policy: Some(PolicySpec::Pid(modelled_policy(&gains, params)?)),
-            });
+            let (ep, entry) =
+                feedback_episode(params, &gains, settings.episode_seconds, seed, &mut seconds)?;
+            training.push(entry);
             episodes.push(ep);
             let stable =
                 stability_test(params, &gains, settings.seed, &StabilityCriteria::default())?
@@ -529,20 +537,11 @@ pub fn learn_policy(
             .seed
             .wrapping_mul(1000)
             .wrapping_add(500 + it as u64);
-        let mut controller = PidPdPolicy::new(gains, params)?;
-        let ep = interact(
-            params,
-            &mut controller,
-            settings.episode_seconds,
-            seed,
-            &mut seconds,
-        )?;
+        let (ep, entry) =
+            feedback_episode(params, &gains, settings.episode_seconds, seed, &mut seconds)?;
         let warm = settings.fit.ly.max(settings.fit.lu);
         let actual = episode_cost(&ep, &cost, warm, horizon);
-        training.push(TrainingEpisode {
-            traj: episode_trajectory(&ep)?,
-            policy: Some(PolicySpec::Pid(modelled_policy(&gains, params)?)),
-        });
+        training.push(entry);
         episodes.push(ep);
         let stable =
             stability_test(params, &gains, settings.seed, &StabilityCriteria::default())?.passed;
