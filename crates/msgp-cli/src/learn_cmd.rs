@@ -52,7 +52,8 @@ impl From<ModelArg> for Method {
 #[derive(Debug, Args)]
 #[command(next_help_heading = "Budget")]
 pub struct BudgetArgs {
-    /// Random-excitation episodes before the first policy.
+    /// Random episodes before the first policy (random excitation, or random policies: see
+    /// --random-policies).
     #[arg(long, default_value_t = LearnSettings::default().random_rollouts)]
     pub random_rollouts: usize,
     /// How many of the random rollouts run a random policy (PID + PD gains drawn uniformly
@@ -261,7 +262,7 @@ pub fn write_outputs(
         iterations_csv(&outcome.iterations).as_bytes(),
     )?;
     for (k, ep) in outcome.episodes.iter().enumerate() {
-        let kind = if k < settings.random_policies.min(settings.random_rollouts) {
+        let kind = if k < settings.random_policies {
             "random-policy".to_string()
         } else if k < settings.random_rollouts {
             "random".to_string()

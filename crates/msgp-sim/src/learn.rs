@@ -371,6 +371,13 @@ pub fn learn_policy(
     let mut episodes: Vec<Episode> = Vec::new();
     let mut training: Vec<TrainingEpisode> = Vec::new();
     let mut seconds = 0.0;
+    if let Some(bad) = settings.gain_scale.iter().find(|g| !g.is_finite()) {
+        return Err(SimError::invalid(
+            "gain_scale",
+            *bad,
+            "typical gain magnitudes must be finite",
+        ));
+    }
     if settings.random_policies > settings.random_rollouts {
         return Err(SimError::invalid(
             "random_policies",

@@ -157,4 +157,8 @@ fn random_policy_rollouts_run_drawn_gains_and_record_them() {
     };
     let err = learn_policy(&params, &too_many, &mut |_| {}).expect_err("3 of 2");
     assert!(err.to_string().contains("random_policies"), "{err}");
+    let mut nan_scale = small(1);
+    nan_scale.gain_scale[3] = f64::NAN;
+    let err = learn_policy(&params, &nan_scale, &mut |_| {}).expect_err("NaN scale");
+    assert!(err.to_string().contains("gain_scale"), "{err}");
 }
