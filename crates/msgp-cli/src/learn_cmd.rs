@@ -84,6 +84,10 @@ pub struct BudgetArgs {
         StartWindow::Measured => 0,
     })]
     pub start_smoothing: usize,
+    /// MSGP: feedback episodes enter the model loss as overlapping segments of N samples (each
+    /// under the gains that ran it) instead of whole; 0 (the default): whole.
+    #[arg(long, value_name = "N", default_value_t = LearnSettings::default().fb_segment.unwrap_or(0))]
+    pub fb_segment: usize,
     /// Pseudo-inputs of the model.
     #[arg(long, value_name = "M", default_value_t = LearnSettings::default().fit.inducing)]
     pub inducing: usize,
@@ -356,6 +360,7 @@ pub fn settings(
         iterations,
         random_rollouts: args.random_rollouts,
         random_policies: args.random_policies,
+        fb_segment: (args.fb_segment > 0).then_some(args.fb_segment),
         episode_seconds: args.episode_seconds,
         policy_horizon_seconds: args.policy_horizon,
         excitation,

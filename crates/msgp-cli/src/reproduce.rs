@@ -25,7 +25,7 @@ pub enum ReproduceCommand {
     Table1(Table1Args),
     /// Figure 4 of the paper: PILCO on the pendulum with MSGP and GP-NARX models, several
     /// seeds; iterations and interaction time to the first stable policy.
-    Figure4(crate::figure4::Figure4Args),
+    Figure4(Box<crate::figure4::Figure4Args>),
 }
 
 /// Options of `msgp reproduce table1`.

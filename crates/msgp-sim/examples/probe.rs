@@ -193,6 +193,29 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 ..hand
             },
         ),
+        (
+            // the 5 s cost's minimiser on the plant itself (examples/true_cost.rs, seed 1)
+            "plant's 5 s optimum",
+            PidPdGains {
+                kp_x: 1.47,
+                ki_x: -0.10,
+                kd_x: 0.57,
+                kp_theta: 41.7,
+                kd_theta: 4.35,
+                ..hand
+            },
+        ),
+        (
+            "a typical loop choice",
+            PidPdGains {
+                kp_x: 2.25,
+                ki_x: 0.22,
+                kd_x: 0.84,
+                kp_theta: 14.7,
+                kd_theta: 0.58,
+                ..hand
+            },
+        ),
     ];
     for (name, g) in probes {
         let predicted = match problem.evaluate(&modelled_policy(&g, &params)?) {

@@ -82,6 +82,13 @@ pub struct LearnSettings {
     /// information after a second or so (initial uncertainty grows like `e^{3.5 t}`), and fitting
     /// the trajectory likelihood of whole falls distorts the dynamics (docs/design.md).
     pub ff_segment: Option<usize>,
+    /// Feedback (policy) episodes enter the model loss as overlapping segments of this many
+    /// samples (stride half of it), each under the gains that ran it; `None` (the default)
+    /// keeps them whole, as the paper does. MSGP only. A feedback episode of weakly damped
+    /// gains oscillates and falls; fitted whole, its trajectory likelihood can turn the
+    /// model's pole into a damped oscillator (docs/design.md).
+    #[serde(default)]
+    pub fb_segment: Option<usize>,
     /// Typical gain magnitudes `[kp_x, ki_x, kd_x, kp_θ, kd_θ]`: the first policy's gains and
     /// the optimiser's coordinate scales (units of the problem, not a solution).
     pub gain_scale: [f64; 5],
@@ -130,6 +137,7 @@ impl Default for LearnSettings {
             },
             cost_widths: [0.1, 0.3],
             ff_segment: Some(30),
+            fb_segment: None,
             gain_scale: [1.0, 0.3, 1.0, 10.0, 2.0],
             warm_start: None,
         }
@@ -344,21 +352,39 @@ fn interact(
     Ok(ep)
 }
 
-/// One episode of `gains` and its training entry: the trajectory under those gains (`L_fb`).
+/// One episode of `gains` and its training entries: the trajectory under those gains
+/// (`L_fb`), whole or in [`LearnSettings::fb_segment`] segments.
 fn feedback_episode(
     params: &PendulumParams,
     gains: &PidPdGains,
-    length: f64,
+    settings: &LearnSettings,
     seed: u64,
     seconds: &mut f64,
-) -> Result<(Episode, TrainingEpisode), SimError> {
+) -> Result<(Episode, Vec<TrainingEpisode>), SimError> {
     let mut controller = PidPdPolicy::new(*gains, params)?;
-    let ep = interact(params, &mut controller, length, seed, seconds)?;
-    let entry = TrainingEpisode {
-        traj: episode_trajectory(&ep)?,
-        policy: Some(PolicySpec::Pid(modelled_policy(gains, params)?)),
+    let ep = interact(
+        params,
+        &mut controller,
+        settings.episode_seconds,
+        seed,
+        seconds,
+    )?;
+    let traj = episode_trajectory(&ep)?;
+    let parts = match settings.fb_segment {
+        Some(len) if settings.method == Method::Msgp => {
+            segments(&traj, len, settings.fit.ly.max(settings.fit.lu) + 5)?
+        }
+        _ => vec![traj],
     };
-    Ok((ep, entry))
+    let policy = PolicySpec::Pid(modelled_policy(gains, params)?);
+    let entries = parts
+        .into_iter()
+        .map(|traj| TrainingEpisode {
+            traj,
+            policy: Some(policy.clone()),
+        })
+        .collect();
+    Ok((ep, entries))
 }
 
 /// Runs the loop; `progress` sees each iteration as it completes.
@@ -390,9 +416,8 @@ pub fn learn_policy(
         let seed = settings.seed.wrapping_mul(1000).wrapping_add(k as u64);
         if k < settings.random_policies {
             let gains = random_gains(seed, &settings.gain_scale);
-            let (ep, entry) =
-                feedback_episode(params, &gains, settings.episode_seconds, seed, &mut seconds)?;
-            training.push(entry);
+            let (ep, entries) = feedback_episode(params, &gains, settings, seed, &mut seconds)?;
+            training.extend(entries);
             episodes.push(ep);
             let stable =
                 stability_test(params, &gains, settings.seed, &StabilityCriteria::default())?
@@ -544,11 +569,10 @@ pub fn learn_policy(
             .seed
             .wrapping_mul(1000)
             .wrapping_add(500 + it as u64);
-        let (ep, entry) =
-            feedback_episode(params, &gains, settings.episode_seconds, seed, &mut seconds)?;
+        let (ep, entries) = feedback_episode(params, &gains, settings, seed, &mut seconds)?;
         let warm = settings.fit.ly.max(settings.fit.lu);
         let actual = episode_cost(&ep, &cost, warm, horizon);
-        training.push(entry);
+        training.extend(entries);
         episodes.push(ep);
         let stable =
             stability_test(params, &gains, settings.seed, &StabilityCriteria::default())?.passed;

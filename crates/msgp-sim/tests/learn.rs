@@ -162,3 +162,30 @@ fn random_policy_rollouts_run_drawn_gains_and_record_them() {
     let err = learn_policy(&params, &nan_scale, &mut |_| {}).expect_err("NaN scale");
     assert!(err.to_string().contains("gain_scale"), "{err}");
 }
+
+/// `fb_segment` cuts the feedback episodes for MSGP fits (the second model then differs from
+/// the one fitted to whole episodes) and leaves one-step fits alone (they see every pair once).
+#[test]
+fn feedback_segments_change_msgp_fits_only() {
+    let params = PendulumParams::default();
+    let run = |method: msgp_core::model::Method, fb_segment: Option<usize>| {
+        let settings = LearnSettings {
+            method,
+            fb_segment,
+            ..small(2)
+        };
+        learn_policy(&params, &settings, &mut |_| {})
+            .expect("learn")
+            .iterations
+    };
+    use msgp_core::model::Method;
+    let (whole, cut) = (run(Method::Msgp, None), run(Method::Msgp, Some(20)));
+    assert_eq!(
+        whole[0].predicted_cost, cut[0].predicted_cost,
+        "no feedback yet"
+    );
+    assert_ne!(whole[1].predicted_cost, cut[1].predicted_cost);
+    assert!(cut[1].predicted_cost.is_finite());
+    let (whole, cut) = (run(Method::GpNarx, None), run(Method::GpNarx, Some(20)));
+    assert_eq!(whole[1].predicted_cost, cut[1].predicted_cost);
+}
