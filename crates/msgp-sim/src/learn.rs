@@ -352,6 +352,21 @@ fn interact(
     Ok(ep)
 }
 
+/// `traj` cut into segments of `segment` samples for MSGP fits; whole otherwise, and always
+/// for one-step fits (they see every pair once: segments would duplicate the overlaps).
+fn msgp_segments(
+    traj: Trajectory,
+    segment: Option<usize>,
+    settings: &LearnSettings,
+) -> Result<Vec<Trajectory>, SimError> {
+    match segment {
+        Some(len) if settings.method == Method::Msgp => {
+            segments(&traj, len, settings.fit.ly.max(settings.fit.lu) + 5)
+        }
+        _ => Ok(vec![traj]),
+    }
+}
+
 /// One episode of `gains` and its training entries: the trajectory under those gains
 /// (`L_fb`), whole or in [`LearnSettings::fb_segment`] segments.
 fn feedback_episode(
@@ -369,13 +384,7 @@ fn feedback_episode(
         seed,
         seconds,
     )?;
-    let traj = episode_trajectory(&ep)?;
-    let parts = match settings.fb_segment {
-        Some(len) if settings.method == Method::Msgp => {
-            segments(&traj, len, settings.fit.ly.max(settings.fit.lu) + 5)?
-        }
-        _ => vec![traj],
-    };
+    let parts = msgp_segments(episode_trajectory(&ep)?, settings.fb_segment, settings)?;
     let policy = PolicySpec::Pid(modelled_policy(gains, params)?);
     let entries = parts
         .into_iter()
@@ -433,14 +442,7 @@ pub fn learn_policy(
             seed,
             &mut seconds,
         )?;
-        let traj = episode_trajectory(&ep)?;
-        let parts = match settings.ff_segment {
-            // one-step fits see every pair once: segments would duplicate the overlaps
-            Some(len) if settings.method == Method::Msgp => {
-                segments(&traj, len, settings.fit.ly.max(settings.fit.lu) + 5)?
-            }
-            _ => vec![traj],
-        };
+        let parts = msgp_segments(episode_trajectory(&ep)?, settings.ff_segment, settings)?;
         training.extend(
             parts
                 .into_iter()
