@@ -86,7 +86,9 @@ pub struct LearnSettings {
     /// samples (stride half of it), each under the gains that ran it; `None` (the default)
     /// keeps them whole, as the paper does. MSGP only. A feedback episode of weakly damped
     /// gains oscillates and falls; fitted whole, its trajectory likelihood can turn the
-    /// model's pole into a damped oscillator (docs/design.md).
+    /// model's pole into a damped oscillator (docs/design.md). A segment's modelled PID
+    /// integral sums its own samples only; the controller's had run since the episode began
+    /// (with the loop's integral gains, a small offset of the command).
     #[serde(default)]
     pub fb_segment: Option<usize>,
     /// Typical gain magnitudes `[kp_x, ki_x, kd_x, kp_θ, kd_θ]`: the first policy's gains and
