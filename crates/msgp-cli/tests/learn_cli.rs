@@ -39,6 +39,15 @@ const TINY: [&str; 12] = [
     "1",
 ];
 
+/// `msgp learn-policy --sim pendulum --out <out> --json` with `options` on the tiny budget,
+/// run in `dir`; it must succeed and print one JSON object, which is returned.
+fn learn_json(dir: &PathBuf, out: &str, options: &[&str]) -> Value {
+    let head = ["learn-policy", "--sim", "pendulum", "--out", out, "--json"];
+    let o = run(dir, &[&head[..], options, &TINY[..]].concat());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_slice(&o.stdout).expect("one JSON object")
+}
+
 /// The iterations without their wall-clock fields.
 fn without_timings(its: &Value) -> Vec<Value> {
     its.as_array()
@@ -60,22 +69,8 @@ fn without_timings(its: &Value) -> Vec<Value> {
 #[test]
 fn learn_policy_writes_policy_table_episodes_plot_and_json() {
     let dir = scratch("run");
-    let mut args = vec![
-        "learn-policy",
-        "--sim",
-        "pendulum",
-        "--iterations",
-        "2",
-        "--seed",
-        "3",
-        "--out",
-        "out",
-        "--json",
-    ];
-    args.extend(TINY);
-    let o = run(&dir, &args);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let v: Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    let options = ["--iterations", "2", "--seed", "3"];
+    let v = learn_json(&dir, "out", &options);
     let its = v["iterations"].as_array().expect("iterations");
     assert_eq!(its.len(), 2);
     for (k, it) in its.iter().enumerate() {
@@ -147,11 +142,7 @@ fn learn_policy_writes_policy_table_episodes_plot_and_json() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 
     // the same seed gives the same numbers (all but the wall-clock timings)
-    let mut again = args.clone();
-    again[8] = "out2";
-    let o2 = run(&dir, &again);
-    assert!(o2.status.success());
-    let v2: Value = serde_json::from_slice(&o2.stdout).expect("JSON");
+    let v2 = learn_json(&dir, "out2", &options);
     assert_eq!(
         without_timings(&v["iterations"]),
         without_timings(&v2["iterations"])
@@ -164,22 +155,11 @@ fn learn_policy_writes_policy_table_episodes_plot_and_json() {
 #[test]
 fn random_policy_rollouts_are_recorded() {
     let dir = scratch("random-policies");
-    let mut args = vec![
-        "learn-policy",
-        "--sim",
-        "pendulum",
-        "--iterations",
-        "1",
-        "--random-policies",
-        "1",
-        "--out",
+    let v = learn_json(
+        &dir,
         "out",
-        "--json",
-    ];
-    args.extend(TINY);
-    let o = run(&dir, &args);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let v: Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+        &["--iterations", "1", "--random-policies", "1"],
+    );
     let rp = v["random_policies"].as_array().expect("random_policies");
     assert_eq!(rp.len(), 1);
     assert!(rp[0]["stable"].is_boolean());
