@@ -14,7 +14,7 @@ use msgp_core::fit::{TrainingEpisode, fit_episodes};
 use msgp_core::policy::PolicySpec;
 use msgp_core::start_window::StartWindow;
 use msgp_sim::learn::{
-    LearnSettings, episode_trajectory, modelled_policy, pendulum_problem, segments,
+    LearnSettings, episode_cost, episode_trajectory, modelled_policy, pendulum_problem, segments,
 };
 use msgp_sim::{
     EpisodeConfig, PendulumParams, PidPdGains, PidPdPolicy, RandomExcitation, Saturation,
@@ -233,14 +233,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     initial_theta: None,
                 },
             )?;
-            let steps: Vec<f64> = ep
-                .samples
-                .iter()
-                .skip(3)
-                .take(horizon)
-                .map(|s| cost.at(&[s.measurement.theta, s.measurement.x]))
-                .collect();
-            measured += steps.iter().sum::<f64>() + (horizon - steps.len()) as f64;
+            measured += episode_cost(&ep, &cost, 3, horizon);
         }
         println!(
             "{name:>20}: predicted {predicted}, plant {:7.2}",

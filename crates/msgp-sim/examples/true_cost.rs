@@ -6,6 +6,7 @@
 //!
 //! `cargo run --release -p msgp-sim --example true_cost -- [horizon_s] [w_theta,w_x] [seed]`
 use msgp_core::cost::SaturatingCost;
+use msgp_sim::learn::episode_cost;
 use msgp_sim::{
     EpisodeConfig, PendulumParams, PidPdGains, PidPdPolicy, Saturation, StabilityCriteria,
     run_episode, stability_test,
@@ -38,13 +39,7 @@ fn cost_of(
         ) else {
             return f64::INFINITY;
         };
-        let seen: Vec<f64> = ep
-            .samples
-            .iter()
-            .take(steps)
-            .map(|x| cost.at(&[x.measurement.theta, x.measurement.x]))
-            .collect();
-        total += seen.iter().sum::<f64>() + (steps - seen.len()) as f64;
+        total += episode_cost(&ep, cost, 0, steps);
     }
     total / episodes as f64
 }

@@ -322,7 +322,7 @@ fn gains_from(p: &PidPolicy<f64>) -> PidPdGains {
 
 /// Cost of the measured outputs of an episode over the modelled window; steps after an early
 /// stop (the pole fell or the arm left its range) count the full cost 1.
-fn episode_cost(ep: &Episode, cost: &SaturatingCost, from: usize, steps: usize) -> f64 {
+pub fn episode_cost(ep: &Episode, cost: &SaturatingCost, from: usize, steps: usize) -> f64 {
     let measured: Vec<f64> = ep
         .samples
         .iter()
