@@ -4,6 +4,8 @@
 //!   [--seconds S] [--seed N] --out RUN.csv|RUN.mcap` — one episode, written atomically.
 //! * `msgp sim stability (--policy P.json | --gains … | --preset NAME) [--seed N] [--json]` —
 //!   the stability test (five starts × three noise draws); exits non-zero when any episode fails.
+//! * Both take `--saturation clip|sine` for the gains' command limit (default: clip for
+//!   `--gains` and `--preset`, the file's for `--policy`).
 //!
 //! Plant parameters default to `msgp_sim::PendulumParams::default()`; `--params FILE.json`
 //! and the per-field flags override them (flags win).
@@ -14,7 +16,8 @@ use anyhow::{Context, bail};
 use clap::{Args, Subcommand, ValueEnum};
 use msgp_sim::{
     Controller, EpisodeConfig, ExcitationConfig, LogFormat, PendulumParams, PidPdGains,
-    PidPdPolicy, RandomExcitation, StabilityCriteria, run_episode, stability_test, write_run,
+    PidPdPolicy, RandomExcitation, Saturation, StabilityCriteria, run_episode, stability_test,
+    write_run,
 };
 
 /// Subcommands of `msgp sim`.
@@ -45,6 +48,8 @@ pub struct PendulumArgs {
     /// RMS of the random excitation [m/s²] (with --random).
     #[arg(long, default_value_t = 1.0)]
     excitation_rms: f64,
+    #[command(flatten)]
+    saturation: SaturationArgs,
     /// Output run log; the extension selects the format: .csv or .mcap.
     #[arg(long)]
     out: PathBuf,
@@ -60,6 +65,8 @@ pub struct PendulumArgs {
 pub struct StabilityArgs {
     #[command(flatten)]
     gains: GainArgs,
+    #[command(flatten)]
+    saturation: SaturationArgs,
     /// Seed of the measurement noise.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -101,6 +108,46 @@ struct GainArgs {
     /// Built-in gains.
     #[arg(long, value_enum)]
     preset: Option<Preset>,
+}
+
+/// How the gains' command is limited to `±action-limit`.
+#[derive(Debug, Args)]
+struct SaturationArgs {
+    /// Command saturation: `clip` (the default of --gains and --preset) or `sine` (PILCO's
+    /// smooth saturation, which `msgp learn-policy` uses). With --policy it overrides the file's.
+    #[arg(long, value_enum)]
+    saturation: Option<SaturationKind>,
+}
+
+impl SaturationArgs {
+    /// `gains` with the chosen saturation, if one was chosen.
+    fn apply(&self, gains: PidPdGains) -> PidPdGains {
+        match self.saturation {
+            Some(kind) => PidPdGains {
+                saturation: kind.into(),
+                ..gains
+            },
+            None => gains,
+        }
+    }
+}
+
+/// [`Saturation`] as a command-line value.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum SaturationKind {
+    /// Hard clipping.
+    Clip,
+    /// PILCO's sine saturation.
+    Sine,
+}
+
+impl From<SaturationKind> for Saturation {
+    fn from(kind: SaturationKind) -> Self {
+        match kind {
+            SaturationKind::Clip => Saturation::Clip,
+            SaturationKind::Sine => Saturation::Sine,
+        }
+    }
 }
 
 /// Built-in gain sets.
@@ -269,7 +316,12 @@ fn run_pendulum(args: &PendulumArgs) -> anyhow::Result<()> {
     let c = &args.controller;
     let mut controller: Box<dyn Controller> =
         match resolve_gains(c.policy.as_deref(), c.gains, c.preset)? {
-            Some(gains) => Box::new(PidPdPolicy::new(gains, &params)?),
+            Some(gains) => Box::new(PidPdPolicy::new(args.saturation.apply(gains), &params)?),
+            None if c.random && args.saturation.saturation.is_some() => {
+                bail!(
+                    "--saturation applies to gains (--policy, --gains, --preset), not to --random"
+                )
+            }
             None if c.random => Box::new(RandomExcitation::new(
                 args.seed,
                 &ExcitationConfig {
@@ -320,13 +372,23 @@ fn run_stability(args: &StabilityArgs) -> anyhow::Result<()> {
     let Some(gains) = resolve_gains(g.policy.as_deref(), g.gains, g.preset)? else {
         bail!("choose gains: --policy, --gains or --preset");
     };
+    let gains = args.saturation.apply(gains);
     let report = stability_test(&params, &gains, args.seed, &StabilityCriteria::default())?;
     if args.json {
         crate::output::out(&serde_json::to_string_pretty(&report)?)?;
     } else {
         crate::output::out(&format!(
-            "gains kp_x={} ki_x={} kd_x={} kp_theta={} kd_theta={}, seed {}",
-            gains.kp_x, gains.ki_x, gains.kd_x, gains.kp_theta, gains.kd_theta, args.seed
+            "gains kp_x={} ki_x={} kd_x={} kp_theta={} kd_theta={}, {} saturation, seed {}",
+            gains.kp_x,
+            gains.ki_x,
+            gains.kd_x,
+            gains.kp_theta,
+            gains.kd_theta,
+            match gains.saturation {
+                Saturation::Clip => "clip",
+                Saturation::Sine => "sine",
+            },
+            args.seed
         ))?;
         crate::output::out(
             "  θ0 [rad]  draw  result  max|θ| [rad]  max|x| [m]  RMS θ last 5 s  failure",

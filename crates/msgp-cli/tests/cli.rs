@@ -747,3 +747,41 @@ fn help_lists_the_commands() {
     let text = ok(&dir, &["fit", "--help"]);
     assert!(text.contains("--train-frac"), "{text}");
 }
+
+/// `--saturation` chooses how the gains' command is limited: the stability report records it,
+/// the episodes change with it, and `--random` (no gains) refuses it.
+#[test]
+fn the_simulator_takes_the_command_saturation() {
+    let dir = Scratch::new("saturation");
+    let report = |extra: &[&str]| -> Value {
+        let o = run(
+            &dir,
+            &args(
+                &["sim", "stability", "--preset", "hand-tuned", "--json"],
+                extra,
+            ),
+        );
+        assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
+        serde_json::from_str(&stdout(&o)).expect("stdout is the JSON report")
+    };
+    let clip = report(&[]);
+    let sine = report(&["--saturation", "sine"]);
+    assert_eq!(clip["gains"]["saturation"], "clip");
+    assert_eq!(sine["gains"]["saturation"], "sine");
+    assert_eq!(report(&["--saturation", "clip"]), clip);
+    let max_theta = |v: &Value| v["starts"][0]["max_abs_theta"].as_f64().expect("a number");
+    assert_ne!(max_theta(&clip), max_theta(&sine));
+    fails(
+        &dir,
+        &[
+            "sim",
+            "pendulum",
+            "--random",
+            "--saturation",
+            "sine",
+            "--out",
+            "r.csv",
+        ],
+        &["--saturation applies to gains"],
+    );
+}
