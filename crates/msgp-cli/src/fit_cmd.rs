@@ -33,6 +33,8 @@ pub enum MethodArg {
     GpNarx,
     /// One-step GP-NARX with PILCO's hyperparameter penalties.
     PilcoNarx,
+    /// Linear-Gaussian window model (no GP) by the exact Kalman-filter likelihood.
+    LinearKf,
 }
 
 impl From<MethodArg> for Method {
@@ -41,6 +43,7 @@ impl From<MethodArg> for Method {
             MethodArg::Msgp => Method::Msgp,
             MethodArg::GpNarx => Method::GpNarx,
             MethodArg::PilcoNarx => Method::PilcoNarx,
+            MethodArg::LinearKf => Method::LinearKf,
         }
     }
 }

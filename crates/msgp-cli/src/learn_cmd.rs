@@ -37,6 +37,9 @@ pub enum ModelArg {
     Msgp,
     /// One-step GP-NARX trained on the marginal likelihood (standard PILCO).
     GpNarx,
+    /// The linear-Gaussian window model (no GP) by the exact Kalman-filter likelihood; the end
+    /// effector declared kinematic.
+    LinearKf,
 }
 
 impl From<ModelArg> for Method {
@@ -44,6 +47,7 @@ impl From<ModelArg> for Method {
         match m {
             ModelArg::Msgp => Method::Msgp,
             ModelArg::GpNarx => Method::GpNarx,
+            ModelArg::LinearKf => Method::LinearKf,
         }
     }
 }
@@ -65,7 +69,8 @@ pub struct BudgetArgs {
     #[arg(long, default_value_t = LearnSettings::default().episode_seconds)]
     pub episode_seconds: f64,
     /// Solver iterations of each model fit [default: 300 for msgp; the one-step fit's 300 Adam
-    /// iterations for gp-narx].
+    /// iterations for gp-narx; at most 300 L-BFGS iterations from each of two starts for
+    /// linear-kf].
     #[arg(long, value_name = "N")]
     pub fit_iters: Option<usize>,
     /// Solver of each MSGP model fit.
@@ -158,6 +163,7 @@ pub fn model_name(m: ModelArg) -> &'static str {
     match m {
         ModelArg::Msgp => "msgp",
         ModelArg::GpNarx => "gp-narx",
+        ModelArg::LinearKf => "linear-kf",
     }
 }
 
@@ -339,7 +345,8 @@ pub fn settings(
     if args.inducing == 0 {
         anyhow::bail!("--inducing must be at least 1");
     }
-    let d = LearnSettings::default();
+    let method: Method = model.into();
+    let d = LearnSettings::for_method(method);
     let start_window = match args.start_smoothing {
         0 => StartWindow::Measured,
         samples => StartWindow::Smoothed { samples, degree: 2 },
@@ -354,7 +361,6 @@ pub fn settings(
     excitation
         .validate()
         .with_context(|| format!("--excitation-max-hz {}", args.excitation_max_hz))?;
-    let method: Method = model.into();
     Ok(LearnSettings {
         method,
         iterations,
@@ -369,12 +375,16 @@ pub fn settings(
         fit: msgp_core::fit::FitSettings {
             inducing: args.inducing,
             mean: args.mean.into(),
-            integrators: match (args.mean, args.free_position) {
-                (MeanArg::Linear, false) => d.fit.integrators.clone(),
+            // a linear-kf model has the linear mean whatever --mean says
+            integrators: match (method, args.mean, args.free_position) {
+                (_, _, true) => Vec::new(),
+                (Method::LinearKf, _, false) | (_, MeanArg::Linear, false) => {
+                    d.fit.integrators.clone()
+                }
                 _ => Vec::new(),
             },
             iterations: match (method, args.fit_iters) {
-                (Method::Msgp, Some(n)) => n,
+                (Method::Msgp | Method::LinearKf, Some(n)) => n,
                 _ => d.fit.iterations,
             },
             optimizer: args.fit_optimizer.into(),

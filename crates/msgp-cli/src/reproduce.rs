@@ -189,6 +189,17 @@ fn table1(args: &Table1Args) -> anyhow::Result<()> {
         .iter()
         .filter(|t| args.only.is_empty() || args.only.iter().any(|n| n == t.key))
         .collect();
+    if let Some(other) = args
+        .methods
+        .iter()
+        .map(|&a| Method::from(a))
+        .find(|m| !METHODS.contains(m))
+    {
+        anyhow::bail!(
+            "--methods {}: table 1 compares the paper's methods (msgp, gp-narx, pilco-narx)",
+            other.name()
+        );
+    }
     let methods: Vec<Method> = if args.methods.is_empty() {
         METHODS.to_vec()
     } else {

@@ -342,3 +342,20 @@ fn bad_learning_options_fail_with_a_message() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--model linear-kf` runs the loop with the Kalman-filter linear model and says so.
+#[test]
+fn learn_policy_runs_the_linear_kf_model() {
+    let dir = scratch("linear-kf");
+    let v = learn_json(&dir, "kf", &["--model", "linear-kf", "--iterations", "2"]);
+    assert_eq!(v["model"], "linear-kf");
+    let its = v["iterations"].as_array().expect("iterations");
+    assert_eq!(its.len(), 2);
+    for it in its {
+        let predicted = it["predicted_cost"].as_f64().expect("predicted cost");
+        assert!(predicted.is_finite() && predicted >= 0.0, "{it}");
+        assert!(it["fit_numerical_stop"].is_null(), "{it}");
+    }
+    assert!(dir.join("kf/policy.json").is_file());
+    let _ = std::fs::remove_dir_all(&dir);
+}

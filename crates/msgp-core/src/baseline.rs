@@ -227,7 +227,7 @@ fn column_std(x: &DMatrix<f64>, d: usize) -> f64 {
 ///
 /// 2SLS: `Aᵀ = (Bᵀ G⁻¹ B)⁻¹ Bᵀ G⁻¹ C` with `G = ZᵀZ`, `B = ZᵀX`, `C = ZᵀY`, i.e. least squares of
 /// `Y` on the projection of `X` onto the instruments.
-fn arx_linear_mean(
+pub(crate) fn arx_linear_mean(
     data: &OneStepData,
     config: &GpConfig,
     fixed: &[FixedCoefficient],

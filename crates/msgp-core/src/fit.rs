@@ -191,7 +191,11 @@ impl FitOptions {
             du: first.u.ncols(),
         };
         spec.validate()?;
-        integrator::validate(&self.integrators, &spec, self.mean)?;
+        let mean = match self.method {
+            Method::LinearKf => MeanFunction::Linear,
+            _ => self.mean,
+        };
+        integrator::validate(&self.integrators, &spec, mean)?;
         let warmup = spec.warmup();
         for (k, t) in train.iter().enumerate() {
             if t.len() <= warmup {
@@ -221,7 +225,7 @@ impl FitOptions {
             lu: self.lu,
             inducing,
             iterations: match (self.method, self.iterations) {
-                (Method::Msgp, Some(n)) => n,
+                (Method::Msgp | Method::LinearKf, Some(n)) => n,
                 _ => defaults.iterations,
             },
             one_step_iterations: match (self.method, self.iterations) {
@@ -446,7 +450,12 @@ fn fit_episodes_from(
         du: first.u.ncols(),
     };
     spec.validate()?;
-    integrator::validate(&settings.integrators, &spec, settings.mean)?;
+    // a linear-kf model always has the linear mean
+    let mean = match settings.method {
+        Method::LinearKf => MeanFunction::Linear,
+        _ => settings.mean,
+    };
+    integrator::validate(&settings.integrators, &spec, mean)?;
     settings.start_window.validate(spec.warmup())?;
     for (k, t) in train.iter().enumerate() {
         t.check(&spec)
@@ -482,6 +491,28 @@ fn fit_episodes_from(
         ..OneStepSettings::default()
     };
 
+    if settings.method == Method::LinearKf {
+        // scaled, not centred: the linear model has no intercept, and centring would turn the
+        // data's mean command into a constant acceleration of the plant
+        let scaled = Normalizer {
+            u_mean: vec![0.0; spec.du],
+            y_mean: vec![0.0; spec.dy],
+            ..normalizer
+        };
+        let norm: Vec<Trajectory> = train.iter().map(|t| scaled.apply(t)).collect();
+        let (model, kf) = crate::kalman::fit_linear_kf(
+            &norm,
+            spec,
+            &Structure::new(&settings.integrators, &spec),
+            scaled,
+            settings.iterations,
+        )?;
+        report.iterations_run = kf.iterations_run;
+        report.best_iteration = kf.iterations_run;
+        report.jitter = kf.jitter;
+        report.train_seconds = start.elapsed().as_secs_f64();
+        return Ok((model, report));
+    }
     if settings.method != Method::Msgp {
         let config = GpConfig {
             mean: settings.mean,
@@ -915,6 +946,59 @@ mod tests {
     /// integrator, `y₁`'s coefficients, the GP's length-scales on its lags and `y₁`'s absent GP
     /// come out of an MSGP fit exactly as the declaration set them, while the rest of the model
     /// was trained.
+    /// A linear-kf fit of a double integrator driven by a command with a non-zero mean: the
+    /// model is scaled, not centred (a centred linear model without intercept would lose the
+    /// mean command's constant acceleration, and its free simulation would drift away
+    /// quadratically), keeps the declared coefficients and has no GP.
+    #[test]
+    fn a_linear_kf_fit_simulates_an_integrator_under_a_mean_command() {
+        use crate::integrator::Integrator;
+        use nalgebra::DMatrix;
+        let n = 200;
+        let u = DMatrix::from_fn(n, 1, |t, _| 0.5 + 0.3 * (0.1 * t as f64).sin());
+        let mut y = DMatrix::<f64>::zeros(n, 2);
+        for t in 1..n - 1 {
+            y[(t + 1, 0)] = 0.9 * y[(t, 0)] + 0.1 * u[(t, 0)];
+            y[(t + 1, 1)] = 2.0 * y[(t, 1)] - y[(t - 1, 1)] + 1e-3 * u[(t, 0)];
+        }
+        let clean = y.clone();
+        let y = y.map(|v| v + 1e-4 * (v * 1e5).sin());
+        let traj = Trajectory::new(u, y).expect("trajectory");
+        let integrators = vec![Integrator {
+            output: 1,
+            order: 2,
+            linear: true,
+        }];
+        let settings = FitSettings {
+            method: Method::LinearKf,
+            ly: 2,
+            lu: 1,
+            iterations: 200,
+            integrators: integrators.clone(),
+            ..FitSettings::default()
+        };
+        let (model, report) =
+            fit(std::slice::from_ref(&traj), &settings, &mut |_| {}).expect("fit");
+        assert_eq!(model.method, Method::LinearKf);
+        assert!(report.iterations_run > 0);
+        assert!(model.normalizer.u_mean.iter().all(|&m| m == 0.0));
+        assert!(model.normalizer.y_mean.iter().all(|&m| m == 0.0));
+        for c in &Structure::new(&integrators, &model.spec).fixed {
+            assert_eq!(model.params.linear_mean[(c.row, c.col)], c.value);
+        }
+        assert!(model.params.pseudo_targets.iter().all(|&v| v == 0.0));
+        // free simulation over 200 steps: the mean command alone moves y₁ by ≈ 10 units
+        let sim = model.simulate(&traj).expect("simulate");
+        let last = sim.mean.nrows() - 1;
+        let err = (sim.mean[(last, 1)] - clean[(n - 1, 1)]).abs();
+        assert!(
+            err < 0.05 * clean[(n - 1, 1)].abs(),
+            "end effector off by {err}"
+        );
+        let err0 = (sim.mean[(last, 0)] - clean[(n - 1, 0)]).abs();
+        assert!(err0 < 0.01, "first output off by {err0}");
+    }
+
     #[test]
     fn an_msgp_fit_keeps_what_an_integrating_output_fixes() {
         use crate::integrator::{IGNORED_LENGTHSCALE, Integrator, NO_GP_SIGNAL_VAR, Structure};

@@ -11,6 +11,7 @@
 //! - [`moments`]: exact moment matching under Gaussian inputs;
 //! - [`narx`], [`rollout`], [`policy`]: the autoregressive window and open/closed-loop rollouts;
 //! - [`loss`]: the trajectory likelihood and complexity term;
+//! - [`kalman`]: the linear-Gaussian window model by the exact Kalman-filter likelihood;
 //! - [`grad`]: exact gradients.
 
 pub mod baseline;
@@ -22,6 +23,7 @@ pub mod fit;
 pub mod gp;
 pub mod grad;
 pub mod integrator;
+pub mod kalman;
 pub mod kernel;
 pub mod kmeans;
 pub mod linalg;

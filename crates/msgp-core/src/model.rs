@@ -21,6 +21,9 @@ pub enum Method {
     PilcoNarx,
     /// Multi-step GP: trajectory likelihood (eq. 7).
     Msgp,
+    /// The linear-Gaussian window model (no GP) by the exact Kalman-filter likelihood
+    /// ([`crate::kalman`]).
+    LinearKf,
 }
 
 impl Method {
@@ -30,11 +33,17 @@ impl Method {
             Method::GpNarx => "gp-narx",
             Method::PilcoNarx => "pilco-narx",
             Method::Msgp => "msgp",
+            Method::LinearKf => "linear-kf",
         }
     }
 
     /// Every method, the paper's first.
-    pub const ALL: [Method; 3] = [Method::Msgp, Method::GpNarx, Method::PilcoNarx];
+    pub const ALL: [Method; 4] = [
+        Method::Msgp,
+        Method::GpNarx,
+        Method::PilcoNarx,
+        Method::LinearKf,
+    ];
 
     /// The method called `name` (see [`name`](Self::name)).
     pub fn from_name(name: &str) -> Option<Self> {

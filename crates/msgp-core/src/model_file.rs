@@ -342,9 +342,7 @@ impl ModelFile {
 
     /// The training method.
     pub fn method(&self) -> Option<Method> {
-        [Method::GpNarx, Method::PilcoNarx, Method::Msgp]
-            .into_iter()
-            .find(|m| m.name() == self.method)
+        Method::from_name(&self.method)
     }
 
     /// Checks every shape and value and builds the [`Model`]; `path` is used in messages.
@@ -353,7 +351,7 @@ impl ModelFile {
             shape_err(
                 path,
                 format!(
-                    "unknown method `{}` (expected msgp, gp-narx or pilco-narx)",
+                    "unknown method `{}` (expected msgp, gp-narx, pilco-narx or linear-kf)",
                     self.method
                 ),
             )

@@ -229,8 +229,8 @@ pub fn stability_test<'py>(
     to_python(py, &report)
 }
 
-/// Learning to balance the pendulum from scratch (PILCO with MSGP or GP-NARX models; paper
-/// section 4.2): random rollouts, then per iteration fit the model, optimise the gains on it,
+/// Learning to balance the pendulum from scratch (PILCO with MSGP, GP-NARX or linear-kf models;
+/// paper section 4.2): random rollouts, then per iteration fit the model, optimise the gains on it,
 /// run them. Returns one dict per iteration (`iteration`, `predicted_cost`,
 /// `predicted_cost_std`, `actual_cost`, `interaction_seconds`, `stable`, `gains`, …).
 /// `settings` overrides other fields of `defaults("learn")` (nested dicts merge), `params`
@@ -259,7 +259,7 @@ pub fn learn_policy<'py>(
             }
         }
     }
-    let base: LearnSettings = with_overrides(&LearnSettings::default(), settings, "settings")?;
+    let base: LearnSettings = with_overrides(&LearnSettings::for_method(m), settings, "settings")?;
     let s = LearnSettings {
         method: m,
         iterations,

@@ -146,6 +146,35 @@ impl Default for LearnSettings {
     }
 }
 
+impl LearnSettings {
+    /// The defaults for `method`. A [`Method::LinearKf`] model has no GP to absorb what a row
+    /// should not carry, so the end effector is declared kinematic
+    /// ([`END_EFFECTOR_KINEMATIC`]): in closed loop the command is a function of the pole's
+    /// motion, and a free row explains the end effector's acceleration by the pole's velocity
+    /// instead of the command.
+    pub fn for_method(method: Method) -> Self {
+        let mut s = Self {
+            method,
+            ..Self::default()
+        };
+        if method == Method::LinearKf {
+            for i in s.fit.integrators.iter_mut() {
+                if *i == END_EFFECTOR_INTEGRATOR {
+                    *i = END_EFFECTOR_KINEMATIC;
+                }
+            }
+        }
+        s
+    }
+}
+
+/// [`END_EFFECTOR_INTEGRATOR`] declared kinematic as well: its acceleration is a linear function
+/// of the commands alone (the robot's actuator), so its row is zero on the pole's lags.
+pub const END_EFFECTOR_KINEMATIC: Integrator = Integrator {
+    linear: true,
+    ..END_EFFECTOR_INTEGRATOR
+};
+
 /// The end-effector position (output 1) is the double integral of the commanded acceleration,
 /// and the plant is the same wherever the end effector is and however fast it moves: a pure
 /// integrator of order 2 ([`msgp_core::integrator`]). Declared by default: four random rollouts

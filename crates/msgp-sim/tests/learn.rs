@@ -189,3 +189,40 @@ fn feedback_segments_change_msgp_fits_only() {
     let (whole, cut) = (run(Method::GpNarx, None), run(Method::GpNarx, Some(20)));
     assert_eq!(whole[1].predicted_cost, cut[1].predicted_cost);
 }
+
+/// The defaults per model: a linear-kf loop declares the end effector kinematic, the others
+/// keep the default settings; a small linear-kf loop runs and is reproducible.
+#[test]
+fn linear_kf_defaults_declare_the_end_effector_kinematic_and_run() {
+    use msgp_core::model::Method;
+    use msgp_sim::learn::{END_EFFECTOR_INTEGRATOR, END_EFFECTOR_KINEMATIC};
+    assert_eq!(
+        LearnSettings::for_method(Method::Msgp),
+        LearnSettings::default()
+    );
+    let kf = LearnSettings::for_method(Method::LinearKf);
+    assert_eq!(kf.fit.integrators, vec![END_EFFECTOR_KINEMATIC]);
+    assert_eq!(
+        LearnSettings::for_method(Method::GpNarx).fit.integrators,
+        vec![END_EFFECTOR_INTEGRATOR]
+    );
+    let settings = LearnSettings {
+        iterations: 1,
+        random_rollouts: 2,
+        episode_seconds: 1.0,
+        search: PolicySearchSettings {
+            iterations: 3,
+            restarts: 0,
+            candidates: 4,
+            ..kf.search
+        },
+        ..kf
+    };
+    let params = PendulumParams::default();
+    let a = learn_policy(&params, &settings, &mut |_| {}).expect("loop runs");
+    let b = learn_policy(&params, &settings, &mut |_| {}).expect("loop runs");
+    assert_eq!(a.iterations.len(), 1);
+    assert!(a.iterations[0].predicted_cost.is_finite());
+    assert_eq!(a.final_gains, b.final_gains);
+    assert_eq!(a.iterations[0].actual_cost, b.iterations[0].actual_cost);
+}
