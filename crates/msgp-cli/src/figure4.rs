@@ -32,7 +32,7 @@ pub struct Figure4Args {
     #[arg(long, default_value_t = LearnSettings::default().iterations)]
     pub iterations: usize,
     /// Models to run (comma-separated).
-    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [ModelArg::Msgp, ModelArg::GpNarx])]
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [ModelArg::Msgp, ModelArg::GpNarx, ModelArg::LinearKf])]
     pub models: Vec<ModelArg>,
     /// No progress lines on stderr.
     #[arg(long)]
@@ -195,8 +195,13 @@ fn render(args: &Figure4Args, runs: &[Run], seconds: f64, plot: &std::path::Path
         0 => String::new(),
         n => format!(", from the second iteration on warm-started for {n} iterations"),
     };
+    let kf = if args.models.contains(&ModelArg::LinearKf) {
+        " (linear-kf: at most that many L-BFGS iterations on the filter likelihood from each of two starts, no GP)"
+    } else {
+        ""
+    };
     s.push_str(&format!(
-        "- Budget per iteration: model fit {} {solver} iterations{warm} (m = {}), policy search: {} random gain candidates screened, {} Adam steps per start\n",
+        "- Budget per iteration: model fit {} {solver} iterations{warm} (m = {}){kf}, policy search: {} random gain candidates screened, {} Adam steps per start\n",
         d.fit_iters.map_or_else(|| "default".to_string(), |n| n.to_string()),
         d.inducing,
         d.candidates,
