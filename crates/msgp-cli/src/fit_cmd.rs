@@ -241,7 +241,6 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         optimizer: args.optimizer.into(),
     }
     .settings(&trajs)?;
-    let inducing = settings.inducing;
     let n_train: usize = trajs.iter().map(Trajectory::len).sum();
     let label = format!(
         "{} on {}",
@@ -262,6 +261,8 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             ));
         }
     };
+    // what the model has (a linear-kf model has one idle pseudo-input and no GP)
+    let inducing = model.params.pseudo_inputs.nrows();
     bar.finish(&format!("trained in {:.1} s", report.train_seconds));
     let file = ModelFile::from_fit(
         &model,
@@ -320,9 +321,13 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         metrics_json(&mut v, metrics.as_ref());
         return out_json(&v);
     }
+    let gp = match method {
+        Method::LinearKf => "no GP (linear-Gaussian, Kalman-filter likelihood)".to_string(),
+        _ => format!("{inducing} pseudo-inputs"),
+    };
     let mut text = format!(
         "{}: {}, {n_train} training and {n_test} test samples; inputs {}; outputs {}\n\
-         history l_y={ly}, l_u={lu}; {inducing} pseudo-inputs; seed {}\n\
+         history l_y={ly}, l_u={lu}; {gp}; seed {}\n\
          training time {:.1} s",
         method.name(),
         trajectories(data.parts.len()),

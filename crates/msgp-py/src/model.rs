@@ -106,7 +106,7 @@ impl Msgp {
 
     fn from_file(file: ModelFile, model: Model, report: Option<FitReport>) -> Self {
         let iterations = match model.method {
-            Method::Msgp => file.training.settings.get("iterations"),
+            Method::Msgp | Method::LinearKf => file.training.settings.get("iterations"),
             _ => file.training.settings.get("one_step_iterations"),
         }
         .and_then(serde_json::Value::as_u64)

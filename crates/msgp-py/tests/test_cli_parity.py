@@ -83,6 +83,20 @@ def test_dryer_msgp_by_lbfgs_matches_cli(dryer, cli, tmp_path):
     assert_same_fit(report, model, model.score(u[500:], y[500:]), out)
 
 
+def test_dryer_linear_kf_matches_cli(dryer, cli, tmp_path):
+    """The Kalman-filter linear model: the same fit from Python and the command line, and its
+    file loads back as a linear-kf model without a GP."""
+    path, u, y = dryer
+    out = tmp_path / "dryer.model.json"
+    report = cli_fit(cli, path, out, 500, (2, 2), method="linear-kf", iters=50)
+    model = msgp.Msgp(history=(2, 2), method="linear-kf", iterations=50, seed=0).fit(u[:500], y[:500])
+    report = report()
+    assert_same_fit(report, model, model.score(u[500:], y[500:]), out)
+    loaded = msgp.Msgp.load(out)
+    assert loaded.method == "linear-kf" and loaded.iterations == 50
+    assert np.all(np.asarray(loaded.params["pseudo_targets"]) == 0.0)
+
+
 def test_dryer_gp_narx_default_inducing_matches_cli(dryer, cli, tmp_path):
     """No --inducing: both take min(100, training windows / 2) = 100 pseudo-inputs."""
     path, u, y = dryer
