@@ -191,11 +191,7 @@ impl FitOptions {
             du: first.u.ncols(),
         };
         spec.validate()?;
-        let mean = match self.method {
-            Method::LinearKf => MeanFunction::Linear,
-            _ => self.mean,
-        };
-        integrator::validate(&self.integrators, &spec, mean)?;
+        integrator::validate(&self.integrators, &spec, model_mean(self.method, self.mean))?;
         let warmup = spec.warmup();
         for (k, t) in train.iter().enumerate() {
             if t.len() <= warmup {
@@ -351,6 +347,14 @@ fn validation_nll(
     Ok(total / steps.max(1) as f64)
 }
 
+/// The prior mean a `method` model gets when `requested`: a linear-kf model is its linear mean.
+fn model_mean(method: Method, requested: MeanFunction) -> MeanFunction {
+    match method {
+        Method::LinearKf => MeanFunction::Linear,
+        _ => requested,
+    }
+}
+
 /// Fits a model on training trajectories given in original units.
 pub fn fit(
     train: &[Trajectory],
@@ -450,12 +454,11 @@ fn fit_episodes_from(
         du: first.u.ncols(),
     };
     spec.validate()?;
-    // a linear-kf model always has the linear mean
-    let mean = match settings.method {
-        Method::LinearKf => MeanFunction::Linear,
-        _ => settings.mean,
-    };
-    integrator::validate(&settings.integrators, &spec, mean)?;
+    integrator::validate(
+        &settings.integrators,
+        &spec,
+        model_mean(settings.method, settings.mean),
+    )?;
     settings.start_window.validate(spec.warmup())?;
     for (k, t) in train.iter().enumerate() {
         t.check(&spec)
@@ -798,6 +801,7 @@ impl Stage<'_, '_> {
 mod tests {
     use super::*;
     use crate::rollout::rollout;
+    use nalgebra::DMatrix;
 
     fn traj(n: usize) -> Trajectory {
         let u: Vec<f64> = (0..n).map(|i| (i as f64 * 0.3).sin()).collect();
@@ -942,33 +946,40 @@ mod tests {
         .expect("kept model rolls out");
     }
 
-    /// A driven double integrator `y₁` next to a damped output `y₀`: declared a linear
-    /// integrator, `y₁`'s coefficients, the GP's length-scales on its lags and `y₁`'s absent GP
-    /// come out of an MSGP fit exactly as the declaration set them, while the rest of the model
-    /// was trained.
+    /// `y₀` a first-order lag `a y₀ + b u`, `y₁` a double integrator of `d u`, from rest, and
+    /// their measurements with a deterministic ripple of amplitude `ripple`; returns the clean
+    /// outputs too. `y₁` declared a kinematic double integrator: [`KINEMATIC_Y1`].
+    fn lag_and_double_integrator(
+        u: DMatrix<f64>,
+        (a, b, d): (f64, f64, f64),
+        ripple: f64,
+    ) -> (DMatrix<f64>, Trajectory) {
+        let n = u.nrows();
+        let mut y = DMatrix::<f64>::zeros(n, 2);
+        for t in 1..n - 1 {
+            y[(t + 1, 0)] = a * y[(t, 0)] + b * u[(t, 0)];
+            y[(t + 1, 1)] = 2.0 * y[(t, 1)] - y[(t - 1, 1)] + d * u[(t, 0)];
+        }
+        let measured = y.map(|v| v + ripple * (10.0 * v / ripple).sin());
+        (y, Trajectory::new(u, measured).expect("trajectory"))
+    }
+
+    const KINEMATIC_Y1: crate::integrator::Integrator = crate::integrator::Integrator {
+        output: 1,
+        order: 2,
+        linear: true,
+    };
+
     /// A linear-kf fit of a double integrator driven by a command with a non-zero mean: the
     /// model is scaled, not centred (a centred linear model without intercept would lose the
     /// mean command's constant acceleration, and its free simulation would drift away
     /// quadratically), keeps the declared coefficients and has no GP.
     #[test]
     fn a_linear_kf_fit_simulates_an_integrator_under_a_mean_command() {
-        use crate::integrator::Integrator;
-        use nalgebra::DMatrix;
         let n = 200;
         let u = DMatrix::from_fn(n, 1, |t, _| 0.5 + 0.3 * (0.1 * t as f64).sin());
-        let mut y = DMatrix::<f64>::zeros(n, 2);
-        for t in 1..n - 1 {
-            y[(t + 1, 0)] = 0.9 * y[(t, 0)] + 0.1 * u[(t, 0)];
-            y[(t + 1, 1)] = 2.0 * y[(t, 1)] - y[(t - 1, 1)] + 1e-3 * u[(t, 0)];
-        }
-        let clean = y.clone();
-        let y = y.map(|v| v + 1e-4 * (v * 1e5).sin());
-        let traj = Trajectory::new(u, y).expect("trajectory");
-        let integrators = vec![Integrator {
-            output: 1,
-            order: 2,
-            linear: true,
-        }];
+        let (clean, traj) = lag_and_double_integrator(u, (0.9, 0.1, 1e-3), 1e-4);
+        let integrators = vec![KINEMATIC_Y1];
         let settings = FitSettings {
             method: Method::LinearKf,
             ly: 2,
@@ -999,26 +1010,19 @@ mod tests {
         assert!(err0 < 0.01, "first output off by {err0}");
     }
 
+    /// A driven double integrator `y₁` next to a damped output `y₀`: declared a linear
+    /// integrator, `y₁`'s coefficients, the GP's length-scales on its lags and `y₁`'s absent GP
+    /// come out of an MSGP fit exactly as the declaration set them, while the rest of the model
+    /// was trained.
     #[test]
     fn an_msgp_fit_keeps_what_an_integrating_output_fixes() {
-        use crate::integrator::{IGNORED_LENGTHSCALE, Integrator, NO_GP_SIGNAL_VAR, Structure};
-        use nalgebra::DMatrix;
+        use crate::integrator::{IGNORED_LENGTHSCALE, NO_GP_SIGNAL_VAR, Structure};
         let n = 120;
         let u = DMatrix::from_fn(n, 1, |t, _| {
             (0.3 * t as f64).sin() + (0.71 * t as f64).cos()
         });
-        let mut y = DMatrix::<f64>::zeros(n, 2);
-        for t in 1..n - 1 {
-            y[(t + 1, 0)] = 0.8 * y[(t, 0)] + 0.3 * u[(t, 0)];
-            y[(t + 1, 1)] = 2.0 * y[(t, 1)] - y[(t - 1, 1)] + 0.01 * u[(t, 0)];
-        }
-        let y = y.map(|v| v + 1e-3 * (v * 1e4).sin());
-        let traj = Trajectory::new(u, y).expect("trajectory");
-        let integrators = vec![Integrator {
-            output: 1,
-            order: 2,
-            linear: true,
-        }];
+        let (_, traj) = lag_and_double_integrator(u, (0.8, 0.3, 0.01), 1e-3);
+        let integrators = vec![KINEMATIC_Y1];
         let settings = FitSettings {
             ly: 2,
             lu: 1,
