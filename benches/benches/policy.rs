@@ -165,6 +165,14 @@ fn bench_policy(c: &mut Criterion) {
     group.bench_function("msgp_20_one_step_plus_20_adam_iterations", |b| {
         b.iter(|| black_box(fit_episodes(&episodes, &msgp, &mut |_| {}).expect("fit")))
     });
+    // the linear-kf model the loop fits with `--model linear-kf`, to convergence (two starts)
+    let kf = FitSettings {
+        method: Method::LinearKf,
+        ..LearnSettings::for_method(Method::LinearKf).fit
+    };
+    group.bench_function("linear_kf_full_fit", |b| {
+        b.iter(|| black_box(fit_episodes(&episodes, &kf, &mut |_| {}).expect("fit")))
+    });
     group.finish();
 }
 
