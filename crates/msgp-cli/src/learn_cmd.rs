@@ -76,9 +76,9 @@ pub struct BudgetArgs {
     /// Solver of each MSGP model fit.
     #[arg(long, value_enum, default_value_t = OptimizerArg::Adam)]
     pub fit_optimizer: OptimizerArg,
-    /// From the second iteration on, continue the previous MSGP model for N solver iterations
-    /// (same normaliser and pseudo-inputs) instead of fitting from scratch; 0 (the default):
-    /// always from scratch.
+    /// From the second iteration on, continue the previous MSGP or linear-kf model for N solver
+    /// iterations (same normaliser and pseudo-inputs) instead of fitting from scratch; 0 (the
+    /// default): always from scratch.
     #[arg(long, value_name = "N", default_value_t = LearnSettings::default().warm_start.unwrap_or(0))]
     pub warm_start: usize,
     /// MSGP: start each training trajectory's predicted rollout from a quadratic fitted to its

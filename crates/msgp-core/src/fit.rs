@@ -396,7 +396,8 @@ pub fn fit_episodes(
 /// solver steps on `episodes` from `previous`'s parameters, in `previous`'s normalised units
 /// and with its pseudo-inputs, instead of a new normaliser, one-step fit and k-means. The
 /// settings must describe the same model (method MSGP, history, outputs and inputs, pseudo-input
-/// count and prior mean).
+/// count and prior mean). A linear-kf fit continues likewise: L-BFGS from the previous `A` and
+/// noise levels alone, instead of its two cold starts.
 pub fn refit_episodes(
     episodes: &[TrainingEpisode],
     settings: &FitSettings,
@@ -409,12 +410,24 @@ pub fn refit_episodes(
             reason: what,
         })
     };
-    if settings.method != Method::Msgp || previous.method != Method::Msgp {
+    if settings.method != previous.method
+        || !matches!(settings.method, Method::Msgp | Method::LinearKf)
+    {
         return refuse(format!(
-            "only MSGP fits continue from a previous model (settings: {}, model: {})",
+            "only MSGP and linear-kf fits continue from a previous model of their own method \
+             (settings: {}, model: {})",
             settings.method.name(),
             previous.method.name()
         ));
+    }
+    if settings.method == Method::LinearKf {
+        if (settings.ly, settings.lu) != (previous.spec.ly, previous.spec.lu) {
+            return refuse(format!(
+                "the previous model has history ({}, {}); the settings ask for ({}, {})",
+                previous.spec.ly, previous.spec.lu, settings.ly, settings.lu
+            ));
+        }
+        return fit_episodes_from(episodes, settings, Some(previous), progress);
     }
     if (settings.ly, settings.lu) != (previous.spec.ly, previous.spec.lu)
         || settings.inducing != previous.params.pseudo_inputs.nrows()
@@ -503,12 +516,18 @@ fn fit_episodes_from(
             ..normalizer
         };
         let norm: Vec<Trajectory> = train.iter().map(|t| scaled.apply(t)).collect();
+        let warm = previous.map(|p| crate::kalman::KalmanParams {
+            a: p.params.linear_mean.clone(),
+            log_process_noise: p.params.log_process_noise.clone(),
+            log_obs_noise: p.params.log_obs_noise.clone(),
+        });
         let (model, kf) = crate::kalman::fit_linear_kf(
             &norm,
             spec,
             &Structure::new(&settings.integrators, &spec),
             scaled,
             settings.iterations,
+            warm.as_ref(),
         )?;
         report.iterations_run = kf.iterations_run;
         report.best_iteration = kf.iterations_run;
@@ -1008,6 +1027,79 @@ mod tests {
         );
         let err0 = (sim.mean[(last, 0)] - clean[(n - 1, 0)]).abs();
         assert!(err0 < 0.01, "first output off by {err0}");
+    }
+
+    /// A linear-kf warm start continues the previous model: zero iterations return its
+    /// parameters and units exactly, more iterations do not make the filter's likelihood of the
+    /// new data worse than there, and a model of another method is refused.
+    #[test]
+    fn a_linear_kf_fit_continues_the_previous_model() {
+        let n = 200;
+        let u = DMatrix::from_fn(n, 1, |t, _| 0.5 + 0.3 * (0.1 * t as f64).sin());
+        let (_, traj) = lag_and_double_integrator(u, (0.9, 0.1, 1e-3), 1e-4);
+        let episode = |t: Trajectory| TrainingEpisode {
+            traj: t,
+            policy: None,
+        };
+        let settings = FitSettings {
+            method: Method::LinearKf,
+            ly: 2,
+            lu: 1,
+            iterations: 100,
+            integrators: vec![KINEMATIC_Y1],
+            ..FitSettings::default()
+        };
+        let (first, _) =
+            fit_episodes(&[episode(traj.slice(0, 120))], &settings, &mut |_| {}).expect("fit");
+        let all = [episode(traj.clone())];
+        let again = |iterations| {
+            refit_episodes(
+                &all,
+                &FitSettings {
+                    iterations,
+                    ..settings.clone()
+                },
+                &first,
+                &mut |_| {},
+            )
+            .expect("warm start")
+            .0
+        };
+        let same = again(0);
+        assert_eq!(same.params, first.params);
+        assert_eq!(same.normalizer, first.normalizer);
+        let more = again(50);
+        let nll = |m: &Model| {
+            let t = m.normalizer.apply(&traj);
+            let p = crate::kalman::KalmanParams {
+                a: m.params.linear_mean.clone(),
+                log_process_noise: m.params.log_process_noise.clone(),
+                log_obs_noise: m.params.log_obs_noise.clone(),
+            };
+            let mut log = JitterLog::default();
+            crate::kalman::kalman_nll(&p, &m.spec, &[&t], &m.config.jitter, &mut log)
+                .expect("filter")
+                .0
+        };
+        assert!(
+            nll(&more) <= nll(&first),
+            "{} > {}",
+            nll(&more),
+            nll(&first)
+        );
+        let (gp, _) = fit_episodes(
+            &all,
+            &FitSettings {
+                method: Method::GpNarx,
+                inducing: 10,
+                one_step_iterations: 5,
+                mean: MeanFunction::Linear,
+                ..settings.clone()
+            },
+            &mut |_| {},
+        )
+        .expect("gp-narx fit");
+        assert!(refit_episodes(&all, &settings, &gp, &mut |_| {}).is_err());
     }
 
     /// A driven double integrator `y₁` next to a damped output `y₀`: declared a linear

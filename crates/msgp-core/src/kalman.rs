@@ -282,10 +282,43 @@ pub fn third_difference_noise(trajs: &[&Trajectory], dy: usize) -> Vec<f64> {
         .collect()
 }
 
+/// The two cold starts of [`fit_linear_kf`] as flat parameter vectors.
+fn cold_starts(
+    refs: &[&Trajectory],
+    spec: NarxSpec,
+    structure: &Structure,
+    layout: &Layout,
+    config: &GpConfig,
+) -> Result<Vec<Vec<f64>>> {
+    let mut log = JitterLog::default();
+    let data = one_step_pairs(&spec, refs)?;
+    let least_squares = arx_linear_mean(&data, config, &structure.fixed, &mut log)?;
+    let mut persistent = layout.base.clone();
+    for &(i, j) in &layout.free {
+        persistent[(i, j)] = if j == spec.y_index(0, i) {
+            if spec.ly >= 2 { 2.0 } else { 1.0 }
+        } else if spec.ly >= 2 && j == spec.y_index(1, i) {
+            -1.0
+        } else {
+            0.0
+        };
+    }
+    let log_r: Vec<f64> = third_difference_noise(refs, spec.dy)
+        .iter()
+        .map(|v| v.ln())
+        .collect();
+    let log_q: Vec<f64> = log_r.iter().map(|l| l + START_PROCESS_RATIO.ln()).collect();
+    Ok([least_squares, persistent]
+        .iter()
+        .map(|a| layout.flat(a, &log_q, &log_r))
+        .collect())
+}
+
 /// What a `linear-kf` fit did.
 #[derive(Clone, Debug, PartialEq)]
 pub struct KalmanReport {
-    /// Mean NLL per scored sample from each start, in start order (least squares, persistent).
+    /// Mean NLL per scored sample from each start, in start order (least squares, persistent;
+    /// or the warm start alone).
     pub start_losses: Vec<f64>,
     /// Index of the start whose fit was kept.
     pub chosen_start: usize,
@@ -305,13 +338,15 @@ pub struct KalmanReport {
 ///    damped basin that the likelihood does not leave (the pendulum's pole).
 ///
 /// Both start with the sensor noise of [`third_difference_noise`] and a process noise
-/// [`START_PROCESS_RATIO`] times smaller.
+/// [`START_PROCESS_RATIO`] times smaller. With `previous` (a *warm start*: the parameters of a
+/// fit to fewer of the same episodes, in the same units) the fit starts there alone.
 pub fn fit_linear_kf(
     norm: &[Trajectory],
     spec: NarxSpec,
     structure: &Structure,
     normalizer: Normalizer,
     iterations: usize,
+    previous: Option<&KalmanParams<f64>>,
 ) -> Result<(Model, KalmanReport)> {
     let refs: Vec<&Trajectory> = norm.iter().collect();
     let layout = Layout::new(spec, structure);
@@ -320,24 +355,14 @@ pub fn fit_linear_kf(
         noise_floor: KF_NOISE_FLOOR,
         ..GpConfig::default()
     };
-    let mut log = JitterLog::default();
-    let data = one_step_pairs(&spec, &refs)?;
-    let least_squares = arx_linear_mean(&data, &config, &structure.fixed, &mut log)?;
-    let mut persistent = layout.base.clone();
-    for &(i, j) in &layout.free {
-        persistent[(i, j)] = if j == spec.y_index(0, i) {
-            if spec.ly >= 2 { 2.0 } else { 1.0 }
-        } else if spec.ly >= 2 && j == spec.y_index(1, i) {
-            -1.0
-        } else {
-            0.0
-        };
-    }
-    let log_r: Vec<f64> = third_difference_noise(&refs, spec.dy)
-        .iter()
-        .map(|v| v.ln())
-        .collect();
-    let log_q: Vec<f64> = log_r.iter().map(|l| l + START_PROCESS_RATIO.ln()).collect();
+    let starts: Vec<Vec<f64>> = match previous {
+        Some(p) => vec![layout.flat(
+            &p.a,
+            p.log_process_noise.as_slice(),
+            p.log_obs_noise.as_slice(),
+        )],
+        None => cold_starts(&refs, spec, structure, &layout, &config)?,
+    };
     let mut objective = KalmanObjective {
         layout: &layout,
         trajs: &refs,
@@ -347,8 +372,7 @@ pub fn fit_linear_kf(
     let active = vec![true; layout.len()];
     let mut best: Option<(Vec<f64>, f64, usize, usize)> = None;
     let mut start_losses = Vec::new();
-    for (k, a0) in [least_squares, persistent].iter().enumerate() {
-        let x0 = layout.flat(a0, &log_q, &log_r);
+    for (k, x0) in starts.into_iter().enumerate() {
         let mut last_it = 0;
         let (x, v) = minimize(
             &mut objective,
@@ -580,9 +604,15 @@ mod tests {
             let refs: Vec<&Trajectory> = trajs.iter().collect();
             let normalizer = Normalizer::fit(&refs).expect("normaliser");
             let norm: Vec<Trajectory> = trajs.iter().map(|t| normalizer.apply(t)).collect();
-            let (model, report) =
-                fit_linear_kf(&norm, spec, &Structure::default(), normalizer.clone(), 300)
-                    .expect("fit");
+            let (model, report) = fit_linear_kf(
+                &norm,
+                spec,
+                &Structure::default(),
+                normalizer.clone(),
+                300,
+                None,
+            )
+            .expect("fit");
             assert!(report.start_losses.iter().all(|l| l.is_finite()));
             assert_eq!(model.method, Method::LinearKf);
             assert!(model.params.pseudo_targets.iter().all(|v| *v == 0.0));

@@ -94,10 +94,10 @@ pub struct LearnSettings {
     /// Typical gain magnitudes `[kp_x, ki_x, kd_x, kp_θ, kd_θ]`: the first policy's gains and
     /// the optimiser's coordinate scales (units of the problem, not a solution).
     pub gain_scale: [f64; 5],
-    /// Warm starts (MSGP only): from the second iteration on, each fit continues the previous
-    /// iteration's model for this many solver iterations ([`refit_episodes`]: its normaliser,
-    /// pseudo-inputs and parameters) instead of starting over from a one-step fit; `None`
-    /// starts over every time (the default). Warm starts make iterations 2–8 4.5–6× faster, but
+    /// Warm starts (MSGP and linear-kf): from the second iteration on, each fit continues the
+    /// previous iteration's model for this many solver iterations ([`refit_episodes`]: its
+    /// normaliser, pseudo-inputs and parameters) instead of starting over from a one-step fit
+    /// (linear-kf: from its two cold starts); `None` starts over every time (the default). Warm starts make iterations 2–8 4.5–6× faster, but
     /// on the five Figure 4 seeds the later iterations measured worse (mean episode cost 36–97
     /// against 28–65), so they are an option (BENCHMARKS.md).
     #[serde(default)]
@@ -524,15 +524,17 @@ pub fn learn_policy(
         };
         let clock = std::time::Instant::now();
         let fitted = match (&previous_model, settings.warm_start) {
-            (Some(prev), Some(n)) if settings.method == Method::Msgp => refit_episodes(
-                &training,
-                &FitSettings {
-                    iterations: n,
-                    ..fit_settings.clone()
-                },
-                prev,
-                &mut |_| {},
-            ),
+            (Some(prev), Some(n)) if matches!(settings.method, Method::Msgp | Method::LinearKf) => {
+                refit_episodes(
+                    &training,
+                    &FitSettings {
+                        iterations: n,
+                        ..fit_settings.clone()
+                    },
+                    prev,
+                    &mut |_| {},
+                )
+            }
             _ => fit_episodes(&training, &fit_settings, &mut |_| {}),
         };
         let (model, mut fit_report) = match fitted {
@@ -559,7 +561,7 @@ pub fn learn_policy(
         let fit_seconds = clock.elapsed().as_secs_f64();
         // a one-step fallback model is not continued: the next fit starts over
         if settings.warm_start.is_some() {
-            previous_model = (model.method == Method::Msgp).then(|| model.clone());
+            previous_model = (model.method == settings.method).then(|| model.clone());
         }
         let problem = pendulum_problem(&model, params, cost.clone(), policy_horizon);
         let search = PolicySearchSettings {
