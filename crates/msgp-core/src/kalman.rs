@@ -485,6 +485,26 @@ mod tests {
         out
     }
 
+    /// Third differences of a slow signal plus white noise give the noise's variance.
+    #[test]
+    fn third_differences_estimate_the_sensor_noise() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(9);
+        let y: Vec<f64> = (0..4000)
+            .map(|t| {
+                let z: f64 = StandardNormal.sample(&mut rng);
+                (0.01 * t as f64).sin() + 0.05 * z
+            })
+            .collect();
+        let u = vec![0.0; y.len()];
+        let traj = Trajectory::siso(&u, &y).expect("trajectory");
+        let v = third_difference_noise(&[&traj], 1);
+        assert!(
+            (v[0].sqrt() / 0.05 - 1.0).abs() < 0.05,
+            "σ = {}",
+            v[0].sqrt()
+        );
+    }
+
     fn siso_params<T: Scalar>(x: &[T]) -> KalmanParams<T> {
         // window [f_t, f_{t−1}, u_t, u_{t−1}]
         KalmanParams {
