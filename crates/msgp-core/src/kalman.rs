@@ -228,7 +228,9 @@ struct KalmanObjective<'a> {
     threads: usize,
 }
 
+#[cfg(test)]
 impl KalmanObjective<'_> {
+    /// The f64 value alone (the duals' real part is tested against it).
     fn value(&self, x: &[f64]) -> Result<f64> {
         let mut log = JitterLog::default();
         let (v, steps) = kalman_nll(
@@ -385,12 +387,6 @@ pub fn fit_linear_kf(
                 Ok(Flow::Continue)
             },
         )?;
-        // the solver's value at its last accepted point, checked in f64
-        let v = if v.is_finite() {
-            objective.value(&x).unwrap_or(f64::NAN)
-        } else {
-            v
-        };
         start_losses.push(v);
         if v.is_finite() && best.as_ref().is_none_or(|b| v < b.1) {
             best = Some((x, v, k, last_it));

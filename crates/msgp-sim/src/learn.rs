@@ -97,9 +97,11 @@ pub struct LearnSettings {
     /// Warm starts (MSGP and linear-kf): from the second iteration on, each fit continues the
     /// previous iteration's model for this many solver iterations ([`refit_episodes`]: its
     /// normaliser, pseudo-inputs and parameters) instead of starting over from a one-step fit
-    /// (linear-kf: from its two cold starts); `None` starts over every time (the default). Warm starts make iterations 2–8 4.5–6× faster, but
-    /// on the five Figure 4 seeds the later iterations measured worse (mean episode cost 36–97
-    /// against 28–65), so they are an option (BENCHMARKS.md).
+    /// (linear-kf: from its two cold starts); `None` starts over every time (the default).
+    /// MSGP warm starts make iterations 2–8 4.5–6× faster, but on the five Figure 4 seeds the
+    /// later iterations measured worse (mean episode cost 36–97 against 28–65); linear-kf ones
+    /// keep every iteration at 2.0–2.8 s with the same seeds stable. Both stay options
+    /// (BENCHMARKS.md).
     #[serde(default)]
     pub warm_start: Option<usize>,
 }
@@ -384,7 +386,8 @@ fn interact(
 }
 
 /// `traj` cut into segments of `segment` samples for MSGP fits; whole otherwise, and always
-/// for one-step fits (they see every pair once: segments would duplicate the overlaps).
+/// for one-step and linear-kf fits (they see every pair once: segments would duplicate the
+/// overlaps; the filter handles a whole unstable episode).
 fn msgp_segments(
     traj: Trajectory,
     segment: Option<usize>,
