@@ -192,16 +192,35 @@ fn render(args: &Figure4Args, runs: &[Run], seconds: f64, plot: &std::path::Path
     ));
     let solver = FitOptimizer::from(d.fit_optimizer).name();
     let warm = match d.warm_start {
-        0 => String::new(),
-        n => format!(", from the second iteration on warm-started for {n} iterations"),
+        None | Some(0) => String::new(),
+        Some(n) => format!(", from the second iteration on warm-started for {n} iterations"),
     };
-    let kf = if args.models.contains(&ModelArg::LinearKf) {
-        " (linear-kf: at most that many L-BFGS iterations on the filter likelihood from each of two starts, no GP)"
-    } else {
-        ""
+    let kf = match (args.models.contains(&ModelArg::LinearKf), d.warm_start) {
+        (false, _) => String::new(),
+        (true, None) => format!(
+            " (linear-kf: no GP, at most that many L-BFGS iterations on the filter likelihood from each of two starts at iteration 1, then at most {} from the previous model)",
+            msgp_sim::learn::LINEAR_KF_WARM_START
+        ),
+        (true, Some(0)) => {
+            " (linear-kf: no GP, at most that many L-BFGS iterations on the filter likelihood from each of two starts)"
+                .to_string()
+        }
+        (true, Some(_)) => {
+            " (linear-kf: no GP, L-BFGS on the filter likelihood, at iteration 1 from each of two starts)"
+                .to_string()
+        }
+    };
+    let horizon = match d.policy_horizon {
+        Some(h) => format!("{h} s"),
+        None if args.models.contains(&ModelArg::LinearKf) => format!(
+            "{} s (linear-kf: {} s)",
+            LearnSettings::default().policy_horizon_seconds,
+            msgp_sim::learn::LINEAR_KF_POLICY_HORIZON_SECONDS
+        ),
+        None => format!("{} s", LearnSettings::default().policy_horizon_seconds),
     };
     s.push_str(&format!(
-        "- Budget per iteration: model fit {} {solver} iterations{warm} (m = {}){kf}, policy search: {} random gain candidates screened, {} Adam steps per start\n",
+        "- Budget per iteration: model fit {} {solver} iterations{warm} (m = {}){kf}, policy search: {} random gain candidates screened, {} Adam steps per start, on predicted rollouts over {horizon}\n",
         d.fit_iters.map_or_else(|| "default".to_string(), |n| n.to_string()),
         d.inducing,
         d.candidates,

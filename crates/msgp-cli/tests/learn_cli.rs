@@ -357,5 +357,60 @@ fn learn_policy_runs_the_linear_kf_model() {
         assert!(it["fit_numerical_stop"].is_null(), "{it}");
     }
     assert!(dir.join("kf/policy.json").is_file());
+    // linear-kf fits are warm-started by default; `--warm-start 0` starts each from scratch
+    assert_eq!(v["settings"]["warm_start"], 300);
+    assert_eq!(v["settings"]["policy_horizon_seconds"], 10.0);
+    let cold = learn_json(
+        &dir,
+        "kf-cold",
+        &[
+            "--model",
+            "linear-kf",
+            "--iterations",
+            "2",
+            "--warm-start",
+            "0",
+        ],
+    );
+    assert!(cold["settings"]["warm_start"].is_null());
+    assert_eq!(
+        without_timings(&cold["iterations"])[0],
+        without_timings(&v["iterations"])[0],
+        "the first iteration has no previous model"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A loop that finds no stable policy says so, and points an MSGP user at linear-kf.
+#[test]
+fn an_unstable_msgp_loop_points_at_linear_kf() {
+    let dir = scratch("msgp-hint");
+    let args = [
+        "learn-policy",
+        "--sim",
+        "pendulum",
+        "--out",
+        "m",
+        "--iterations",
+        "1",
+    ];
+    let o = run(&dir, &[&args[..], &TINY[..]].concat());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = String::from_utf8_lossy(&o.stdout);
+    let v: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("m/summary.json")).expect("summary"))
+            .expect("summary JSON");
+    assert!(
+        v["settings"]["warm_start"].is_null(),
+        "msgp fits start over"
+    );
+    assert_eq!(v["settings"]["policy_horizon_seconds"], 5.0);
+    // this seed's tiny run fails the test (deterministic: everything is seeded)
+    assert!(v["first_stable_iteration"].is_null(), "{out}");
+    assert!(
+        out.contains("no iteration passed the stability test"),
+        "{out}"
+    );
+    assert!(out.contains("try --model linear-kf"), "{out}");
     let _ = std::fs::remove_dir_all(&dir);
 }

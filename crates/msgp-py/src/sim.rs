@@ -55,13 +55,28 @@ pub fn synthetic_system<'py>(
 }
 
 /// The default values of a group of settings as a dict: "pendulum" (plant parameters),
-/// "stability" (stability-test criteria), "learn" (policy-learning loop), "fit" (model fit).
+/// "stability" (stability-test criteria), "learn" (policy-learning loop; `method` picks the
+/// model's defaults, as `learn_policy(method)` uses them), "fit" (model fit).
 #[pyfunction]
-pub fn defaults<'py>(py: Python<'py>, what: &str) -> PyResult<Bound<'py, PyAny>> {
+#[pyo3(signature = (what, *, method = None))]
+pub fn defaults<'py>(
+    py: Python<'py>,
+    what: &str,
+    method: Option<&str>,
+) -> PyResult<Bound<'py, PyAny>> {
+    if method.is_some() && what != "learn" {
+        return Err(input(format!(
+            "defaults({what:?}): method applies to the \"learn\" defaults only"
+        ))
+        .into());
+    }
     match what {
         "pendulum" => to_python(py, &PendulumParams::default()),
         "stability" => to_python(py, &StabilityCriteria::default()),
-        "learn" => to_python(py, &LearnSettings::default()),
+        "learn" => {
+            let m = crate::model::method(method.unwrap_or("msgp"))?;
+            to_python(py, &LearnSettings::for_method(m))
+        }
         "fit" => to_python(py, &FitSettings::default()),
         other => Err(input(format!(
             "no defaults for {other:?}: expected \"pendulum\", \"stability\", \"learn\" or \"fit\""
@@ -233,7 +248,8 @@ pub fn stability_test<'py>(
 /// paper section 4.2): random rollouts, then per iteration fit the model, optimise the gains on it,
 /// run them. Returns one dict per iteration (`iteration`, `predicted_cost`,
 /// `predicted_cost_std`, `actual_cost`, `interaction_seconds`, `stable`, `gains`, …).
-/// `settings` overrides other fields of `defaults("learn")` (nested dicts merge), `params`
+/// `settings` overrides other fields of `defaults("learn", method=method)` (nested dicts
+/// merge), `params`
 /// the plant. Takes minutes; releases the GIL.
 #[pyfunction]
 #[pyo3(signature = (method = "msgp", iterations = 8, seed = 0, *, params = None, settings = None))]

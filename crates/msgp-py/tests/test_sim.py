@@ -1,6 +1,7 @@
 """The pendulum simulator, its stability test and the policy-learning loop from Python."""
 
 import numpy as np
+import pytest
 
 import msgp
 
@@ -82,3 +83,20 @@ def test_learn_policy_runs_and_reports():
     again = msgp.learn_policy(method="msgp", iterations=1, seed=2, settings=settings)
     assert untimed(again) == untimed(reports)
     assert msgp.defaults("learn")["iterations"] == 8
+
+
+def test_learn_defaults_per_model():
+    """`defaults("learn", method=...)` are the loop's defaults for that model: linear-kf
+    warm-starts its fits and searches over the stability test's 10 s; the others do not."""
+    msgp_defaults = msgp.defaults("learn")
+    assert msgp_defaults == msgp.defaults("learn", method="msgp")
+    assert msgp_defaults["warm_start"] is None
+    assert msgp_defaults["policy_horizon_seconds"] == 5.0
+    kf = msgp.defaults("learn", method="linear-kf")
+    assert kf["warm_start"] == 300
+    assert kf["policy_horizon_seconds"] == 10.0
+    assert kf["method"] == "LinearKf"  # the settings' serde name
+    with pytest.raises(ValueError, match="learn"):
+        msgp.defaults("fit", method="linear-kf")
+    with pytest.raises(ValueError, match="method"):
+        msgp.defaults("learn", method="pilco")

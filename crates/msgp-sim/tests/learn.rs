@@ -195,19 +195,38 @@ fn feedback_segments_change_msgp_fits_only() {
 #[test]
 fn linear_kf_defaults_declare_the_end_effector_kinematic_and_run() {
     use msgp_core::model::Method;
-    use msgp_sim::learn::{END_EFFECTOR_INTEGRATOR, END_EFFECTOR_KINEMATIC};
+    use msgp_sim::learn::{
+        END_EFFECTOR_INTEGRATOR, END_EFFECTOR_KINEMATIC, LINEAR_KF_POLICY_HORIZON_SECONDS,
+        LINEAR_KF_WARM_START,
+    };
     assert_eq!(
         LearnSettings::for_method(Method::Msgp),
         LearnSettings::default()
     );
     let kf = LearnSettings::for_method(Method::LinearKf);
     assert_eq!(kf.fit.integrators, vec![END_EFFECTOR_KINEMATIC]);
+    assert_eq!(kf.warm_start, Some(LINEAR_KF_WARM_START));
+    assert_eq!(kf.policy_horizon_seconds, LINEAR_KF_POLICY_HORIZON_SECONDS);
+    assert_eq!(
+        LearnSettings {
+            fit: LearnSettings::default().fit,
+            warm_start: None,
+            policy_horizon_seconds: LearnSettings::default().policy_horizon_seconds,
+            ..kf.clone()
+        },
+        LearnSettings {
+            method: Method::LinearKf,
+            ..LearnSettings::default()
+        },
+        "nothing else differs"
+    );
     assert_eq!(
         LearnSettings::for_method(Method::GpNarx).fit.integrators,
         vec![END_EFFECTOR_INTEGRATOR]
     );
+    // two iterations: the second warm-starts from the first's model
     let settings = LearnSettings {
-        iterations: 1,
+        iterations: 2,
         random_rollouts: 2,
         episode_seconds: 1.0,
         search: PolicySearchSettings {
@@ -221,8 +240,8 @@ fn linear_kf_defaults_declare_the_end_effector_kinematic_and_run() {
     let params = PendulumParams::default();
     let a = learn_policy(&params, &settings, &mut |_| {}).expect("loop runs");
     let b = learn_policy(&params, &settings, &mut |_| {}).expect("loop runs");
-    assert_eq!(a.iterations.len(), 1);
-    assert!(a.iterations[0].predicted_cost.is_finite());
+    assert_eq!(a.iterations.len(), 2);
+    assert!(a.iterations.iter().all(|r| r.predicted_cost.is_finite()));
     assert_eq!(a.final_gains, b.final_gains);
-    assert_eq!(a.iterations[0].actual_cost, b.iterations[0].actual_cost);
+    assert_eq!(a.iterations[1].actual_cost, b.iterations[1].actual_cost);
 }

@@ -115,8 +115,9 @@ def synthetic_system(k: int, seed: int = 0, noise: str = "std") -> Dict[str, Any
     """Synthetic system k (1–5) of the paper's Table 2: u_train, y_train, u_test, y_test
     (1-D arrays) and history (l_y, l_u)."""
 
-def defaults(what: str) -> Dict[str, Any]:
-    """Defaults of "pendulum", "stability", "learn" or "fit" settings."""
+def defaults(what: str, *, method: Optional[str] = None) -> Dict[str, Any]:
+    """Defaults of "pendulum", "stability", "learn" or "fit" settings; for "learn", those of
+    the model `method` ("msgp" when None; "linear-kf" warm-starts and searches over 10 s)."""
 
 def run_episode(
     controller: Optional[Gains] = None,
