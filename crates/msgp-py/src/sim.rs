@@ -249,8 +249,7 @@ pub fn stability_test<'py>(
 /// run them. Returns one dict per iteration (`iteration`, `predicted_cost`,
 /// `predicted_cost_std`, `actual_cost`, `interaction_seconds`, `stable`, `gains`, …).
 /// `settings` overrides other fields of `defaults("learn", method=method)` (nested dicts
-/// merge), `params`
-/// the plant. Takes minutes; releases the GIL.
+/// merge), `params` the plant. Takes minutes; releases the GIL.
 #[pyfunction]
 #[pyo3(signature = (method = "msgp", iterations = 8, seed = 0, *, params = None, settings = None))]
 pub fn learn_policy<'py>(

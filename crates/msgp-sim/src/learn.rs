@@ -100,8 +100,8 @@ pub struct LearnSettings {
     /// (linear-kf: from its two cold starts); `None` starts over every time (the default).
     /// MSGP warm starts make iterations 2–8 4.5–6× faster, but on the five Figure 4 seeds the
     /// later iterations measured worse (mean episode cost 36–97 against 28–65), so MSGP starts
-    /// over by default. linear-kf warm starts keep every iteration at 2.0–2.8 s with the same
-    /// seeds stable: [`LearnSettings::for_method`] turns them on for linear-kf
+    /// over by default. linear-kf warm starts kept every iteration at 2.0–2.8 s (5 s policy
+    /// horizon) with the same seeds stable: [`LearnSettings::for_method`] turns them on for linear-kf
     /// ([`LINEAR_KF_WARM_START`]; BENCHMARKS.md).
     #[serde(default)]
     pub warm_start: Option<usize>,
@@ -178,7 +178,8 @@ impl LearnSettings {
 /// held, a 5 s horizon lets the search trade a slow drift of the end effector (an ever more
 /// negative `ki_x`) for a cheaper 5 s; on the five Figure 4 seeds 33–34 of 40 iterations then
 /// passed the 10 s test, and 37 of 40 with this horizon, at the same first stable iterations
-/// (docs/design.md). The search takes about twice as long (≈ 2.5 s per iteration).
+/// (docs/design.md). The search takes about twice as long (2.5–3.6 s per iteration alone on
+/// the 2-core machine, BENCHMARKS.md).
 pub const LINEAR_KF_POLICY_HORIZON_SECONDS: f64 = 10.0;
 
 /// The default warm start of a linear-kf loop ([`LearnSettings::warm_start`]): from the second
@@ -186,7 +187,7 @@ pub const LINEAR_KF_POLICY_HORIZON_SECONDS: f64 = 10.0;
 /// by itself when converged, after 10–40), instead of two cold starts. The filter likelihood
 /// changes little when one episode is added, so the previous optimum is a start next to the new
 /// one; from scratch, the fit's time grows with the data (to 5–14 s by iteration 8), warm it
-/// stays at 0.6–1.3 s.
+/// stays at 0.6–2.3 s.
 pub const LINEAR_KF_WARM_START: usize = 300;
 
 /// [`END_EFFECTOR_INTEGRATOR`] declared kinematic as well: its acceleration is a linear function
