@@ -34,7 +34,7 @@ enum Command {
     Eval(Box<eval_cmd::EvalArgs>),
     /// Free simulation with a saved model, written as CSV (mean, std, measured per step).
     Simulate(Box<eval_cmd::SimulateArgs>),
-    /// Learn a controller with PILCO on a simulated system (MSGP or GP-NARX models).
+    /// Learn a controller with PILCO on a simulated system (MSGP, GP-NARX or linear-kf models).
     LearnPolicy(Box<learn_cmd::LearnArgs>),
     /// Reproduce the paper's results.
     #[command(subcommand)]
