@@ -3,7 +3,8 @@
 //! 250-step closed-loop rollouts): one expected-cost evaluation in f64, the gradient over the 5
 //! gains by the adjoint sweep (the search's) and by duals (5 and 8 lanes), a reduced policy search
 //! (on every core and on one), and 20 Adam iterations of the MSGP fit on four random rollouts
-//! plus one feedback episode.
+//! plus one feedback episode; and the value and adjoint gradient of the linear-kf loop's
+//! problem (its model, a 10 s = 500-step horizon).
 //!
 //! The model is fitted once, outside the timings, on four 3 s random-excitation episodes and one
 //! 3 s episode of the hand-tuned gains (seeded).
@@ -149,6 +150,36 @@ fn bench_policy(c: &mut Criterion) {
             },
         );
     }
+    group.finish();
+
+    // the linear-kf loop's problem: its model (no GP) and its 10 s (500-step) horizon, where the
+    // policy's per-step vector–Jacobian product is most of the adjoint sweep
+    let kf_settings = LearnSettings::for_method(Method::LinearKf);
+    let kf_fit = FitSettings {
+        method: Method::LinearKf,
+        ..kf_settings.fit.clone()
+    };
+    let (kf_model, _) = fit_episodes(&episodes, &kf_fit, &mut |_| {}).expect("linear-kf fit");
+    let kf_problem = PolicyProblem {
+        model: &kf_model,
+        y0_mean: problem.y0_mean.clone(),
+        y0_var: problem.y0_var.clone(),
+        u0: problem.u0.clone(),
+        cost: problem.cost.clone(),
+        horizon: (kf_settings.policy_horizon_seconds * params.control_rate_hz).round() as usize,
+    };
+    let mut group = c.benchmark_group("policy_pendulum_linear_kf_H500");
+    group
+        .sample_size(10)
+        .sampling_mode(SamplingMode::Flat)
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(4));
+    group.bench_function("expected_cost_f64", |b| {
+        b.iter(|| black_box(kf_problem.evaluate(&initial).expect("evaluate")))
+    });
+    group.bench_function("gradient_adjoint", |b| {
+        b.iter(|| black_box(kf_problem.gradient(&mask, &initial, &x).expect("gradient")))
+    });
     group.finish();
 
     let mut group = c.benchmark_group("fit_pendulum_m50");

@@ -55,8 +55,14 @@ impl PidMask {
 
     /// The free gains of `p` as a vector (K_p, then K_i, then K_d; column-major).
     pub fn pack(&self, p: &PidPolicy<f64>) -> Vec<f64> {
+        self.pack_matrices(&p.kp, &p.ki, &p.kd)
+    }
+
+    /// The free entries of three d_u × d_y matrices (gains or their adjoints), in
+    /// [`PidMask::pack`]'s order.
+    fn pack_matrices(&self, kp: &DMatrix<f64>, ki: &DMatrix<f64>, kd: &DMatrix<f64>) -> Vec<f64> {
         let mut v = Vec::new();
-        for (m, g) in [(&self.kp, &p.kp), (&self.ki, &p.ki), (&self.kd, &p.kd)] {
+        for (m, g) in [(&self.kp, kp), (&self.ki, ki), (&self.kd, kd)] {
             v.extend(m.iter().zip(g.iter()).filter(|(b, _)| **b).map(|(_, x)| *x));
         }
         v
@@ -237,6 +243,16 @@ impl PolicyProblem<'_> {
             }
             .moments(qm, qc)
         };
+        // the policy map's VJP in closed form (the duals through `moments` are its reference)
+        let vjp = |qm: &DVector<f64>,
+                   qc: &DMatrix<f64>,
+                   mean_bar: &DVector<f64>,
+                   cov_bar: &DMatrix<f64>,
+                   c_bar: &DMatrix<f64>| {
+            let (qm_bar, qc_bar, gains) = policy.moments_vjp(qm, qc, mean_bar, cov_bar, c_bar)?;
+            let theta_bar = mask.pack_matrices(&gains.kp, &gains.ki, &gains.kd);
+            Ok((qm_bar, qc_bar, theta_bar))
+        };
         let start = self.start::<f64>(policy.state_dim());
         let t0 = self.model.spec.warmup();
         closed_loop_cost_gradient(
@@ -245,6 +261,7 @@ impl PolicyProblem<'_> {
             &start,
             &policy,
             &moments,
+            Some(&vjp),
             g,
             t0,
             t0 + self.horizon,

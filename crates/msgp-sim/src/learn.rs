@@ -177,9 +177,9 @@ impl LearnSettings {
 /// The policy horizon of a linear-kf loop \[s\]: the stability test's length. Once the pole is
 /// held, a 5 s horizon lets the search trade a slow drift of the end effector (an ever more
 /// negative `ki_x`) for a cheaper 5 s; on the five Figure 4 seeds 33–34 of 40 iterations then
-/// passed the 10 s test, and 37 of 40 with this horizon, at the same first stable iterations
-/// (docs/design.md). The search takes about twice as long (2.5–3.6 s per iteration alone on
-/// the 2-core machine, BENCHMARKS.md).
+/// passed the 10 s test and two runs of five ended on failing gains; with this horizon 36–37
+/// of 40 passed (docs/design.md). The search takes about twice as long as at 5 s (1.1–1.2 s
+/// per iteration alone on the 2-core machine, BENCHMARKS.md).
 pub const LINEAR_KF_POLICY_HORIZON_SECONDS: f64 = 10.0;
 
 /// The default warm start of a linear-kf loop ([`LearnSettings::warm_start`]): from the second

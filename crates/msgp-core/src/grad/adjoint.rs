@@ -516,6 +516,18 @@ struct PolicyRecord {
 pub type DualPolicyMap<'a> =
     dyn Fn(&[Dual], &DVector<Dual>, &DMatrix<Dual>) -> Result<PolicyMoments<Dual>> + Sync + 'a;
 
+/// A policy's vector–Jacobian product in closed form, `(q_m, q_c, ō_mean, ō_cov, C̄) ↦ (q̄_m,
+/// q̄_c, θ̄)`: what [`policy_vjp`] computes by duals through a [`DualPolicyMap`].
+pub type PolicyVjp<'a> = dyn Fn(
+        &DVector<f64>,
+        &DMatrix<f64>,
+        &DVector<f64>,
+        &DMatrix<f64>,
+        &DMatrix<f64>,
+    ) -> Result<(DVector<f64>, DMatrix<f64>, Vec<f64>)>
+    + Sync
+    + 'a;
+
 /// The policy of a closed-loop adjoint rollout, and what the sweep differentiates it by.
 pub(crate) struct AdjointPolicy<'a> {
     /// The policy at its current parameters.
@@ -523,13 +535,17 @@ pub(crate) struct AdjointPolicy<'a> {
     /// The same policy's moment map in dual numbers (for the vector–Jacobian product of each
     /// step); `θ` may be empty (a fixed policy: the feedback episodes of a model fit).
     pub moments: &'a DualPolicyMap<'a>,
+    /// The vector–Jacobian product in closed form, used instead of duals through `moments`
+    /// when given.
+    pub vjp: Option<&'a PolicyVjp<'a>>,
     /// The parameter values `θ`.
     pub theta: &'a [f64],
 }
 
 /// Vector–Jacobian product of a policy's moment map at `(qm, qc, θ)`: the gradient of
 /// `⟨ō_mean, mean⟩ + ⟨ō_cov, cov⟩ + ⟨C̄, C⟩` with respect to every entry of `qm`, `qc` and `θ`,
-/// by forward-mode duals (the policy block is small: `n_q + n_q² + |θ|` directions).
+/// in closed form when the policy has one ([`AdjointPolicy::vjp`]), else by forward-mode duals
+/// (`n_q + n_q² + |θ|` directions).
 fn policy_vjp(
     policy: &AdjointPolicy<'_>,
     rec: &PolicyRecord,
@@ -537,6 +553,9 @@ fn policy_vjp(
     cov_bar: &DMatrix<f64>,
     c_bar: &DMatrix<f64>,
 ) -> Result<(DVector<f64>, DMatrix<f64>, Vec<f64>)> {
+    if let Some(vjp) = policy.vjp {
+        return vjp(&rec.qm, &rec.qc, mean_bar, cov_bar, c_bar);
+    }
     let nq = rec.qm.len();
     let mut x: Vec<f64> = rec.qm.iter().copied().collect();
     x.extend(rec.qc.iter().copied());
@@ -595,7 +614,8 @@ fn cost_vjp(
 /// ([`crate::policy_cost::closed_loop_cost`]), by the adjoint sweep: reverse mode over the
 /// rollout, forward-mode duals only inside each step's small policy and cost maps. It costs a
 /// few rollouts whatever `|θ|`; duals over `θ` through the whole rollout are the reference it
-/// is tested against. `moments` is the same policy's moment map in dual numbers.
+/// is tested against. `moments` is the same policy's moment map in dual numbers; `vjp`, when
+/// given, its vector–Jacobian product in closed form (used instead of duals through `moments`).
 #[allow(clippy::too_many_arguments)]
 pub fn closed_loop_cost_gradient(
     gp: &PreparedGp<f64>,
@@ -603,6 +623,7 @@ pub fn closed_loop_cost_gradient(
     start: &StartState<f64>,
     policy: &dyn FeedbackPolicy<f64>,
     moments: &DualPolicyMap<'_>,
+    vjp: Option<&PolicyVjp<'_>>,
     theta: &[f64],
     t0: usize,
     horizon: usize,
@@ -624,6 +645,7 @@ pub fn closed_loop_cost_gradient(
     let adjoint_policy = AdjointPolicy {
         policy,
         moments,
+        vjp,
         theta,
     };
     let out = rollout_adjoint(
@@ -681,6 +703,7 @@ fn episode_adjoint(
             Some(AdjointPolicy {
                 policy: p,
                 moments: &moments,
+                vjp: None,
                 theta: &[],
             })
         }

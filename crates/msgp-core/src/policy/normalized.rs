@@ -7,7 +7,8 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::{FeedbackPolicy, PolicyMoments};
+use super::pid::PidVjp;
+use super::{FeedbackPolicy, PidPolicy, PolicyMoments};
 use crate::data::Normalizer;
 use crate::error::Result;
 use crate::scalar::{Scalar, c};
@@ -19,6 +20,70 @@ pub struct Normalized<P> {
     pub inner: P,
     /// The model's normalisation.
     pub normalizer: Normalizer,
+}
+
+impl<P> Normalized<P> {
+    /// The diagonal `A` of `q_o = A q_n + b` for a policy input of size `nq`: the outputs'
+    /// standard deviations, then 1 for the policy state (kept in original units).
+    fn input_scale(&self, nq: usize) -> Vec<f64> {
+        let y_std = &self.normalizer.y_std;
+        (0..nq)
+            .map(|k| if k < y_std.len() { y_std[k] } else { 1.0 })
+            .collect()
+    }
+
+    /// The diagonal `B` of `o_n = B o_o + c` for `du` inputs in a policy output of size `no`.
+    fn output_scale(&self, du: usize, no: usize) -> Vec<f64> {
+        (0..no)
+            .map(|k| {
+                if k < du {
+                    1.0 / self.normalizer.u_std[k]
+                } else {
+                    1.0
+                }
+            })
+            .collect()
+    }
+}
+
+impl Normalized<PidPolicy<f64>> {
+    /// Vector–Jacobian product of [`FeedbackPolicy::moments`] (see
+    /// [`PidPolicy::moments_vjp`]): the affine changes of units are diagonal, so their adjoints
+    /// scale the inner policy's.
+    pub(crate) fn moments_vjp(
+        &self,
+        mean: &DVector<f64>,
+        cov: &DMatrix<f64>,
+        mean_bar: &DVector<f64>,
+        cov_bar: &DMatrix<f64>,
+        c_bar: &DMatrix<f64>,
+    ) -> Result<PidVjp> {
+        let n = &self.normalizer;
+        let nq = mean.len();
+        let (du, no) = (self.inner.kp.nrows(), mean_bar.len());
+        let a = self.input_scale(nq);
+        let b = self.output_scale(du, no);
+        let qm = DVector::from_fn(nq, |k, _| {
+            if k < n.y_mean.len() {
+                mean[k] * a[k] + n.y_mean[k]
+            } else {
+                mean[k]
+            }
+        });
+        let qc = DMatrix::from_fn(nq, nq, |i, j| cov[(i, j)] * a[i] * a[j]);
+        let (qm_bar, qc_bar, gains) = self.inner.moments_vjp(
+            &qm,
+            &qc,
+            &DVector::from_fn(no, |k, _| mean_bar[k] * b[k]),
+            &DMatrix::from_fn(no, no, |i, j| cov_bar[(i, j)] * b[i] * b[j]),
+            &DMatrix::from_fn(c_bar.nrows(), no, |i, j| a[i] * c_bar[(i, j)] * b[j]),
+        )?;
+        Ok((
+            DVector::from_fn(nq, |k, _| qm_bar[k] * a[k]),
+            DMatrix::from_fn(nq, nq, |i, j| qc_bar[(i, j)] * a[i] * a[j]),
+            gains,
+        ))
+    }
 }
 
 impl<T: Scalar, P: FeedbackPolicy<T>> FeedbackPolicy<T> for Normalized<P> {
@@ -44,9 +109,7 @@ impl<T: Scalar, P: FeedbackPolicy<T>> FeedbackPolicy<T> for Normalized<P> {
         let dy = n.y_std.len();
         let du = self.input_dim();
         let nq = mean.len();
-        let a: Vec<T> = (0..nq)
-            .map(|k| c::<T>(if k < dy { n.y_std[k] } else { 1.0 }))
-            .collect();
+        let a: Vec<T> = self.input_scale(nq).into_iter().map(c::<T>).collect();
         let qm = DVector::from_fn(nq, |k, _| {
             if k < dy {
                 mean[k] * a[k] + c::<T>(n.y_mean[k])
@@ -57,9 +120,7 @@ impl<T: Scalar, P: FeedbackPolicy<T>> FeedbackPolicy<T> for Normalized<P> {
         let qc = DMatrix::from_fn(nq, nq, |i, j| cov[(i, j)] * a[i] * a[j]);
         let inner = self.inner.moments(&qm, &qc)?;
         let no = inner.mean.len();
-        let b: Vec<T> = (0..no)
-            .map(|k| c::<T>(if k < du { 1.0 / n.u_std[k] } else { 1.0 }))
-            .collect();
+        let b: Vec<T> = self.output_scale(du, no).into_iter().map(c::<T>).collect();
         let om = DVector::from_fn(no, |k, _| {
             if k < du {
                 (inner.mean[k] - c::<T>(n.u_mean[k])) * b[k]
@@ -74,5 +135,149 @@ impl<T: Scalar, P: FeedbackPolicy<T>> FeedbackPolicy<T> for Normalized<P> {
             cov: oc,
             c: cm,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{DMatrix, DVector};
+    use rand::SeedableRng;
+    use rand::rngs::StdRng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    use super::*;
+    use crate::grad::dual::{Dual, gradient};
+
+    /// The closed-form VJP of a normalised PID policy's moment map equals the gradient of
+    /// `⟨ō_mean, mean⟩ + ⟨ō_cov, cov⟩ + ⟨C̄, C⟩` by duals through the whole map, with respect
+    /// to the input moments and every gain, at random points with the saturation active.
+    #[test]
+    fn the_pid_vjp_matches_duals_through_the_whole_map() {
+        let mut rng = StdRng::seed_from_u64(7);
+        let (du, dy) = (1, 2);
+        let (nq, no) = (3 * dy, du + 2 * dy);
+        for case in 0..5 {
+            let mut r = |s: f64| {
+                let z: f64 = StandardNormal.sample(&mut rng);
+                s * z
+            };
+            let gains =
+                |r: &mut dyn FnMut(f64) -> f64, s: f64| DMatrix::from_fn(du, dy, |_, _| r(s));
+            let policy = Normalized {
+                inner: PidPolicy::new(
+                    gains(&mut r, 5.0),
+                    gains(&mut r, 1.0),
+                    gains(&mut r, 0.3),
+                    0.02,
+                    vec![5.0],
+                )
+                .expect("pid"),
+                normalizer: Normalizer {
+                    u_mean: vec![r(0.3)],
+                    u_std: vec![1.0 + r(0.5).abs()],
+                    y_mean: vec![r(0.1), r(0.1)],
+                    y_std: vec![0.05 + r(0.02).abs(), 0.2 + r(0.1).abs()],
+                },
+            };
+            // q = [y (normalised); y_prev, integral (original units, the outputs' sizes)]
+            let size = [1.0, 1.0, 0.05, 0.2, 0.05, 0.2];
+            let mean = DVector::from_fn(nq, |i, _| r(size[i]));
+            let f = DMatrix::from_fn(nq, nq, |i, _| r(0.5 * size[i]));
+            let cov = &f * f.transpose()
+                + DMatrix::from_fn(nq, nq, |i, j| {
+                    if i == j {
+                        0.01 * size[i] * size[i]
+                    } else {
+                        0.0
+                    }
+                });
+            // the saturation is neither negligible nor saturated away
+            let pm = policy.moments(&mean, &cov).expect("moments");
+            let (u_var, u_lin) = (pm.cov[(0, 0)], pm.c.column(0).amax());
+            assert!(
+                u_var > 1e-3 && u_lin > 1e-3,
+                "case {case}: Var u {u_var}, |C_u| {u_lin}"
+            );
+            let mean_bar = DVector::from_fn(no, |_, _| r(1.0));
+            let cov_bar = DMatrix::from_fn(no, no, |_, _| r(1.0));
+            let c_bar = DMatrix::from_fn(nq, no, |_, _| r(1.0));
+            let (qm_bar, qc_bar, adj) = policy
+                .moments_vjp(&mean, &cov, &mean_bar, &cov_bar, &c_bar)
+                .expect("vjp");
+
+            // the reference: duals over (mean, cov, K_p, K_i, K_d) through `moments`
+            let inner = &policy.inner;
+            let mut x: Vec<f64> = mean.iter().chain(cov.iter()).copied().collect();
+            x.extend(
+                inner
+                    .kp
+                    .iter()
+                    .chain(inner.ki.iter())
+                    .chain(inner.kd.iter()),
+            );
+            let active: Vec<usize> = (0..x.len()).collect();
+            let (_, g) = gradient(&x, &active, 1, |xd: &[Dual]| {
+                let k = nq + nq * nq;
+                let gain =
+                    |o: usize| DMatrix::from_column_slice(du, dy, &xd[k + o..k + o + du * dy]);
+                let p = Normalized {
+                    inner: PidPolicy::new(
+                        gain(0),
+                        gain(du * dy),
+                        gain(2 * du * dy),
+                        0.02,
+                        vec![5.0],
+                    )?,
+                    normalizer: policy.normalizer.clone(),
+                };
+                let pm = p.moments(
+                    &DVector::from_column_slice(&xd[..nq]),
+                    &DMatrix::from_column_slice(nq, nq, &xd[nq..k]),
+                )?;
+                let mut acc = Dual::from_re(0.0);
+                for (o, b) in pm.mean.iter().zip(mean_bar.iter()) {
+                    acc += *o * *b;
+                }
+                for (o, b) in pm.cov.iter().zip(cov_bar.iter()) {
+                    acc += *o * *b;
+                }
+                for (o, b) in pm.c.iter().zip(c_bar.iter()) {
+                    acc += *o * *b;
+                }
+                Ok(acc)
+            })
+            .expect("duals");
+            let closed: Vec<f64> = qm_bar
+                .iter()
+                .chain(qc_bar.iter())
+                .chain(adj.kp.iter())
+                .chain(adj.ki.iter())
+                .chain(adj.kd.iter())
+                .copied()
+                .collect();
+            assert_eq!(closed.len(), g.len());
+            // block by block (the input moments' adjoints are orders of magnitude larger than
+            // the gains'), each to 1e-10 of its block's largest entry
+            let k = nq + nq * nq;
+            let blocks = [
+                ("mean", 0..nq),
+                ("cov", nq..k),
+                ("kp", k..k + 2),
+                ("ki", k + 2..k + 4),
+                ("kd", k + 4..k + 6),
+            ];
+            for (name, range) in blocks {
+                let scale = g[range.clone()].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                assert!(scale > 0.0, "case {case}: {name} has no gradient");
+                for i in range {
+                    assert!(
+                        (closed[i] - g[i]).abs() <= 1e-10 * scale,
+                        "case {case}, {name} entry {i}: closed form {} vs duals {} (scale {scale})",
+                        closed[i],
+                        g[i]
+                    );
+                }
+            }
+        }
     }
 }

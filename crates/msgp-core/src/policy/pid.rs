@@ -106,6 +106,155 @@ impl<T: Scalar> PidPolicy<T> {
     }
 }
 
+/// Adjoints of a PID policy's gain matrices (each d_u × d_y), from
+/// [`PidPolicy::moments_vjp`].
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct PidAdjoint {
+    /// Adjoint of `K_p`.
+    pub kp: DMatrix<f64>,
+    /// Adjoint of `K_i`.
+    pub ki: DMatrix<f64>,
+    /// Adjoint of `K_d`.
+    pub kd: DMatrix<f64>,
+}
+
+/// Adjoints of a policy map's input moments `(mean, cov)` and of the PID gains.
+pub(crate) type PidVjp = (DVector<f64>, DMatrix<f64>, PidAdjoint);
+
+impl PidPolicy<f64> {
+    /// Vector–Jacobian product of [`FeedbackPolicy::moments`] at `q ~ N(mean, cov)`: for the
+    /// adjoints `(ō_mean, ō_cov, C̄)` of its outputs, the adjoints of `mean`, `cov` and the
+    /// gains. In closed form through the linear map `L` and the blocks built from it; by
+    /// forward-mode duals through the saturation's `d_u + d_u²` inputs only. Duals through the
+    /// whole map are the reference it is tested against.
+    pub(crate) fn moments_vjp(
+        &self,
+        mean: &DVector<f64>,
+        cov: &DMatrix<f64>,
+        mean_bar: &DVector<f64>,
+        cov_bar: &DMatrix<f64>,
+        c_bar: &DMatrix<f64>,
+    ) -> Result<PidVjp> {
+        let (du, dy) = self.kp.shape();
+        let (nq, no) = (3 * dy, du + 2 * dy);
+        if mean.len() != nq
+            || cov.shape() != (nq, nq)
+            || mean_bar.len() != no
+            || cov_bar.shape() != (no, no)
+            || c_bar.shape() != (nq, no)
+        {
+            return Err(MsgpError::Shape(format!(
+                "PID policy VJP: input moments of size {nq} and output adjoints of size {no} \
+                 expected, got {} and {}",
+                mean.len(),
+                mean_bar.len()
+            )));
+        }
+        // the forward pass (as `moments`)
+        let l = self.linear_map();
+        let lm = &l * mean;
+        let lc = &l * cov * l.transpose();
+        let scale: Vec<f64> = self.u_max.iter().map(|u| 2.0 / (3.0 * u)).collect();
+        let sm = DVector::from_fn(du, |i, _| lm[i] * scale[i]);
+        let sc = DMatrix::from_fn(du, du, |i, j| lc[(i, j)] * scale[i] * scale[j]);
+        let sat = saturate_moments(&sm, &sc, &self.u_max);
+        // `S C_sat`, the factor of the (p, u) covariance block and of C's u columns
+        let ssc = DMatrix::from_fn(du, du, |i, j| scale[i] * sat.c[(i, j)]);
+
+        // adjoints of L·mean and L·cov·Lᵀ, and of S C_sat
+        let mut lm_bar = DVector::<f64>::zeros(no);
+        lm_bar
+            .rows_mut(du, 2 * dy)
+            .copy_from(&mean_bar.rows(du, 2 * dy));
+        let mut lc_bar = DMatrix::<f64>::zeros(no, no);
+        lc_bar
+            .view_mut((du, du), (2 * dy, 2 * dy))
+            .copy_from(&cov_bar.view((du, du), (2 * dy, 2 * dy)));
+        // Cov(p, u) = lc_pu (S C_sat) sits in the (p, u) block and, transposed, in (u, p)
+        let pu_bar =
+            cov_bar.view((du, 0), (2 * dy, du)) + cov_bar.view((0, du), (du, 2 * dy)).transpose();
+        let mut lc_pu_bar = lc_bar.view_mut((du, 0), (2 * dy, du));
+        lc_pu_bar += &pu_bar * ssc.transpose();
+        let mut ssc_bar = lc.view((du, 0), (2 * dy, du)).transpose() * &pu_bar;
+        // C = [Lᵤᵀ (S C_sat), L_pᵀ]
+        let mut l_bar = DMatrix::<f64>::zeros(no, nq);
+        let cu_bar = c_bar.columns(0, du);
+        let mut l_bar_u = l_bar.rows_mut(0, du);
+        l_bar_u += &ssc * cu_bar.transpose();
+        ssc_bar += l.rows(0, du) * cu_bar;
+        let mut l_bar_p = l_bar.rows_mut(du, 2 * dy);
+        l_bar_p += c_bar.columns(du, 2 * dy).transpose();
+        // through the saturation: its inputs (s_m, s_c) from its outputs' adjoints
+        let csat_bar = DMatrix::from_fn(du, du, |i, j| scale[i] * ssc_bar[(i, j)]);
+        let (sm_bar, sc_bar) = saturation_vjp(
+            &sm,
+            &sc,
+            &self.u_max,
+            &mean_bar.rows(0, du).into_owned(),
+            &cov_bar.view((0, 0), (du, du)).into_owned(),
+            &csat_bar,
+        )?;
+        for i in 0..du {
+            lm_bar[i] += scale[i] * sm_bar[i];
+            for j in 0..du {
+                lc_bar[(i, j)] += scale[i] * scale[j] * sc_bar[(i, j)];
+            }
+        }
+        // lm = L mean, lc = L cov Lᵀ
+        let mean_adj = l.transpose() * &lm_bar;
+        let lc_bar_l = &lc_bar * &l;
+        let cov_adj = l.transpose() * &lc_bar_l;
+        l_bar += &lm_bar * mean.transpose();
+        l_bar += &lc_bar_l * cov.transpose() + lc_bar.transpose() * &l * cov;
+        // L's u rows hold the gains (see `linear_map`)
+        let (tp, inv_t) = (self.period, 1.0 / self.period);
+        let gains = PidAdjoint {
+            kp: DMatrix::from_fn(du, dy, |i, j| l_bar[(i, j)]),
+            ki: DMatrix::from_fn(du, dy, |i, j| l_bar[(i, j)] * tp + l_bar[(i, 2 * dy + j)]),
+            kd: DMatrix::from_fn(du, dy, |i, j| (l_bar[(i, j)] - l_bar[(i, dy + j)]) * inv_t),
+        };
+        Ok((mean_adj, cov_adj, gains))
+    }
+}
+
+/// The saturation's vector–Jacobian product: the adjoints of its input moments `(m, s)` for
+/// the adjoints of its outputs (mean, covariance and `C`), by forward-mode duals over the
+/// `d_u + d_u²` inputs.
+fn saturation_vjp(
+    m: &DVector<f64>,
+    s: &DMatrix<f64>,
+    u_max: &[f64],
+    mean_bar: &DVector<f64>,
+    cov_bar: &DMatrix<f64>,
+    c_bar: &DMatrix<f64>,
+) -> Result<(DVector<f64>, DMatrix<f64>)> {
+    use crate::grad::dual::{Dual, gradient};
+    let du = m.len();
+    let mut x: Vec<f64> = m.iter().copied().collect();
+    x.extend(s.iter().copied());
+    let active: Vec<usize> = (0..x.len()).collect();
+    let (_, g) = gradient(&x, &active, 1, |xd: &[Dual]| {
+        let md = DVector::from_column_slice(&xd[..du]);
+        let sd = DMatrix::from_column_slice(du, du, &xd[du..]);
+        let sat = saturate_moments(&md, &sd, u_max);
+        let mut acc = Dual::from_re(0.0);
+        for (o, b) in sat.mean.iter().zip(mean_bar.iter()) {
+            acc += *o * *b;
+        }
+        for (o, b) in sat.cov.iter().zip(cov_bar.iter()) {
+            acc += *o * *b;
+        }
+        for (o, b) in sat.c.iter().zip(c_bar.iter()) {
+            acc += *o * *b;
+        }
+        Ok(acc)
+    })?;
+    Ok((
+        DVector::from_column_slice(&g[..du]),
+        DMatrix::from_column_slice(du, du, &g[du..]),
+    ))
+}
+
 impl<T: Scalar> FeedbackPolicy<T> for PidPolicy<T> {
     fn input_dim(&self) -> usize {
         self.kp.nrows()
