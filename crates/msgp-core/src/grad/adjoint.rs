@@ -17,7 +17,7 @@ use nalgebra::{DMatrix, DVector};
 use crate::cost::SaturatingCost;
 use crate::error::{MsgpError, Result};
 use crate::gp::{GpConfig, GpParams, GpShape, ParamGroup, PreparedGp};
-use crate::grad::dual::{Dual, gradient};
+use crate::grad::dual::{Dual, gradient, weighted_sum};
 use crate::kernel::kernel_matrix;
 use crate::linalg::{JitterLog, JitterPolicy, cholesky, symmetrize};
 use crate::loss::{Complexity, LossValue, complexity_term, gaussian_nll};
@@ -565,17 +565,11 @@ fn policy_vjp(
         let qm = DVector::from_column_slice(&xd[..nq]);
         let qc = DMatrix::from_column_slice(nq, nq, &xd[nq..nq + nq * nq]);
         let pm = (policy.moments)(&xd[nq + nq * nq..], &qm, &qc)?;
-        let mut acc = Dual::from_re(0.0);
-        for (o, b) in pm.mean.iter().zip(mean_bar.iter()) {
-            acc += *o * *b;
-        }
-        for (o, b) in pm.cov.iter().zip(cov_bar.iter()) {
-            acc += *o * *b;
-        }
-        for (o, b) in pm.c.iter().zip(c_bar.iter()) {
-            acc += *o * *b;
-        }
-        Ok(acc)
+        Ok(weighted_sum(&[
+            (pm.mean.as_slice(), mean_bar.as_slice()),
+            (pm.cov.as_slice(), cov_bar.as_slice()),
+            (pm.c.as_slice(), c_bar.as_slice()),
+        ]))
     })?;
     Ok((
         DVector::from_column_slice(&g[..nq]),

@@ -15,6 +15,19 @@ pub const LANES: usize = 8;
 /// The dual scalar used for gradients.
 pub type Dual = DualSVec64<LANES>;
 
+/// `Σ_k ⟨a_k, w_k⟩` over pairs of equally long slices, summed in order: the scalar whose dual
+/// gradient is a vector–Jacobian product, the weights `w_k` being the adjoints of the outputs
+/// `a_k` (a policy's or a saturation's moments, flattened column-major).
+pub(crate) fn weighted_sum(pairs: &[(&[Dual], &[f64])]) -> Dual {
+    let mut acc = Dual::from_re(0.0);
+    for (a, w) in pairs {
+        for (o, b) in a.iter().zip(w.iter()) {
+            acc += *o * *b;
+        }
+    }
+    acc
+}
+
 /// Value and `(index, derivative)` pairs from one chunk of directions.
 type ChunkResult = Result<(f64, Vec<(usize, f64)>)>;
 

@@ -146,7 +146,7 @@ mod tests {
     use rand_distr::{Distribution, StandardNormal};
 
     use super::*;
-    use crate::grad::dual::{Dual, gradient};
+    use crate::grad::dual::{Dual, gradient, weighted_sum};
 
     /// The closed-form VJP of a normalised PID policy's moment map equals the gradient of
     /// `⟨ō_mean, mean⟩ + ⟨ō_cov, cov⟩ + ⟨C̄, C⟩` by duals through the whole map, with respect
@@ -234,17 +234,11 @@ mod tests {
                     &DVector::from_column_slice(&xd[..nq]),
                     &DMatrix::from_column_slice(nq, nq, &xd[nq..k]),
                 )?;
-                let mut acc = Dual::from_re(0.0);
-                for (o, b) in pm.mean.iter().zip(mean_bar.iter()) {
-                    acc += *o * *b;
-                }
-                for (o, b) in pm.cov.iter().zip(cov_bar.iter()) {
-                    acc += *o * *b;
-                }
-                for (o, b) in pm.c.iter().zip(c_bar.iter()) {
-                    acc += *o * *b;
-                }
-                Ok(acc)
+                Ok(weighted_sum(&[
+                    (pm.mean.as_slice(), mean_bar.as_slice()),
+                    (pm.cov.as_slice(), cov_bar.as_slice()),
+                    (pm.c.as_slice(), c_bar.as_slice()),
+                ]))
             })
             .expect("duals");
             let closed: Vec<f64> = qm_bar

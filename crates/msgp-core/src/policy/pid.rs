@@ -228,7 +228,7 @@ fn saturation_vjp(
     cov_bar: &DMatrix<f64>,
     c_bar: &DMatrix<f64>,
 ) -> Result<(DVector<f64>, DMatrix<f64>)> {
-    use crate::grad::dual::{Dual, gradient};
+    use crate::grad::dual::{Dual, gradient, weighted_sum};
     let du = m.len();
     let mut x: Vec<f64> = m.iter().copied().collect();
     x.extend(s.iter().copied());
@@ -237,17 +237,11 @@ fn saturation_vjp(
         let md = DVector::from_column_slice(&xd[..du]);
         let sd = DMatrix::from_column_slice(du, du, &xd[du..]);
         let sat = saturate_moments(&md, &sd, u_max);
-        let mut acc = Dual::from_re(0.0);
-        for (o, b) in sat.mean.iter().zip(mean_bar.iter()) {
-            acc += *o * *b;
-        }
-        for (o, b) in sat.cov.iter().zip(cov_bar.iter()) {
-            acc += *o * *b;
-        }
-        for (o, b) in sat.c.iter().zip(c_bar.iter()) {
-            acc += *o * *b;
-        }
-        Ok(acc)
+        Ok(weighted_sum(&[
+            (sat.mean.as_slice(), mean_bar.as_slice()),
+            (sat.cov.as_slice(), cov_bar.as_slice()),
+            (sat.c.as_slice(), c_bar.as_slice()),
+        ]))
     })?;
     Ok((
         DVector::from_column_slice(&g[..du]),
