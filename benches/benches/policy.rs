@@ -12,12 +12,13 @@
 use std::hint::black_box;
 use std::time::Duration;
 
-use criterion::{Criterion, SamplingMode, criterion_group, criterion_main};
+use criterion::measurement::WallTime;
+use criterion::{BenchmarkGroup, Criterion, SamplingMode, criterion_group, criterion_main};
 use msgp_core::cost::SaturatingCost;
 use msgp_core::fit::{FitSettings, TrainingEpisode, fit_episodes};
 use msgp_core::grad::dual;
 use msgp_core::model::Method;
-use msgp_core::policy::PolicySpec;
+use msgp_core::policy::{PidPolicy, PolicySpec};
 use msgp_core::policy_search::{
     PidMask, PolicyProblem, PolicySearchSettings, optimise_pid_scaled_with_threads,
 };
@@ -61,6 +62,34 @@ fn training(params: &PendulumParams, settings: &LearnSettings) -> Vec<TrainingEp
     out
 }
 
+/// A benchmark group of 10 flat samples over `seconds` (each sample is long).
+fn flat_group<'a>(c: &'a mut Criterion, name: &str, seconds: u64) -> BenchmarkGroup<'a, WallTime> {
+    let mut group = c.benchmark_group(name);
+    group
+        .sample_size(10)
+        .sampling_mode(SamplingMode::Flat)
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(seconds));
+    group
+}
+
+/// `expected_cost_f64` (one closed-loop rollout with its cost) and `gradient_adjoint` (the
+/// search's gradient over the free gains) of `problem`.
+fn value_and_adjoint_gradient(
+    group: &mut BenchmarkGroup<'_, WallTime>,
+    problem: &PolicyProblem<'_>,
+    mask: &PidMask,
+    initial: &PidPolicy<f64>,
+    x: &[f64],
+) {
+    group.bench_function("expected_cost_f64", |b| {
+        b.iter(|| black_box(problem.evaluate(initial).expect("evaluate")))
+    });
+    group.bench_function("gradient_adjoint", |b| {
+        b.iter(|| black_box(problem.gradient(mask, initial, x).expect("gradient")))
+    });
+}
+
 fn bench_policy(c: &mut Criterion) {
     let params = PendulumParams::default();
     let settings = LearnSettings::default();
@@ -92,20 +121,10 @@ fn bench_policy(c: &mut Criterion) {
     let typical: Vec<f64> = x.iter().map(|g| g.abs().max(1.0)).collect();
     let all: Vec<usize> = (0..x.len()).collect();
 
-    let mut group = c.benchmark_group("policy_pendulum_m50_H250");
-    group
-        .sample_size(10)
-        .sampling_mode(SamplingMode::Flat)
-        .warm_up_time(Duration::from_millis(500))
-        .measurement_time(Duration::from_secs(4));
-    group.bench_function("expected_cost_f64", |b| {
-        b.iter(|| black_box(problem.evaluate(&initial).expect("evaluate")))
-    });
+    let mut group = flat_group(c, "policy_pendulum_m50_H250", 4);
     // the search's gradient: the rollout's adjoint sweep; and the duals it replaced (5 lanes for
     // 5 gains, and the generic 8) for comparison
-    group.bench_function("gradient_adjoint", |b| {
-        b.iter(|| black_box(problem.gradient(&mask, &initial, &x).expect("gradient")))
-    });
+    value_and_adjoint_gradient(&mut group, &problem, &mask, &initial, &x);
     group.bench_function("gradient_dual_5_lanes", |b| {
         b.iter(|| {
             black_box(
@@ -168,26 +187,11 @@ fn bench_policy(c: &mut Criterion) {
         cost: problem.cost.clone(),
         horizon: (kf_settings.policy_horizon_seconds * params.control_rate_hz).round() as usize,
     };
-    let mut group = c.benchmark_group("policy_pendulum_linear_kf_H500");
-    group
-        .sample_size(10)
-        .sampling_mode(SamplingMode::Flat)
-        .warm_up_time(Duration::from_millis(500))
-        .measurement_time(Duration::from_secs(4));
-    group.bench_function("expected_cost_f64", |b| {
-        b.iter(|| black_box(kf_problem.evaluate(&initial).expect("evaluate")))
-    });
-    group.bench_function("gradient_adjoint", |b| {
-        b.iter(|| black_box(kf_problem.gradient(&mask, &initial, &x).expect("gradient")))
-    });
+    let mut group = flat_group(c, "policy_pendulum_linear_kf_H500", 4);
+    value_and_adjoint_gradient(&mut group, &kf_problem, &mask, &initial, &x);
     group.finish();
 
-    let mut group = c.benchmark_group("fit_pendulum_m50");
-    group
-        .sample_size(10)
-        .sampling_mode(SamplingMode::Flat)
-        .warm_up_time(Duration::from_millis(500))
-        .measurement_time(Duration::from_secs(10));
+    let mut group = flat_group(c, "fit_pendulum_m50", 10);
     let msgp = FitSettings {
         iterations: 20,
         one_step_iterations: 20,

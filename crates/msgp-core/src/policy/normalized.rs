@@ -44,6 +44,27 @@ impl<P> Normalized<P> {
             })
             .collect()
     }
+
+    /// The policy input's moments in original units, `q_o = A q_n + b` (`b`: the outputs'
+    /// means on their entries, 0 on the policy state).
+    fn input_to_original<T: Scalar>(
+        &self,
+        mean: &DVector<T>,
+        cov: &DMatrix<T>,
+    ) -> (DVector<T>, DMatrix<T>) {
+        let y_mean = &self.normalizer.y_mean;
+        let nq = mean.len();
+        let a: Vec<T> = self.input_scale(nq).into_iter().map(c::<T>).collect();
+        let qm = DVector::from_fn(nq, |k, _| {
+            if k < y_mean.len() {
+                mean[k] * a[k] + c::<T>(y_mean[k])
+            } else {
+                mean[k]
+            }
+        });
+        let qc = DMatrix::from_fn(nq, nq, |i, j| cov[(i, j)] * a[i] * a[j]);
+        (qm, qc)
+    }
 }
 
 impl Normalized<PidPolicy<f64>> {
@@ -58,19 +79,11 @@ impl Normalized<PidPolicy<f64>> {
         cov_bar: &DMatrix<f64>,
         c_bar: &DMatrix<f64>,
     ) -> Result<PidVjp> {
-        let n = &self.normalizer;
         let nq = mean.len();
         let (du, no) = (self.inner.kp.nrows(), mean_bar.len());
         let a = self.input_scale(nq);
         let b = self.output_scale(du, no);
-        let qm = DVector::from_fn(nq, |k, _| {
-            if k < n.y_mean.len() {
-                mean[k] * a[k] + n.y_mean[k]
-            } else {
-                mean[k]
-            }
-        });
-        let qc = DMatrix::from_fn(nq, nq, |i, j| cov[(i, j)] * a[i] * a[j]);
+        let (qm, qc) = self.input_to_original(mean, cov);
         let (qm_bar, qc_bar, gains) = self.inner.moments_vjp(
             &qm,
             &qc,
@@ -106,18 +119,10 @@ impl<T: Scalar, P: FeedbackPolicy<T>> FeedbackPolicy<T> for Normalized<P> {
 
     fn moments(&self, mean: &DVector<T>, cov: &DMatrix<T>) -> Result<PolicyMoments<T>> {
         let n = &self.normalizer;
-        let dy = n.y_std.len();
         let du = self.input_dim();
         let nq = mean.len();
         let a: Vec<T> = self.input_scale(nq).into_iter().map(c::<T>).collect();
-        let qm = DVector::from_fn(nq, |k, _| {
-            if k < dy {
-                mean[k] * a[k] + c::<T>(n.y_mean[k])
-            } else {
-                mean[k]
-            }
-        });
-        let qc = DMatrix::from_fn(nq, nq, |i, j| cov[(i, j)] * a[i] * a[j]);
+        let (qm, qc) = self.input_to_original(mean, cov);
         let inner = self.inner.moments(&qm, &qc)?;
         let no = inner.mean.len();
         let b: Vec<T> = self.output_scale(du, no).into_iter().map(c::<T>).collect();
