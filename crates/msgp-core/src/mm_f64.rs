@@ -392,7 +392,9 @@ const LANES: usize = crate::simd::CHUNK;
 
 /// The exponents of `Q` for columns `j0..j0 + NJ`, rows `i0..mp` in tiles of [`LANES`]:
 /// `u^a_i + u^b_j + (Ãᵀ Y)_ij` with `Y = N B̃`, the product accumulated in registers, written
-/// to `ebuf[jj·mp + i]`. Every pass over `Q` (the loss's reductions and the adjoint's
+/// to `ebuf[jj·(mp − first) + i − first]`: the block's `NJ` columns lie end to end, so that one
+/// loop exponentiates all of them (a loop of exponentials is latency-bound, and longer loops
+/// overlap more of them). Every pass over `Q` (the loss's reductions and the adjoint's
 /// recomputation) exponentiates what this function writes with [`exp_q`], so they all see the
 /// same bits.
 #[inline(always)]
@@ -404,11 +406,12 @@ fn q_exponents<const F: bool>(
     y: &[f64],
     ua: &[f64],
     ub: &[f64],
-    i0: usize,
+    first: usize,
     j0: usize,
     ebuf: &mut [f64],
 ) {
-    let mut i0 = i0;
+    let ld = mp - first;
+    let mut i0 = first;
     while i0 < mp {
         let mut acc = [[0.0f64; LANES]; NJ];
         for k in 0..d {
@@ -424,7 +427,8 @@ fn q_exponents<const F: bool>(
         let uai = &ua[i0..i0 + LANES];
         for jj in 0..NJ {
             let ubj = ub[j0 + jj];
-            let out = &mut ebuf[jj * mp + i0..jj * mp + i0 + LANES];
+            let o = jj * ld + i0 - first;
+            let out = &mut ebuf[o..o + LANES];
             for l in 0..LANES {
                 out[l] = uai[l] + ubj + acc[jj][l];
             }
@@ -488,11 +492,16 @@ pub(crate) fn q_reduce_sym<const F: bool>(
     let mut j0 = 0;
     while j0 < m {
         let start = sym_start(j0);
+        let ld = mp - start;
         q_exponents::<F>(d, mp, at, y, ua, ub, start, j0, ebuf);
+        exp_q_slice::<F>(&mut ebuf[..NJ * ld]);
         for jj in 0..NJ {
-            let (c, e) = ((j0 + jj) * mp, &mut ebuf[jj * mp + start..(jj + 1) * mp]);
-            exp_q_slice::<F>(e);
-            dot_into::<F>(e, &w[c + start..c + mp], &mut total);
+            let c = (j0 + jj) * mp;
+            dot_into::<F>(
+                &ebuf[jj * ld..(jj + 1) * ld],
+                &w[c + start..c + mp],
+                &mut total,
+            );
         }
         j0 += NJ;
     }
@@ -548,12 +557,13 @@ pub(crate) fn q_matrix<const F: bool>(
     let mut j0 = 0;
     while j0 < m {
         let start = if sym { sym_start(j0) } else { 0 };
+        let ld = mp - start;
         q_exponents::<F>(d, mp, at, y, ua, ub, start, j0, ebuf);
         for jj in 0..NJ.min(m - j0) {
             let j = j0 + jj;
             let (col, e) = (
                 &mut q[j * m + start..(j + 1) * m],
-                &ebuf[jj * mp + start..jj * mp + m],
+                &ebuf[jj * ld..jj * ld + m - start],
             );
             for (qv, ev) in col.iter_mut().zip(e) {
                 *qv = exp_q::<F>(*ev);
