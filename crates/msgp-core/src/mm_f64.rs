@@ -390,7 +390,7 @@ const NJ: usize = 4;
 /// Rows of `Q` per tile: one vector of the dispatched instruction set.
 const LANES: usize = crate::simd::CHUNK;
 
-/// The exponents of `Q` for columns `j0..j0 + NJ`, rows `i0..mp` in tiles of [`LANES`]:
+/// The exponents of `Q` for columns `j0..j0 + NJ`, rows `first..mp` in tiles of [`LANES`]:
 /// `u^a_i + u^b_j + (Ãᵀ Y)_ij` with `Y = N B̃`, the product accumulated in registers, written
 /// to `ebuf[jj·(mp − first) + i − first]`: the block's `NJ` columns lie end to end, so that one
 /// loop exponentiates all of them (a loop of exponentials is latency-bound, and longer loops
