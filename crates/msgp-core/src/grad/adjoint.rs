@@ -17,7 +17,7 @@ use nalgebra::{DMatrix, DVector};
 use crate::cost::SaturatingCost;
 use crate::error::{MsgpError, Result};
 use crate::gp::{GpConfig, GpParams, GpShape, ParamGroup, PreparedGp};
-use crate::grad::dual::{Dual, gradient, weighted_sum};
+use crate::grad::dual::{Dual, gradient, moments_gradient, weighted_sum};
 use crate::kernel::kernel_matrix;
 use crate::linalg::{JitterLog, JitterPolicy, cholesky, symmetrize};
 use crate::loss::{Complexity, LossValue, complexity_term, gaussian_nll};
@@ -586,21 +586,11 @@ fn cost_vjp(
     cov: &DMatrix<f64>,
     jitter: &JitterPolicy,
 ) -> Result<(DVector<f64>, DMatrix<f64>)> {
-    let dy = mean.len();
-    let mut x: Vec<f64> = mean.iter().copied().collect();
-    x.extend(cov.iter().copied());
-    let active: Vec<usize> = (0..x.len()).collect();
-    let (_, g) = gradient(&x, &active, 1, |xd: &[Dual]| {
-        let m = DVector::from_column_slice(&xd[..dy]);
-        let s = DMatrix::from_column_slice(dy, dy, &xd[dy..]);
+    let (gm, gc) = moments_gradient(mean, cov, |m, s| {
         let mut log = JitterLog::default();
-        Ok(cost.moments(&m, &s, jitter, &mut log)?.mean)
+        Ok(cost.moments(m, s, jitter, &mut log)?.mean)
     })?;
-    let gc = DMatrix::from_column_slice(dy, dy, &g[dy..]);
-    Ok((
-        DVector::from_column_slice(&g[..dy]),
-        (&gc + gc.transpose()) * 0.5,
-    ))
+    Ok((gm, (&gc + gc.transpose()) * 0.5))
 }
 
 /// Value and gradient, with respect to the policy parameters `θ`, of the expected cost

@@ -28,6 +28,33 @@ pub(crate) fn weighted_sum(pairs: &[(&[Dual], &[f64])]) -> Dual {
     acc
 }
 
+/// Gradient of a scalar `f(mean, cov)` of Gaussian moments with respect to `mean` and every
+/// entry of `cov` (not symmetrised), by duals over the `d + d²` packed inputs on one thread:
+/// the shared step of the small VJPs inside the adjoint sweep (a saturation's, a cost's).
+pub(crate) fn moments_gradient<F>(
+    mean: &nalgebra::DVector<f64>,
+    cov: &nalgebra::DMatrix<f64>,
+    f: F,
+) -> Result<(nalgebra::DVector<f64>, nalgebra::DMatrix<f64>)>
+where
+    F: Fn(&nalgebra::DVector<Dual>, &nalgebra::DMatrix<Dual>) -> Result<Dual> + Sync,
+{
+    use nalgebra::{DMatrix, DVector};
+    let d = mean.len();
+    let mut x: Vec<f64> = mean.iter().copied().collect();
+    x.extend(cov.iter().copied());
+    let active: Vec<usize> = (0..x.len()).collect();
+    let (_, g) = gradient(&x, &active, 1, |xd: &[Dual]| {
+        let m = DVector::from_column_slice(&xd[..d]);
+        let s = DMatrix::from_column_slice(d, d, &xd[d..]);
+        f(&m, &s)
+    })?;
+    Ok((
+        DVector::from_column_slice(&g[..d]),
+        DMatrix::from_column_slice(d, d, &g[d..]),
+    ))
+}
+
 /// Value and `(index, derivative)` pairs from one chunk of directions.
 type ChunkResult = Result<(f64, Vec<(usize, f64)>)>;
 

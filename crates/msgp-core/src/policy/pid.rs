@@ -228,25 +228,15 @@ fn saturation_vjp(
     cov_bar: &DMatrix<f64>,
     c_bar: &DMatrix<f64>,
 ) -> Result<(DVector<f64>, DMatrix<f64>)> {
-    use crate::grad::dual::{Dual, gradient, weighted_sum};
-    let du = m.len();
-    let mut x: Vec<f64> = m.iter().copied().collect();
-    x.extend(s.iter().copied());
-    let active: Vec<usize> = (0..x.len()).collect();
-    let (_, g) = gradient(&x, &active, 1, |xd: &[Dual]| {
-        let md = DVector::from_column_slice(&xd[..du]);
-        let sd = DMatrix::from_column_slice(du, du, &xd[du..]);
-        let sat = saturate_moments(&md, &sd, u_max);
+    use crate::grad::dual::{moments_gradient, weighted_sum};
+    moments_gradient(m, s, |md, sd| {
+        let sat = saturate_moments(md, sd, u_max);
         Ok(weighted_sum(&[
             (sat.mean.as_slice(), mean_bar.as_slice()),
             (sat.cov.as_slice(), cov_bar.as_slice()),
             (sat.c.as_slice(), c_bar.as_slice()),
         ]))
-    })?;
-    Ok((
-        DVector::from_column_slice(&g[..du]),
-        DMatrix::from_column_slice(du, du, &g[du..]),
-    ))
+    })
 }
 
 impl<T: Scalar> FeedbackPolicy<T> for PidPolicy<T> {
