@@ -115,8 +115,9 @@ impl Hyper {
 }
 
 /// Negative log marginal likelihood (eq. 5) of one output, optionally with PILCO's penalties.
-struct Marginal<'a> {
-    x: &'a DMatrix<f64>,
+struct Marginal {
+    /// The inputs, each column centred (the SE kernel sees only differences).
+    xc: DMatrix<f64>,
     y: DVector<f64>,
     config: GpConfig,
     /// `Some(std of each input dimension)` adds PILCO's penalties.
@@ -124,9 +125,31 @@ struct Marginal<'a> {
     log: JitterLog,
 }
 
-impl Objective for Marginal<'_> {
+impl Marginal {
+    fn new(
+        x: &DMatrix<f64>,
+        y: DVector<f64>,
+        config: GpConfig,
+        pilco_std: Option<Vec<f64>>,
+    ) -> Self {
+        let mut xc = x.clone();
+        for mut col in xc.column_iter_mut() {
+            let mean = col.mean();
+            col.add_scalar_mut(-mean);
+        }
+        Self {
+            xc,
+            y,
+            config,
+            pilco_std,
+            log: JitterLog::default(),
+        }
+    }
+}
+
+impl Objective for Marginal {
     fn value_and_gradient(&mut self, p: &[f64]) -> Result<(f64, Vec<f64>)> {
-        let (n, d) = self.x.shape();
+        let (n, d) = self.xc.shape();
         let h = Hyper::from_vec(p);
         let inv_l2: Vec<f64> = h
             .log_lengthscales
@@ -135,7 +158,7 @@ impl Objective for Marginal<'_> {
             .collect();
         let sf2 = h.log_signal_var.exp();
         let sn2 = self.config.noise_floor + h.log_noise.exp();
-        let kf = kernel_matrix(self.x, self.x, &inv_l2, sf2);
+        let kf = kernel_matrix(&self.xc, &self.xc, &inv_l2, sf2);
         let mut k = kf.clone();
         for i in 0..n {
             k[(i, i)] += sn2;
@@ -148,25 +171,34 @@ impl Objective for Marginal<'_> {
         )?;
         let kinv = ch.inverse();
         let alpha = &kinv * &self.y;
+        let kdiag = kinv.diagonal();
         let mut value = 0.5 * self.y.dot(&alpha) + 0.5 * ch.log_det() + 0.5 * n as f64 * LN_2PI;
-        // dNLL/dθ = −½ tr((ααᵀ − K⁻¹) ∂K/∂θ)
-        let mut grad = vec![0.0; d + 2];
-        let mut tr_sf = 0.0;
-        for i in 0..n {
-            for j in 0..n {
-                let w = alpha[i] * alpha[j] - kinv[(i, j)];
-                let g = w * kf[(i, j)];
-                tr_sf += g;
-                if i != j {
-                    for dd in 0..d {
-                        let diff = self.x[(i, dd)] - self.x[(j, dd)];
-                        grad[dd] -= 0.5 * g * diff * diff * inv_l2[dd];
-                    }
-                }
+        // dNLL/dθ = −½ tr((ααᵀ − K⁻¹) ∂K/∂θ) = −½ Σᵢⱼ Gᵢⱼ ∂log kᵢⱼ/∂θ, G = (ααᵀ − K⁻¹) ∘ K_f;
+        // ∂log kᵢⱼ/∂log ℓ_d = (xᵢ_d − xⱼ_d)² / ℓ_d², and Σᵢⱼ Gᵢⱼ (xᵢ − xⱼ)² =
+        // Σᵢ xᵢ² (rᵢ + cᵢ) − 2 xᵀ G x with r, c the row and column sums of G: one n × n × d
+        // product instead of a scalar loop over the pairs (the inputs are centred, which leaves
+        // the differences as they are and keeps the expanded terms small)
+        let mut g = kinv;
+        for j in 0..n {
+            for i in 0..n {
+                g[(i, j)] = (alpha[i] * alpha[j] - g[(i, j)]) * kf[(i, j)];
             }
         }
+        let tr_sf: f64 = g.iter().sum();
+        let rows = g.column_sum();
+        let cols = g.row_sum();
+        let gx = &g * &self.xc;
+        let mut grad = vec![0.0; d + 2];
+        for (dd, gr) in grad.iter_mut().take(d).enumerate() {
+            let mut q = 0.0;
+            for i in 0..n {
+                let xi = self.xc[(i, dd)];
+                q += xi * (xi * (rows[i] + cols[i]) - 2.0 * gx[(i, dd)]);
+            }
+            *gr = -0.5 * q * inv_l2[dd];
+        }
         grad[d] = -0.5 * tr_sf;
-        let tr_w: f64 = (0..n).map(|i| alpha[i] * alpha[i] - kinv[(i, i)]).sum();
+        let tr_w: f64 = (0..n).map(|i| alpha[i] * alpha[i] - kdiag[i]).sum();
         grad[d + 1] = -0.5 * tr_w * h.log_noise.exp();
         if let Some(std) = &self.pilco_std {
             let p30 = |z: f64| z.powi(30);
@@ -325,6 +357,23 @@ pub fn fit_one_step(
     seed: u64,
     log: &mut JitterLog,
 ) -> Result<GpParams<f64>> {
+    let threads = crate::grad::adjoint::thread_count();
+    fit_one_step_with_threads(data, m, settings, config, structure, seed, threads, log)
+}
+
+/// [`fit_one_step`] with the outputs on up to `threads` threads; the result does not depend
+/// on `threads`.
+#[allow(clippy::too_many_arguments)]
+fn fit_one_step_with_threads(
+    data: &OneStepData,
+    m: usize,
+    settings: &OneStepSettings,
+    config: &GpConfig,
+    structure: &Structure,
+    seed: u64,
+    threads: usize,
+    log: &mut JitterLog,
+) -> Result<GpParams<f64>> {
     let (n, d) = data.x.shape();
     let e = data.y.ncols();
     if n < 2 {
@@ -368,7 +417,11 @@ pub fn fit_one_step(
         log_obs_noise: DVector::from_element(e, (1e-3 * config.noise_floor).ln()),
         linear_mean,
     };
-    for a in 0..e {
+    // the outputs are independent fits: one per thread (faer runs sequentially), their
+    // results and jitter records taken in output order, so any thread count gives the same bits
+    let outputs: Vec<usize> = (0..e).collect();
+    let fit_output = |_: usize, &a: &usize| -> Result<(Hyper, DVector<f64>, JitterLog)> {
+        let mut log = JitterLog::default();
         let ys = DVector::from_fn(idx.len(), |i, _| targets[(idx[i], a)]);
         let var_y = {
             let mean = ys.mean();
@@ -377,27 +430,26 @@ pub fn fit_one_step(
         .max(1e-6);
         if structure.without_gp.contains(&a) {
             // no GP: what the linear mean leaves over is noise (pseudo-targets stay zero)
-            for k in 0..d {
-                params.log_lengthscales[(a, k)] = std[k].ln();
-            }
-            params.log_signal_var[a] = NO_GP_SIGNAL_VAR.ln();
-            params.log_process_noise[a] = (var_y - config.noise_floor)
-                .max(1e-3 * config.noise_floor)
-                .ln();
-            continue;
+            let h = Hyper {
+                log_lengthscales: std.iter().map(|s| s.ln()).collect(),
+                log_signal_var: NO_GP_SIGNAL_VAR.ln(),
+                log_noise: (var_y - config.noise_floor)
+                    .max(1e-3 * config.noise_floor)
+                    .ln(),
+            };
+            return Ok((h, DVector::zeros(mm), log));
         }
         let init = Hyper {
             log_lengthscales: std.iter().map(|s| s.ln()).collect(),
             log_signal_var: var_y.ln(),
             log_noise: (0.05 * var_y).ln(),
         };
-        let mut objective = Marginal {
-            x: &xs,
-            y: ys,
-            config: *config,
-            pilco_std: settings.pilco_penalty.then(|| std.clone()),
-            log: JitterLog::default(),
-        };
+        let mut objective = Marginal::new(
+            &xs,
+            ys,
+            *config,
+            settings.pilco_penalty.then(|| std.clone()),
+        );
         let adam = Solver::Adam(Adam {
             learning_rate: settings.learning_rate,
             ..Adam::default()
@@ -442,7 +494,7 @@ pub fn fit_one_step(
             let kmm = kernel_matrix(&pseudo, &pseudo, &inv_l2, sf2);
             let kmn = kernel_matrix(&pseudo, &gx, &inv_l2, sf2);
             let a_mat = &kmm * sn2 + &kmn * kmn.transpose();
-            let ch = DenseChol::new(&a_mat, &config.jitter, "σ² K_mm + K_mn K_nm", log)?;
+            let ch = DenseChol::new(&a_mat, &config.jitter, "σ² K_mm + K_mn K_nm", &mut log)?;
             let rhs = &kmn * &yfull;
             let sol = ch.solve(&DMatrix::from_column_slice(mm, 1, rhs.as_slice()));
             let mut kt = kmm;
@@ -451,6 +503,12 @@ pub fn fit_one_step(
             }
             DVector::from_column_slice((&kt * sol).as_slice())
         };
+        Ok((h, ybar, log))
+    };
+    let fits = crate::parallel::map_indexed(&outputs, threads, fit_output);
+    for (a, fit) in fits.into_iter().enumerate() {
+        let (h, ybar, olog) = fit?;
+        log.merge(&olog);
         params.pseudo_targets.set_column(a, &ybar);
         for k in 0..d {
             params.log_lengthscales[(a, k)] = h.log_lengthscales[k];
@@ -594,13 +652,7 @@ mod tests {
     fn check(pilco: bool) {
         let (x, y) = problem();
         let std: Vec<f64> = (0..3).map(|k| column_std(&x, k)).collect();
-        let mut obj = Marginal {
-            x: &x,
-            y,
-            config: GpConfig::default(),
-            pilco_std: pilco.then_some(std),
-            log: JitterLog::default(),
-        };
+        let mut obj = Marginal::new(&x, y, GpConfig::default(), pilco.then_some(std));
         // near the penalties' active region for the PILCO case
         let p = vec![-0.3, 0.4, 4.0, 0.2, -3.0];
         let (_, g) = obj.value_and_gradient(&p).expect("value");
@@ -618,6 +670,60 @@ mod tests {
                 g[i]
             );
         }
+    }
+
+    #[test]
+    fn outputs_fitted_on_two_threads_give_the_same_bits() {
+        let (x, y0) = problem();
+        let y = DMatrix::from_fn(x.nrows(), 3, |i, a| match a {
+            0 => y0[i],
+            1 => (x[(i, 1)] * 1.5).cos() - 0.2 * x[(i, 0)],
+            _ => x[(i, 2)] * x[(i, 0)],
+        });
+        let data = OneStepData {
+            x,
+            y,
+            instrumented: Vec::new(),
+            z: DMatrix::zeros(0, 3),
+        };
+        let settings = OneStepSettings {
+            iterations: 30,
+            ..OneStepSettings::default()
+        };
+        let run_on = |data: &OneStepData, threads: usize| {
+            let mut log = JitterLog::default();
+            fit_one_step_with_threads(
+                data,
+                12,
+                &settings,
+                &GpConfig::default(),
+                &Structure::default(),
+                4,
+                threads,
+                &mut log,
+            )
+            .expect("fit")
+        };
+        let one = run_on(&data, 1).to_flat();
+        for threads in [2, 3] {
+            let p = run_on(&data, threads).to_flat();
+            assert!(
+                one.iter().zip(&p).all(|(a, b)| a.to_bits() == b.to_bits()),
+                "{threads} threads"
+            );
+        }
+        // each output's fit is its own: output 1 alone gives the same hyperparameters and
+        // pseudo-targets as in the three-output fit on three threads
+        let alone = OneStepData {
+            y: data.y.columns(1, 1).into_owned(),
+            ..data.clone()
+        };
+        let (p1, p3) = (run_on(&alone, 1), run_on(&data, 3));
+        assert_eq!(p1.log_lengthscales.row(0), p3.log_lengthscales.row(1));
+        assert_eq!(p1.log_signal_var[0], p3.log_signal_var[1]);
+        assert_eq!(p1.log_process_noise[0], p3.log_process_noise[1]);
+        assert_eq!(p1.pseudo_targets.column(0), p3.pseudo_targets.column(1));
+        assert_ne!(p3.log_signal_var[0], p3.log_signal_var[1]);
     }
 
     #[test]
