@@ -3,8 +3,9 @@
 //! 250-step closed-loop rollouts): one expected-cost evaluation in f64, the gradient over the 5
 //! gains by the adjoint sweep (the search's) and by duals (5 and 8 lanes), a reduced policy search
 //! (on every core and on one), and 20 Adam iterations of the MSGP fit on four random rollouts
-//! plus one feedback episode; and the value and adjoint gradient of the linear-kf loop's
-//! problem (its model, a 10 s = 500-step horizon).
+//! plus one feedback episode; the two parts of a later MSGP fit (four feedback episodes): its
+//! one-step start and its Adam iterations on the trajectory likelihood; and the value and
+//! adjoint gradient of the linear-kf loop's problem (its model, a 10 s = 500-step horizon).
 //!
 //! The model is fitted once, outside the timings, on four 3 s random-excitation episodes and one
 //! 3 s episode of the hand-tuned gains (seeded).
@@ -29,7 +30,13 @@ use msgp_sim::{
 };
 use nalgebra::{DMatrix, DVector};
 
-fn training(params: &PendulumParams, settings: &LearnSettings) -> Vec<TrainingEpisode> {
+/// Four random rollouts in 30-sample segments and `feedback` 3 s episodes of the hand-tuned
+/// gains (seeds 500, 501, …).
+fn training(
+    params: &PendulumParams,
+    settings: &LearnSettings,
+    feedback: u64,
+) -> Vec<TrainingEpisode> {
     let mut out = Vec::new();
     for seed in 0..4u64 {
         let mut ex = RandomExcitation::new(seed, &settings.excitation).expect("excitation");
@@ -46,19 +53,21 @@ fn training(params: &PendulumParams, settings: &LearnSettings) -> Vec<TrainingEp
     }
     let mut gains = PidPdGains::hand_tuned();
     gains.saturation = Saturation::Sine;
-    let mut controller = PidPdPolicy::new(gains, params).expect("policy");
-    let config = EpisodeConfig {
-        seconds: settings.episode_seconds,
-        seed: 500,
-        initial_theta: None,
-    };
-    let ep = run_episode(params, &mut controller, &config).expect("episode");
-    out.push(TrainingEpisode {
-        traj: episode_trajectory(&ep).expect("trajectory"),
-        policy: Some(PolicySpec::Pid(
-            modelled_policy(&gains, params).expect("policy"),
-        )),
-    });
+    for seed in 500..500 + feedback {
+        let mut controller = PidPdPolicy::new(gains, params).expect("policy");
+        let config = EpisodeConfig {
+            seconds: settings.episode_seconds,
+            seed,
+            initial_theta: None,
+        };
+        let ep = run_episode(params, &mut controller, &config).expect("episode");
+        out.push(TrainingEpisode {
+            traj: episode_trajectory(&ep).expect("trajectory"),
+            policy: Some(PolicySpec::Pid(
+                modelled_policy(&gains, params).expect("policy"),
+            )),
+        });
+    }
     out
 }
 
@@ -93,7 +102,7 @@ fn value_and_adjoint_gradient(
 fn bench_policy(c: &mut Criterion) {
     let params = PendulumParams::default();
     let settings = LearnSettings::default();
-    let episodes = training(&params, &settings);
+    let episodes = training(&params, &settings, 1);
     let fit = FitSettings {
         method: Method::GpNarx,
         ..settings.fit.clone()
@@ -199,6 +208,25 @@ fn bench_policy(c: &mut Criterion) {
     };
     group.bench_function("msgp_20_one_step_plus_20_adam_iterations", |b| {
         b.iter(|| black_box(fit_episodes(&episodes, &msgp, &mut |_| {}).expect("fit")))
+    });
+    // the loop's later fits: four feedback episodes (about 900 one-step pairs, two outputs),
+    // where the one-step start and the closed-loop episodes dominate
+    let later = training(&params, &settings, 4);
+    let one_step = FitSettings {
+        iterations: 0,
+        one_step_iterations: 20,
+        ..settings.fit.clone()
+    };
+    group.bench_function("msgp_one_step_20_iterations_4_feedback_episodes", |b| {
+        b.iter(|| black_box(fit_episodes(&later, &one_step, &mut |_| {}).expect("fit")))
+    });
+    let adam = FitSettings {
+        iterations: 10,
+        one_step_iterations: 0,
+        ..settings.fit.clone()
+    };
+    group.bench_function("msgp_10_adam_iterations_4_feedback_episodes", |b| {
+        b.iter(|| black_box(fit_episodes(&later, &adam, &mut |_| {}).expect("fit")))
     });
     // the linear-kf model the loop fits with `--model linear-kf`, to convergence (two starts)
     let kf = FitSettings {
