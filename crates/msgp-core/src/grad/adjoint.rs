@@ -681,41 +681,25 @@ fn episode_adjoint(
     // the episode's policy is fixed (no parameters): lifted to duals once
     let pol_dual: Option<Box<dyn FeedbackPolicy<Dual>>> = policy.map(|p| p.lift::<Dual>());
     let moments;
-    // a PID policy's vector–Jacobian product in closed form (the duals through `moments` are
-    // its reference; a linear policy's map is cheap enough for them)
-    let vjp = |qm: &DVector<f64>,
-               qc: &DMatrix<f64>,
-               mean_bar: &DVector<f64>,
-               cov_bar: &DMatrix<f64>,
-               c_bar: &DMatrix<f64>| {
-        let (qm_bar, qc_bar, _) = match policy {
-            Some(PolicySpec::Pid(p)) => p.moments_vjp(qm, qc, mean_bar, cov_bar, c_bar)?,
-            Some(PolicySpec::NormalizedPid(p)) => {
-                p.moments_vjp(qm, qc, mean_bar, cov_bar, c_bar)?
-            }
-            _ => {
-                return Err(MsgpError::Shape(
-                    "closed-form policy VJP asked of a policy without one".into(),
-                ));
-            }
-        };
-        Ok((qm_bar, qc_bar, Vec::new()))
-    };
-    let closed_form = matches!(
-        policy,
-        Some(PolicySpec::Pid(_) | PolicySpec::NormalizedPid(_))
-    );
+    // the policy's vector–Jacobian product in closed form where it has one (the duals through
+    // `moments` are its reference)
+    let vjp = policy.filter(|p| p.has_closed_form_vjp()).map(|p| {
+        move |qm: &DVector<f64>,
+              qc: &DMatrix<f64>,
+              mean_bar: &DVector<f64>,
+              cov_bar: &DMatrix<f64>,
+              c_bar: &DMatrix<f64>| {
+            let (qm_bar, qc_bar, _) = p.moments_vjp(qm, qc, mean_bar, cov_bar, c_bar)?;
+            Ok((qm_bar, qc_bar, Vec::new()))
+        }
+    });
     let adjoint_policy = match (pol.as_deref(), pol_dual.as_deref()) {
         (Some(p), Some(pd)) => {
             moments = move |_: &[Dual], qm: &DVector<Dual>, qc: &DMatrix<Dual>| pd.moments(qm, qc);
             Some(AdjointPolicy {
                 policy: p,
                 moments: &moments,
-                vjp: if closed_form {
-                    Some(&vjp as &PolicyVjp<'_>)
-                } else {
-                    None
-                },
+                vjp: vjp.as_ref().map(|f| f as &PolicyVjp<'_>),
                 theta: &[],
             })
         }

@@ -148,6 +148,32 @@ impl PolicySpec {
         })
     }
 
+    /// Whether [`PolicySpec::moments_vjp`] has a closed form for this policy (the PID ones; a
+    /// linear policy's map is cheap enough for duals).
+    pub(crate) fn has_closed_form_vjp(&self) -> bool {
+        matches!(self, PolicySpec::Pid(_) | PolicySpec::NormalizedPid(_))
+    }
+
+    /// Vector–Jacobian product of the policy's moment map in closed form
+    /// ([`PidPolicy::moments_vjp`]); an error for a policy without one
+    /// ([`PolicySpec::has_closed_form_vjp`]).
+    pub(crate) fn moments_vjp(
+        &self,
+        mean: &DVector<f64>,
+        cov: &DMatrix<f64>,
+        mean_bar: &DVector<f64>,
+        cov_bar: &DMatrix<f64>,
+        c_bar: &DMatrix<f64>,
+    ) -> Result<pid::PidVjp> {
+        match self {
+            PolicySpec::Pid(p) => p.moments_vjp(mean, cov, mean_bar, cov_bar, c_bar),
+            PolicySpec::NormalizedPid(p) => p.moments_vjp(mean, cov, mean_bar, cov_bar, c_bar),
+            PolicySpec::Linear(_) => Err(MsgpError::Shape(
+                "a linear policy has no closed-form vector–Jacobian product".into(),
+            )),
+        }
+    }
+
     /// The policy on scalar type `T`.
     pub fn lift<T: Scalar>(&self) -> Box<dyn FeedbackPolicy<T>> {
         let c = crate::scalar::c::<T>;
