@@ -259,7 +259,8 @@ pub struct FitProgress {
 pub struct FitReport {
     /// Adam iterations run (all stages).
     pub iterations_run: usize,
-    /// Iteration chosen by early stopping (the refit runs this many).
+    /// Iteration chosen by early stopping (the refit runs this many); without a validation
+    /// tail, the iteration of the lowest training loss, whose parameters the fit returns.
     pub best_iteration: usize,
     /// (iteration, training loss per step, validation NLL per step).
     pub history: Vec<(usize, f64, f64)>,
@@ -684,9 +685,10 @@ impl Stage<'_, '_> {
         Ok(init)
     }
 
-    /// Adam from `init` for up to `iterations` steps. With validation episodes, checks them every
-    /// `eval_every` steps, stops after `patience` checks without improvement and returns the best
-    /// parameters and their iteration; otherwise returns the last parameters.
+    /// The solver from `init` for up to `iterations` steps. With validation episodes, checks them
+    /// every `eval_every` steps, stops after `patience` checks without improvement and returns the
+    /// parameters of the best validation NLL and their iteration; otherwise returns the iterate of
+    /// the lowest training loss (the last one, unless a late Adam step threw the loss up).
     fn train(
         &mut self,
         init: GpParams<f64>,
@@ -767,6 +769,12 @@ impl Stage<'_, '_> {
                 }
                 good = Some((x.to_vec(), it));
                 last_it = it;
+                // without a validation tail, the best iterate is the one of lowest training loss:
+                // Adam's steps at the loop's step size can throw the loss up for a few dozen
+                // iterations (by 0.5–1 nat per step), also at the very last one
+                if tails.is_empty() && loss < best.0 {
+                    best = (loss, x.to_vec(), it);
+                }
                 let mut validation = None;
                 if !tails.is_empty() && (it % every == 0 || it == iterations) {
                     let p = GpParams::from_flat(shape, x)?;
@@ -803,13 +811,13 @@ impl Stage<'_, '_> {
                     "stage {stage}: stopped at iteration {} of {iterations}: {e}; kept iteration {it}",
                     it + 1
                 ));
-                if !tails.is_empty() && best.0.is_finite() {
+                if best.0.is_finite() {
                     (best.1, best.2)
                 } else {
                     (x, it)
                 }
             }
-            (None, _) if tails.is_empty() => (last_x, last_it),
+            (None, _) if tails.is_empty() && !best.0.is_finite() => (last_x, last_it),
             (None, _) => (best.1, best.2),
         };
         Ok((GpParams::from_flat(shape, &x)?, it))
@@ -923,8 +931,60 @@ mod tests {
         }
     }
 
+    /// Without a validation tail the fit returns the iterate of lowest training loss: a step
+    /// size large enough to throw the loss up near the end of the run (but not to fail
+    /// numerically) ends above its best, and the fit still returns the best iterate, bit for
+    /// bit the parameters of the same fit stopped at that iteration.
     #[test]
-    fn a_numerically_failing_step_keeps_the_last_good_parameters() {
+    fn without_validation_the_fit_returns_its_lowest_training_loss() {
+        let u: Vec<f64> = (0..80).map(|i| (i as f64 * 0.37).sin()).collect();
+        let mut y = vec![0.0; 80];
+        for t in 1..80 {
+            y[t] = 0.9 * y[t - 1] + 0.5 * u[t - 1] + 0.2 * (y[t - 1] * 3.0).sin();
+        }
+        let traj = Trajectory::siso(&u, &y).expect("finite");
+        let settings = FitSettings {
+            ly: 1,
+            lu: 1,
+            inducing: 10,
+            iterations: 300,
+            learning_rate: 0.04,
+            validation_fraction: 0.0,
+            mean: MeanFunction::Linear,
+            ..FitSettings::default()
+        };
+        let mut losses = Vec::new();
+        let (model, report) = fit(std::slice::from_ref(&traj), &settings, &mut |p| {
+            losses.push(p.loss)
+        })
+        .expect("fit");
+        assert!(
+            report.numerical_stop.is_none(),
+            "{:?}",
+            report.numerical_stop
+        );
+        assert_eq!(losses.len(), settings.iterations + 1);
+        let (best, lowest) = losses
+            .iter()
+            .copied()
+            .enumerate()
+            .fold((0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
+        assert!(
+            best < settings.iterations && losses[settings.iterations] > lowest + 1e-2,
+            "the run must end above its best for the test to mean anything: {losses:?}"
+        );
+        assert_eq!(report.best_iteration, best);
+        let stopped = FitSettings {
+            iterations: best,
+            ..settings.clone()
+        };
+        let (at_best, _) =
+            fit(std::slice::from_ref(&traj), &stopped, &mut |_| {}).expect("fit to the best");
+        assert_eq!(model.params, at_best.params);
+    }
+
+    #[test]
+    fn a_numerically_failing_step_keeps_parameters_that_evaluate() {
         // an absurd step size drives the rollout covariances to overflow within a few steps
         let u: Vec<f64> = (0..80).map(|i| (i as f64 * 0.37).sin()).collect();
         let mut y = vec![0.0; 80];
