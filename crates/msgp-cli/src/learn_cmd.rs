@@ -14,13 +14,16 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 use msgp_core::model::Method;
 use msgp_core::start_window::StartWindow;
-use msgp_sim::learn::{IterationReport, LearnOutcome, LearnSettings, learn_policy};
+use msgp_sim::learn::{
+    IterationReport, LearnEvent, LearnOutcome, LearnSettings, learn_policy_observed,
+};
 use msgp_sim::{PendulumParams, write_run};
 use serde_json::{Value, json};
 
 use crate::cost_plot::{CostCurve, plot_costs};
 use crate::fit_cmd::{MeanArg, OptimizerArg};
 use crate::output::{out, out_json};
+use crate::progress::FitBar;
 use crate::sim_cmd::PlantArgs;
 
 /// Simulated systems the loop can learn on.
@@ -446,12 +449,40 @@ pub fn learn(
     quiet: bool,
 ) -> anyhow::Result<(LearnOutcome, f64)> {
     let started = Instant::now();
-    let outcome = learn_policy(params, settings, &mut |r| {
-        if !quiet {
-            eprintln!("{}", progress_line(r, started));
+    // each iteration's model fit gets a bar (a line every few seconds when stderr is not a
+    // terminal): an MSGP fit takes up to a minute
+    let mut bar: Option<FitBar> = None;
+    let method = settings.method.name();
+    let learned = learn_policy_observed(params, settings, &mut |e| match e {
+        LearnEvent::FitStarted { iteration } => {
+            let stage = match (settings.method, settings.warm_start, iteration) {
+                (Method::LinearKf, _, _) => "filter likelihood",
+                (Method::Msgp, Some(_), 2..) => "continuing the previous model",
+                _ => "one-step initialisation",
+            };
+            let label = format!("iteration {iteration}: {method} fit");
+            bar = Some(FitBar::starting(&label, quiet, stage));
         }
-    })
-    .context("policy learning failed")?;
+        LearnEvent::Fit { progress, .. } => {
+            if let Some(b) = bar.as_mut() {
+                b.update(progress);
+            }
+        }
+        LearnEvent::SearchStarted { .. } => {
+            if let Some(b) = bar.take() {
+                b.abandon();
+            }
+        }
+        LearnEvent::Iteration(r) => {
+            if !quiet {
+                eprintln!("{}", progress_line(r, started));
+            }
+        }
+    });
+    if let Some(b) = bar.take() {
+        b.abandon();
+    }
+    let outcome = learned.context("policy learning failed")?;
     if !quiet {
         for (k, (g, stable)) in outcome.random_policies.iter().enumerate() {
             eprintln!(

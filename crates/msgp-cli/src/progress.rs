@@ -34,6 +34,12 @@ impl std::fmt::Debug for FitBar {
 impl FitBar {
     /// Starts reporting a fit called `label` (e.g. "msgp on dryer").
     pub fn new(label: &str, quiet: bool) -> Self {
+        Self::starting(label, quiet, "one-step initialisation")
+    }
+
+    /// Starts reporting a fit called `label` whose first stage, until the first solver
+    /// iteration, the bar names `stage`.
+    pub fn starting(label: &str, quiet: bool, stage: &str) -> Self {
         let mode = if quiet {
             Mode::Quiet
         } else if std::io::stderr().is_terminal() {
@@ -44,7 +50,7 @@ impl FitBar {
             .unwrap_or_else(|_| ProgressStyle::default_bar());
             bar.set_style(style);
             bar.set_prefix(label.to_string());
-            bar.set_message("one-step initialisation");
+            bar.set_message(stage.to_string());
             bar.enable_steady_tick(Duration::from_millis(200));
             Mode::Bar(bar)
         } else {

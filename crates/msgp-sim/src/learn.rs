@@ -17,7 +17,7 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use msgp_core::cost::SaturatingCost;
-use msgp_core::fit::{FitSettings, TrainingEpisode, fit_episodes, refit_episodes};
+use msgp_core::fit::{FitProgress, FitSettings, TrainingEpisode, fit_episodes, refit_episodes};
 use msgp_core::gp::MeanFunction;
 use msgp_core::integrator::Integrator;
 use msgp_core::model::Method;
@@ -241,7 +241,7 @@ pub struct IterationReport {
     #[serde(default)]
     pub search_seconds: f64,
     /// Why the model fit stopped early, when a training step failed numerically (the fit then
-    /// keeps the last parameters that evaluated).
+    /// keeps the parameters of lowest loss among those that evaluated).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fit_numerical_stop: Option<String>,
     /// Set when every policy-search start diverged on the model: the previous gains ran again
@@ -450,11 +450,49 @@ fn feedback_episode(
     Ok((ep, entries))
 }
 
+/// What the loop reports while it runs ([`learn_policy_observed`]).
+#[derive(Clone, Copy, Debug)]
+pub enum LearnEvent<'a> {
+    /// The model fit of policy iteration `iteration` (from 1) starts.
+    FitStarted {
+        /// The policy iteration.
+        iteration: usize,
+    },
+    /// The model fit of policy iteration `iteration` finished a solver iteration (MSGP fits
+    /// only: one-step and linear-kf fits report nothing until they end).
+    Fit {
+        /// The policy iteration.
+        iteration: usize,
+        /// The fit's own progress.
+        progress: &'a FitProgress,
+    },
+    /// The policy search of an iteration starts (its fit has ended).
+    SearchStarted {
+        /// The policy iteration.
+        iteration: usize,
+    },
+    /// A policy iteration completed.
+    Iteration(&'a IterationReport),
+}
+
 /// Runs the loop; `progress` sees each iteration as it completes.
 pub fn learn_policy(
     params: &PendulumParams,
     settings: &LearnSettings,
     progress: &mut dyn FnMut(&IterationReport),
+) -> Result<LearnOutcome, SimError> {
+    learn_policy_observed(params, settings, &mut |e| {
+        if let LearnEvent::Iteration(r) = e {
+            progress(r)
+        }
+    })
+}
+
+/// Runs the loop; `observe` sees its fits' and iterations' progress ([`LearnEvent`]).
+pub fn learn_policy_observed(
+    params: &PendulumParams,
+    settings: &LearnSettings,
+    observe: &mut dyn FnMut(LearnEvent<'_>),
 ) -> Result<LearnOutcome, SimError> {
     params.validate()?;
     let mut episodes: Vec<Episode> = Vec::new();
@@ -546,6 +584,13 @@ pub fn learn_policy(
             ..settings.fit.clone()
         };
         let clock = std::time::Instant::now();
+        observe(LearnEvent::FitStarted { iteration: it });
+        let mut fit_progress = |p: &FitProgress| {
+            observe(LearnEvent::Fit {
+                iteration: it,
+                progress: p,
+            })
+        };
         let fitted = match (&previous_model, settings.warm_start) {
             (Some(prev), Some(n)) if matches!(settings.method, Method::Msgp | Method::LinearKf) => {
                 refit_episodes(
@@ -555,10 +600,10 @@ pub fn learn_policy(
                         ..fit_settings.clone()
                     },
                     prev,
-                    &mut |_| {},
+                    &mut fit_progress,
                 )
             }
-            _ => fit_episodes(&training, &fit_settings, &mut |_| {}),
+            _ => fit_episodes(&training, &fit_settings, &mut fit_progress),
         };
         let (model, mut fit_report) = match fitted {
             Ok(fitted) => fitted,
@@ -595,6 +640,7 @@ pub fn learn_policy(
                 .wrapping_add(it as u64),
             ..settings.search
         };
+        observe(LearnEvent::SearchStarted { iteration: it });
         let clock = std::time::Instant::now();
         let searched = optimise_pid_scaled(
             &problem,
@@ -647,7 +693,7 @@ pub fn learn_policy(
             search_failure,
             gains,
         };
-        progress(&report);
+        observe(LearnEvent::Iteration(&report));
         reports.push(report);
     }
     Ok(LearnOutcome {

@@ -245,3 +245,39 @@ fn linear_kf_defaults_declare_the_end_effector_kinematic_and_run() {
     assert_eq!(a.final_gains, b.final_gains);
     assert_eq!(a.iterations[1].actual_cost, b.iterations[1].actual_cost);
 }
+
+/// The observed loop reports, per iteration and in order: the fit's start, every solver
+/// iteration of the MSGP fit (10 here, plus the evaluation at the end), the search's start and
+/// the finished iteration; and it learns exactly what `learn_policy` does.
+#[test]
+fn the_observed_loop_reports_fits_searches_and_iterations_in_order() {
+    use msgp_sim::learn::{LearnEvent, learn_policy_observed};
+    let settings = small(2);
+    let params = PendulumParams::default();
+    let mut events = Vec::new();
+    let observed = learn_policy_observed(&params, &settings, &mut |e| {
+        events.push(match e {
+            LearnEvent::FitStarted { iteration } => format!("fit {iteration}"),
+            LearnEvent::Fit {
+                iteration,
+                progress,
+            } => format!("step {iteration}.{}", progress.iteration),
+            LearnEvent::SearchStarted { iteration } => format!("search {iteration}"),
+            LearnEvent::Iteration(r) => format!("done {}", r.iteration),
+        })
+    })
+    .expect("learn");
+    let mut expected = Vec::new();
+    for it in 1..=2 {
+        expected.push(format!("fit {it}"));
+        expected.extend((0..=10).map(|k| format!("step {it}.{k}")));
+        expected.push(format!("search {it}"));
+        expected.push(format!("done {it}"));
+    }
+    assert_eq!(events, expected);
+    let plain = learn_policy(&params, &settings, &mut |_| {}).expect("learn");
+    let gains = |o: &msgp_sim::learn::LearnOutcome| -> Vec<_> {
+        o.iterations.iter().map(|r| r.gains).collect()
+    };
+    assert_eq!(gains(&observed), gains(&plain));
+}
