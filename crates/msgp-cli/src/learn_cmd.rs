@@ -7,6 +7,7 @@
 //! interaction episode), `cost.png` (predicted and actual cost per iteration) and
 //! `summary.json` (what `--json` prints).
 
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -453,31 +454,34 @@ pub fn learn(
     // terminal): an MSGP fit takes up to a minute
     let mut bar: Option<FitBar> = None;
     let method = settings.method.name();
-    let learned = learn_policy_observed(params, settings, &mut |e| match e {
-        LearnEvent::FitStarted { iteration } => {
-            let stage = match (settings.method, settings.warm_start, iteration) {
-                (Method::LinearKf, _, _) => "filter likelihood",
-                (Method::Msgp, Some(_), 2..) => "continuing the previous model",
-                _ => "one-step initialisation",
-            };
-            let label = format!("iteration {iteration}: {method} fit");
-            bar = Some(FitBar::starting(&label, quiet, stage));
-        }
-        LearnEvent::Fit { progress, .. } => {
-            if let Some(b) = bar.as_mut() {
-                b.update(progress);
+    let learned = learn_policy_observed(params, settings, &mut |e| {
+        match e {
+            LearnEvent::FitStarted { iteration } => {
+                let stage = match (settings.method, settings.warm_start, iteration) {
+                    (Method::LinearKf, _, _) => "filter likelihood",
+                    (Method::Msgp, Some(_), 2..) => "continuing the previous model",
+                    _ => "one-step initialisation",
+                };
+                let label = format!("iteration {iteration}: {method} fit");
+                bar = Some(FitBar::starting(&label, quiet, stage));
+            }
+            LearnEvent::Fit { progress, .. } => {
+                if let Some(b) = bar.as_mut() {
+                    b.update(progress);
+                }
+            }
+            LearnEvent::SearchStarted { .. } => {
+                if let Some(b) = bar.take() {
+                    b.abandon();
+                }
+            }
+            LearnEvent::Iteration(r) => {
+                if !quiet {
+                    eprintln!("{}", progress_line(r, started));
+                }
             }
         }
-        LearnEvent::SearchStarted { .. } => {
-            if let Some(b) = bar.take() {
-                b.abandon();
-            }
-        }
-        LearnEvent::Iteration(r) => {
-            if !quiet {
-                eprintln!("{}", progress_line(r, started));
-            }
-        }
+        ControlFlow::Continue(())
     });
     if let Some(b) = bar.take() {
         b.abandon();

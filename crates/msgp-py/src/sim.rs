@@ -3,7 +3,9 @@
 
 use msgp_core::data::{NoiseScale, SyntheticSystem};
 use msgp_core::fit::FitSettings;
-use msgp_sim::learn::{LearnSettings, episode_trajectory, learn_policy as run_learning};
+use std::ops::ControlFlow;
+
+use msgp_sim::learn::{LearnEvent, LearnSettings, episode_trajectory, learn_policy_observed};
 use msgp_sim::{
     Controller, Episode, EpisodeConfig, ExcitationConfig, PendulumParams, PidPdGains, PidPdPolicy,
     RandomExcitation, StabilityCriteria, run_episode as run_sim_episode,
@@ -249,9 +251,11 @@ pub fn stability_test<'py>(
 /// run them. Returns one dict per iteration (`iteration`, `predicted_cost`,
 /// `predicted_cost_std`, `actual_cost`, `interaction_seconds`, `stable`, `gains`, …).
 /// `settings` overrides other fields of `defaults("learn", method=method)` (nested dicts
-/// merge), `params` the plant. Takes minutes; releases the GIL.
+/// merge), `params` the plant. Takes minutes; releases the GIL. `progress`, a callable, is
+/// called with each iteration's dict as it completes. Ctrl-C (or an exception raised by
+/// `progress`) stops the loop within one model fit and raises.
 #[pyfunction]
-#[pyo3(signature = (method = "msgp", iterations = 8, seed = 0, *, params = None, settings = None))]
+#[pyo3(signature = (method = "msgp", iterations = 8, seed = 0, *, params = None, settings = None, progress = None))]
 pub fn learn_policy<'py>(
     py: Python<'py>,
     method: &str,
@@ -259,7 +263,18 @@ pub fn learn_policy<'py>(
     seed: i128,
     params: Option<&Bound<'py, PyAny>>,
     settings: Option<&Bound<'py, PyAny>>,
+    progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyList>> {
+    let progress: Option<Py<PyAny>> = match progress {
+        Some(p) if !p.is_callable() => {
+            return Err(input(format!(
+                "progress must be a callable taking one iteration's dict, not a {}",
+                p.get_type().name()?
+            ))
+            .into());
+        }
+        p => p.map(|p| p.clone().unbind()),
+    };
     let m = crate::model::method(method)?;
     let iterations = count(iterations, "iterations")?;
     let seed = uint(seed, "seed")?;
@@ -281,7 +296,32 @@ pub fn learn_policy<'py>(
         seed,
         ..base
     };
-    let outcome = detached(py, move || Ok(run_learning(&p, &s, &mut |_| {})?))?;
+    // the loop runs without the GIL; at every event it takes it back to let Python see
+    // signals, and at the end of an iteration to call `progress`
+    let (learned, raised) = detached(py, move || {
+        let mut raised: Option<PyErr> = None;
+        let learned = learn_policy_observed(&p, &s, &mut |e| {
+            let seen = Python::attach(|py| -> PyResult<()> {
+                py.check_signals()?;
+                if let (LearnEvent::Iteration(r), Some(f)) = (&e, &progress) {
+                    f.call1(py, (to_python(py, *r)?,))?;
+                }
+                Ok(())
+            });
+            match seen {
+                Ok(()) => ControlFlow::Continue(()),
+                Err(err) => {
+                    raised.get_or_insert(err);
+                    ControlFlow::Break(())
+                }
+            }
+        });
+        Ok((learned, raised))
+    })?;
+    if let Some(err) = raised {
+        return Err(err);
+    }
+    let outcome = learned.map_err(Error::from)?;
     let list = PyList::empty(py);
     for r in &outcome.iterations {
         list.append(to_python(py, r)?)?;

@@ -85,6 +85,40 @@ def test_learn_policy_runs_and_reports():
     assert msgp.defaults("learn")["iterations"] == 8
 
 
+def test_learn_policy_reports_progress_and_stops_on_its_exception():
+    """`progress` sees each iteration's report as it completes, the same dicts the call
+    returns; an exception it raises stops the loop and comes out of the call."""
+    settings = {
+        "random_rollouts": 1,
+        "episode_seconds": 1.0,
+        "fit": {"inducing": 10, "iterations": 3, "one_step_iterations": 10},
+        "search": {"iterations": 2, "candidates": 4},
+    }
+    seen = []
+    reports = msgp.learn_policy(
+        method="msgp", iterations=2, seed=2, settings=settings, progress=seen.append
+    )
+    assert [r["iteration"] for r in seen] == [1, 2]
+    assert seen == reports
+
+    class Enough(Exception):
+        pass
+
+    calls = []
+
+    def stop_after_first(report):
+        calls.append(report["iteration"])
+        raise Enough(report["iteration"])
+
+    with pytest.raises(Enough):
+        msgp.learn_policy(
+            method="msgp", iterations=3, seed=2, settings=settings, progress=stop_after_first
+        )
+    assert calls == [1]
+    with pytest.raises(msgp.InvalidInputError, match="callable"):
+        msgp.learn_policy(iterations=1, settings=settings, progress=3)
+
+
 def test_learn_defaults_per_model():
     """`defaults("learn", method=...)` are the loop's defaults for that model: linear-kf
     warm-starts its fits and searches over the stability test's 10 s; the others do not."""

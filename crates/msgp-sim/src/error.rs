@@ -67,6 +67,12 @@ pub enum SimError {
         #[source]
         source: mcap::McapError,
     },
+    /// The observer of [`crate::learn::learn_policy_observed`] asked the loop to stop.
+    #[error("policy learning stopped by its observer at iteration {iteration}")]
+    Stopped {
+        /// The policy iteration it stopped in.
+        iteration: usize,
+    },
     /// A run log's file name ends in neither `.csv` nor `.mcap`.
     #[error("unsupported run-log extension for {path} (expected .csv or .mcap)")]
     UnsupportedExtension {

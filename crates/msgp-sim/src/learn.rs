@@ -13,6 +13,8 @@
 //! is [`msgp_core::policy::PidPolicy`] with the sine saturation that the simulator's policy
 //! applies when its gains say `saturation: sine`.
 
+use std::ops::ControlFlow;
+
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
@@ -485,14 +487,17 @@ pub fn learn_policy(
         if let LearnEvent::Iteration(r) = e {
             progress(r)
         }
+        ControlFlow::Continue(())
     })
 }
 
-/// Runs the loop; `observe` sees its fits' and iterations' progress ([`LearnEvent`]).
+/// Runs the loop; `observe` sees its fits' and iterations' progress ([`LearnEvent`]) and can
+/// stop it: after a [`ControlFlow::Break`] the loop ends at the next event, returning
+/// [`SimError::Stopped`]. A fit is not cut short: a break during one takes effect when it ends.
 pub fn learn_policy_observed(
     params: &PendulumParams,
     settings: &LearnSettings,
-    observe: &mut dyn FnMut(LearnEvent<'_>),
+    observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
 ) -> Result<LearnOutcome, SimError> {
     params.validate()?;
     let mut episodes: Vec<Episode> = Vec::new();
@@ -584,12 +589,17 @@ pub fn learn_policy_observed(
             ..settings.fit.clone()
         };
         let clock = std::time::Instant::now();
-        observe(LearnEvent::FitStarted { iteration: it });
+        let stopped = SimError::Stopped { iteration: it };
+        if observe(LearnEvent::FitStarted { iteration: it }).is_break() {
+            return Err(stopped);
+        }
+        let mut stop = false;
         let mut fit_progress = |p: &FitProgress| {
-            observe(LearnEvent::Fit {
+            stop |= observe(LearnEvent::Fit {
                 iteration: it,
                 progress: p,
             })
+            .is_break();
         };
         let fitted = match (&previous_model, settings.warm_start) {
             (Some(prev), Some(n)) if matches!(settings.method, Method::Msgp | Method::LinearKf) => {
@@ -605,6 +615,9 @@ pub fn learn_policy_observed(
             }
             _ => fit_episodes(&training, &fit_settings, &mut fit_progress),
         };
+        if stop {
+            return Err(stopped);
+        }
         let (model, mut fit_report) = match fitted {
             Ok(fitted) => fitted,
             // the MSGP start (the one-step model rolled out over every episode) can already
@@ -640,7 +653,9 @@ pub fn learn_policy_observed(
                 .wrapping_add(it as u64),
             ..settings.search
         };
-        observe(LearnEvent::SearchStarted { iteration: it });
+        if observe(LearnEvent::SearchStarted { iteration: it }).is_break() {
+            return Err(stopped);
+        }
         let clock = std::time::Instant::now();
         let searched = optimise_pid_scaled(
             &problem,
@@ -693,7 +708,9 @@ pub fn learn_policy_observed(
             search_failure,
             gains,
         };
-        observe(LearnEvent::Iteration(&report));
+        if observe(LearnEvent::Iteration(&report)).is_break() {
+            return Err(stopped);
+        }
         reports.push(report);
     }
     Ok(LearnOutcome {

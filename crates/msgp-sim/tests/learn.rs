@@ -3,8 +3,10 @@
 
 use msgp_core::fit::FitSettings;
 use msgp_core::policy_search::PolicySearchSettings;
-use msgp_sim::PendulumParams;
+use std::ops::ControlFlow;
+
 use msgp_sim::learn::{LearnSettings, learn_policy};
+use msgp_sim::{PendulumParams, SimError};
 
 /// `iterations` of a loop small enough for a test: two 1 s random rollouts, m = 20, 10 fit
 /// and 3 search iterations.
@@ -264,7 +266,8 @@ fn the_observed_loop_reports_fits_searches_and_iterations_in_order() {
             } => format!("step {iteration}.{}", progress.iteration),
             LearnEvent::SearchStarted { iteration } => format!("search {iteration}"),
             LearnEvent::Iteration(r) => format!("done {}", r.iteration),
-        })
+        });
+        ControlFlow::Continue(())
     })
     .expect("learn");
     let mut expected = Vec::new();
@@ -280,4 +283,38 @@ fn the_observed_loop_reports_fits_searches_and_iterations_in_order() {
         o.iterations.iter().map(|r| r.gains).collect()
     };
     assert_eq!(gains(&observed), gains(&plain));
+    // a break ends the loop at the next event: during a fit, once the fit has ended
+    for (at, iteration) in [("fit 1", 1), ("step 2.3", 2), ("done 1", 1)] {
+        let mut seen = Vec::new();
+        let err = learn_policy_observed(&params, &settings, &mut |e| {
+            let name = match e {
+                LearnEvent::FitStarted { iteration } => format!("fit {iteration}"),
+                LearnEvent::Fit {
+                    iteration,
+                    progress,
+                } => format!("step {iteration}.{}", progress.iteration),
+                LearnEvent::SearchStarted { iteration } => format!("search {iteration}"),
+                LearnEvent::Iteration(r) => format!("done {}", r.iteration),
+            };
+            let flow = if name == at {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
+            };
+            seen.push(name);
+            flow
+        })
+        .expect_err("stopped");
+        assert!(
+            matches!(err, SimError::Stopped { iteration: i } if i == iteration),
+            "{err}"
+        );
+        let last = seen.last().cloned().unwrap_or_default();
+        let expected_last = if at.starts_with("step") {
+            "step 2.10".to_string()
+        } else {
+            at.to_string()
+        };
+        assert_eq!(last, expected_last, "{seen:?}");
+    }
 }

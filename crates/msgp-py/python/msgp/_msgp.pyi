@@ -1,7 +1,7 @@
 """Type stubs of the compiled module `msgp._msgp` (re-exported by `msgp`)."""
 
 import os
-from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -148,6 +148,9 @@ def learn_policy(
     *,
     params: Optional[Dict[str, Any]] = None,
     settings: Optional[Dict[str, Any]] = None,
+    progress: Optional[Callable[[Dict[str, Any]], Any]] = None,
 ) -> List[Dict[str, Any]]:
-    """PILCO with MSGP (or GP-NARX) models on the simulated pendulum; one report per
-    iteration. Releases the GIL; takes minutes with the defaults."""
+    """PILCO with MSGP, GP-NARX or linear-kf models on the simulated pendulum; one report per
+    iteration. Releases the GIL; takes minutes with the defaults. `progress` is called with
+    each iteration's report as it completes; Ctrl-C or an exception it raises stops the loop
+    within one model fit and raises."""
