@@ -931,18 +931,23 @@ mod tests {
         }
     }
 
+    /// 80 samples of `y_t = 0.9 y_{t−1} + 0.5 u_{t−1} + a sin(3 y_{t−1})` under a sine input.
+    fn first_order(a: f64) -> Trajectory {
+        let u: Vec<f64> = (0..80).map(|i| (i as f64 * 0.37).sin()).collect();
+        let mut y = vec![0.0; 80];
+        for t in 1..80 {
+            y[t] = 0.9 * y[t - 1] + 0.5 * u[t - 1] + a * (y[t - 1] * 3.0).sin();
+        }
+        Trajectory::siso(&u, &y).expect("finite")
+    }
+
     /// Without a validation tail the fit returns the iterate of lowest training loss: a step
     /// size large enough to throw the loss up near the end of the run (but not to fail
     /// numerically) ends above its best, and the fit still returns the best iterate, bit for
     /// bit the parameters of the same fit stopped at that iteration.
     #[test]
     fn without_validation_the_fit_returns_its_lowest_training_loss() {
-        let u: Vec<f64> = (0..80).map(|i| (i as f64 * 0.37).sin()).collect();
-        let mut y = vec![0.0; 80];
-        for t in 1..80 {
-            y[t] = 0.9 * y[t - 1] + 0.5 * u[t - 1] + 0.2 * (y[t - 1] * 3.0).sin();
-        }
-        let traj = Trajectory::siso(&u, &y).expect("finite");
+        let traj = first_order(0.2);
         let settings = FitSettings {
             ly: 1,
             lu: 1,
@@ -986,12 +991,7 @@ mod tests {
     #[test]
     fn a_numerically_failing_step_keeps_parameters_that_evaluate() {
         // an absurd step size drives the rollout covariances to overflow within a few steps
-        let u: Vec<f64> = (0..80).map(|i| (i as f64 * 0.37).sin()).collect();
-        let mut y = vec![0.0; 80];
-        for t in 1..80 {
-            y[t] = 0.9 * y[t - 1] + 0.5 * u[t - 1];
-        }
-        let traj = Trajectory::siso(&u, &y).expect("finite");
+        let traj = first_order(0.0);
         let settings = FitSettings {
             ly: 1,
             lu: 1,

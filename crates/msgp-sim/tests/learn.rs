@@ -5,7 +5,7 @@ use msgp_core::fit::FitSettings;
 use msgp_core::policy_search::PolicySearchSettings;
 use std::ops::ControlFlow;
 
-use msgp_sim::learn::{LearnSettings, learn_policy};
+use msgp_sim::learn::{LearnEvent, LearnSettings, learn_policy, learn_policy_observed};
 use msgp_sim::{PendulumParams, SimError};
 
 /// `iterations` of a loop small enough for a test: two 1 s random rollouts, m = 20, 10 fit
@@ -248,25 +248,29 @@ fn linear_kf_defaults_declare_the_end_effector_kinematic_and_run() {
     assert_eq!(a.iterations[1].actual_cost, b.iterations[1].actual_cost);
 }
 
+/// `fit 2`, `step 2.7`, `search 2`, `done 2`: what a [`LearnEvent`] is, for comparisons.
+fn event_name(e: &LearnEvent<'_>) -> String {
+    match e {
+        LearnEvent::FitStarted { iteration } => format!("fit {iteration}"),
+        LearnEvent::Fit {
+            iteration,
+            progress,
+        } => format!("step {iteration}.{}", progress.iteration),
+        LearnEvent::SearchStarted { iteration } => format!("search {iteration}"),
+        LearnEvent::Iteration(r) => format!("done {}", r.iteration),
+    }
+}
+
 /// The observed loop reports, per iteration and in order: the fit's start, every solver
 /// iteration of the MSGP fit (10 here, plus the evaluation at the end), the search's start and
 /// the finished iteration; and it learns exactly what `learn_policy` does.
 #[test]
 fn the_observed_loop_reports_fits_searches_and_iterations_in_order() {
-    use msgp_sim::learn::{LearnEvent, learn_policy_observed};
     let settings = small(2);
     let params = PendulumParams::default();
     let mut events = Vec::new();
     let observed = learn_policy_observed(&params, &settings, &mut |e| {
-        events.push(match e {
-            LearnEvent::FitStarted { iteration } => format!("fit {iteration}"),
-            LearnEvent::Fit {
-                iteration,
-                progress,
-            } => format!("step {iteration}.{}", progress.iteration),
-            LearnEvent::SearchStarted { iteration } => format!("search {iteration}"),
-            LearnEvent::Iteration(r) => format!("done {}", r.iteration),
-        });
+        events.push(event_name(&e));
         ControlFlow::Continue(())
     })
     .expect("learn");
@@ -287,15 +291,7 @@ fn the_observed_loop_reports_fits_searches_and_iterations_in_order() {
     for (at, iteration) in [("fit 1", 1), ("step 2.3", 2), ("done 1", 1)] {
         let mut seen = Vec::new();
         let err = learn_policy_observed(&params, &settings, &mut |e| {
-            let name = match e {
-                LearnEvent::FitStarted { iteration } => format!("fit {iteration}"),
-                LearnEvent::Fit {
-                    iteration,
-                    progress,
-                } => format!("step {iteration}.{}", progress.iteration),
-                LearnEvent::SearchStarted { iteration } => format!("search {iteration}"),
-                LearnEvent::Iteration(r) => format!("done {}", r.iteration),
-            };
+            let name = event_name(&e);
             let flow = if name == at {
                 ControlFlow::Break(())
             } else {
