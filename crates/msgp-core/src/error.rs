@@ -70,6 +70,12 @@ pub enum MsgpError {
         /// Versions this build reads (e.g. "1.x").
         supported: String,
     },
+    /// The observer of a fit ([`crate::fit::fit_episodes_observed`]) asked it to stop.
+    #[error("the fit was stopped by its observer at iteration {iteration}")]
+    Stopped {
+        /// The solver iteration it stopped at.
+        iteration: usize,
+    },
 }
 
 /// Result alias for msgp-core.

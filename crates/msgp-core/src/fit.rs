@@ -11,6 +11,7 @@
 //!    its free-simulation NLL is computed every [`FitSettings::eval_every`] iterations, and the
 //!    parameters with the best validation NLL are returned. The test data are never seen.
 
+use std::ops::ControlFlow;
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
@@ -389,7 +390,26 @@ pub fn fit_episodes(
     settings: &FitSettings,
     progress: &mut dyn FnMut(&FitProgress),
 ) -> Result<(Model, FitReport)> {
-    fit_episodes_from(episodes, settings, None, progress)
+    fit_episodes_observed(episodes, settings, None, &mut |p| {
+        progress(p);
+        ControlFlow::Continue(())
+    })
+}
+
+/// [`fit_episodes`], or with `previous` [`refit_episodes`], under an observer that sees every
+/// solver iteration of the MSGP training and can stop it: after a [`ControlFlow::Break`] the
+/// fit ends with [`MsgpError::Stopped`]. (The one-step start and the one-step and linear-kf
+/// fits report nothing and run to their end.)
+pub fn fit_episodes_observed(
+    episodes: &[TrainingEpisode],
+    settings: &FitSettings,
+    previous: Option<&Model>,
+    observe: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
+) -> Result<(Model, FitReport)> {
+    if let Some(previous) = previous {
+        check_continuation(settings, previous)?;
+    }
+    fit_episodes_from(episodes, settings, previous, observe)
 }
 
 /// Continues training an MSGP model fitted earlier (a *warm start*), typically on fewer of the
@@ -405,6 +425,14 @@ pub fn refit_episodes(
     previous: &Model,
     progress: &mut dyn FnMut(&FitProgress),
 ) -> Result<(Model, FitReport)> {
+    fit_episodes_observed(episodes, settings, Some(previous), &mut |p| {
+        progress(p);
+        ControlFlow::Continue(())
+    })
+}
+
+/// Whether `settings` describe a model that can continue `previous` ([`refit_episodes`]).
+fn check_continuation(settings: &FitSettings, previous: &Model) -> Result<()> {
     let refuse = |what: String| {
         Err(MsgpError::InvalidSetting {
             name: "warm start",
@@ -428,7 +456,7 @@ pub fn refit_episodes(
                 previous.spec.ly, previous.spec.lu, settings.ly, settings.lu
             ));
         }
-        return fit_episodes_from(episodes, settings, Some(previous), progress);
+        return Ok(());
     }
     if (settings.ly, settings.lu) != (previous.spec.ly, previous.spec.lu)
         || settings.inducing != previous.params.pseudo_inputs.nrows()
@@ -447,14 +475,14 @@ pub fn refit_episodes(
             settings.mean
         ));
     }
-    fit_episodes_from(episodes, settings, Some(previous), progress)
+    Ok(())
 }
 
 fn fit_episodes_from(
     episodes: &[TrainingEpisode],
     settings: &FitSettings,
     previous: Option<&Model>,
-    progress: &mut dyn FnMut(&FitProgress),
+    progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
 ) -> Result<(Model, FitReport)> {
     let start = Instant::now();
     let train: Vec<Trajectory> = episodes.iter().map(|e| e.traj.clone()).collect();
@@ -638,7 +666,7 @@ struct Stage<'a, 'p> {
     config: GpConfig,
     settings: &'a FitSettings,
     start: Instant,
-    progress: &'p mut dyn FnMut(&FitProgress),
+    progress: &'p mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
     report: &'a mut FitReport,
 }
 
@@ -756,6 +784,7 @@ impl Stage<'_, '_> {
         let report = &mut *self.report;
         let progress = &mut *self.progress;
         let mut last_it = iterations;
+        let mut stopped = None;
         let (last_x, _) = minimize(
             &mut objective,
             &solver,
@@ -789,7 +818,7 @@ impl Stage<'_, '_> {
                     }
                 }
                 report.iterations_run += 1;
-                progress(&FitProgress {
+                let seen = progress(&FitProgress {
                     stage,
                     iteration: it,
                     iterations,
@@ -797,6 +826,10 @@ impl Stage<'_, '_> {
                     validation,
                     elapsed: start.elapsed().as_secs_f64(),
                 });
+                if seen.is_break() {
+                    stopped = Some(it);
+                    return Ok(Flow::Stop);
+                }
                 if it == iterations || (!tails.is_empty() && since_best >= settings.patience) {
                     return Ok(Flow::Stop);
                 }
@@ -804,6 +837,9 @@ impl Stage<'_, '_> {
             },
         )?;
         report.jitter.merge(&objective.log);
+        if let Some(iteration) = stopped {
+            return Err(MsgpError::Stopped { iteration });
+        }
         let (x, it) = match (objective.failure.take(), good) {
             (Some(e), None) => return Err(e),
             (Some(e), Some((x, it))) => {
@@ -986,6 +1022,43 @@ mod tests {
         let (at_best, _) =
             fit(std::slice::from_ref(&traj), &stopped, &mut |_| {}).expect("fit to the best");
         assert_eq!(model.params, at_best.params);
+    }
+
+    /// An observer that breaks stops the MSGP training at that iteration with
+    /// [`MsgpError::Stopped`]; one that never breaks gives what [`fit_episodes`] gives.
+    #[test]
+    fn an_observer_can_stop_a_fit() {
+        let episodes = [TrainingEpisode {
+            traj: first_order(0.2),
+            policy: None,
+        }];
+        let settings = FitSettings {
+            ly: 1,
+            lu: 1,
+            inducing: 10,
+            iterations: 40,
+            validation_fraction: 0.0,
+            mean: MeanFunction::Linear,
+            ..FitSettings::default()
+        };
+        let mut seen = Vec::new();
+        let err = fit_episodes_observed(&episodes, &settings, None, &mut |p| {
+            seen.push(p.iteration);
+            if p.iteration == 5 {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
+            }
+        })
+        .expect_err("stopped");
+        assert!(matches!(err, MsgpError::Stopped { iteration: 5 }), "{err}");
+        assert_eq!(seen, (0..=5).collect::<Vec<_>>());
+        let (observed, _) = fit_episodes_observed(&episodes, &settings, None, &mut |_| {
+            ControlFlow::Continue(())
+        })
+        .expect("fit");
+        let (plain, _) = fit_episodes(&episodes, &settings, &mut |_| {}).expect("fit");
+        assert_eq!(observed.params, plain.params);
     }
 
     #[test]

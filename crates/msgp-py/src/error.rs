@@ -123,6 +123,7 @@ fn core_kind(e: &CoreError) -> Kind {
         CoreError::File { .. } | CoreError::FileAt { .. } | CoreError::ModelVersion { .. } => {
             Kind::ModelFile
         }
+        CoreError::Stopped { .. } => Kind::Other,
     }
 }
 
@@ -204,4 +205,37 @@ where
         catch_unwind(AssertUnwindSafe(f))
             .unwrap_or_else(|p| Err(Error::Panic(panic_message(p.as_ref()))))
     })
+}
+
+/// For an observer inside [`detached`] work: takes the GIL, lets Python see signals (Ctrl-C),
+/// then runs `f`. Continue when both went well; otherwise Break, with the first exception kept
+/// in `raised` for the caller to raise once the work has stopped.
+pub fn with_python(
+    raised: &mut Option<PyErr>,
+    f: impl FnOnce(Python<'_>) -> PyResult<()>,
+) -> std::ops::ControlFlow<()> {
+    let seen = Python::attach(|py| {
+        py.check_signals()?;
+        f(py)
+    });
+    match seen {
+        Ok(()) => std::ops::ControlFlow::Continue(()),
+        Err(err) => {
+            raised.get_or_insert(err);
+            std::ops::ControlFlow::Break(())
+        }
+    }
+}
+
+/// A callable argument, or a clear error naming `what` it should be.
+pub fn callable(arg: Option<&Bound<'_, PyAny>>, what: &str) -> Result<Option<Py<PyAny>>> {
+    match arg {
+        Some(f) if !f.is_callable() => Err(input(format!(
+            "progress must be a callable taking {what}, not a {}",
+            f.get_type()
+                .name()
+                .map_or_else(|_| "non-callable".to_string(), |n| n.to_string())
+        ))),
+        f => Ok(f.map(|f| f.clone().unbind())),
+    }
 }

@@ -6,7 +6,9 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use msgp_core::fit::{FitOptimizer, FitOptions, FitReport, FitSettings, fit};
+use msgp_core::fit::{
+    FitOptimizer, FitOptions, FitReport, FitSettings, TrainingEpisode, fit_episodes_observed,
+};
 use msgp_core::gp::MeanFunction;
 use msgp_core::model::{Method, Metrics, Model, pool, score};
 use msgp_core::model_file::{FitRecord, ModelFile};
@@ -16,7 +18,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
 
 use crate::convert::{array1, array2, matrix, to_python, trajectories, with_overrides};
-use crate::error::{Error, Result, detached, input};
+use crate::error::{Error, Result, callable, detached, input, with_python};
 
 /// Settings that the constructor's own arguments set.
 const OWN_SETTINGS: [(&str, &str); 6] = [
@@ -309,16 +311,21 @@ impl Msgp {
     }
 
     /// Fits the model on `u`, `y` (arrays (n, d) or (n,), or lists of such arrays for several
-    /// trajectories); returns self. Releases the GIL while fitting.
-    #[pyo3(signature = (u, y, *, input_names = None, output_names = None))]
+    /// trajectories); returns self. Releases the GIL while fitting. `progress`, a callable, is
+    /// called with a dict (stage, iteration, iterations, loss, validation, elapsed) after every
+    /// training iteration of an MSGP fit; Ctrl-C, or an exception `progress` raises, stops
+    /// that training at its next iteration and raises (the model stays as it was).
+    #[pyo3(signature = (u, y, *, input_names = None, output_names = None, progress = None))]
     fn fit<'py>(
         slf: Bound<'py, Self>,
         u: &Bound<'py, PyAny>,
         y: &Bound<'py, PyAny>,
         input_names: Option<Vec<String>>,
         output_names: Option<Vec<String>>,
+        progress: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, Self>> {
         let py = slf.py();
+        let progress = callable(progress, "one training iteration's dict")?;
         let (options, overrides) = {
             let me = slf.try_borrow().map_err(|e| Error::Busy(e.to_string()))?;
             (me.options.clone(), me.overrides.clone())
@@ -330,9 +337,36 @@ impl Msgp {
         if let Some(n) = inputs.iter().find(|n| outputs.contains(n)) {
             return Err(input(format!("{n:?} is both an input and an output name")).into());
         }
-        let fitted = detached(py, move || -> Result<Fitted> {
+        let fitted = detached(py, move || -> Result<std::result::Result<Fitted, PyErr>> {
             let settings = Msgp::settings(&options, overrides.as_ref(), &train)?;
-            let (model, report) = fit(&train, &settings, &mut |_| {})?;
+            let episodes: Vec<TrainingEpisode> = train
+                .iter()
+                .map(|t| TrainingEpisode {
+                    traj: t.clone(),
+                    policy: None,
+                })
+                .collect();
+            let mut raised = None;
+            let fitted = fit_episodes_observed(&episodes, &settings, None, &mut |p| {
+                with_python(&mut raised, |py| {
+                    let Some(f) = &progress else {
+                        return Ok(());
+                    };
+                    let d = PyDict::new(py);
+                    d.set_item("stage", p.stage)?;
+                    d.set_item("iteration", p.iteration)?;
+                    d.set_item("iterations", p.iterations)?;
+                    d.set_item("loss", p.loss)?;
+                    d.set_item("validation", p.validation)?;
+                    d.set_item("elapsed", p.elapsed)?;
+                    f.call1(py, (d,))?;
+                    Ok(())
+                })
+            });
+            if let Some(err) = raised {
+                return Ok(Err(err));
+            }
+            let (model, report) = fitted?;
             let file = ModelFile::from_fit(
                 &model,
                 &FitRecord {
@@ -345,12 +379,12 @@ impl Msgp {
             )?;
             // predict with the model as saved, like `msgp fit`
             let model = file.to_model()?;
-            Ok(Fitted {
+            Ok(Ok(Fitted {
                 file,
                 model,
                 report: Some(report),
-            })
-        })?;
+            }))
+        })??;
         slf.try_borrow_mut()
             .map_err(|e| Error::Busy(e.to_string()))?
             .fitted = Some(Arc::new(fitted));

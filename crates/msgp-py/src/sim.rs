@@ -3,8 +3,6 @@
 
 use msgp_core::data::{NoiseScale, SyntheticSystem};
 use msgp_core::fit::FitSettings;
-use std::ops::ControlFlow;
-
 use msgp_sim::learn::{LearnEvent, LearnSettings, episode_trajectory, learn_policy_observed};
 use msgp_sim::{
     Controller, Episode, EpisodeConfig, ExcitationConfig, PendulumParams, PidPdGains, PidPdPolicy,
@@ -16,7 +14,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyString};
 
 use crate::convert::{array1, array2, to_json, to_python, with_overrides};
-use crate::error::{Error, Result, detached, input};
+use crate::error::{Error, Result, callable, detached, input, with_python};
 use crate::model::{count, uint};
 
 fn noise_scale(noise: &str) -> Result<NoiseScale> {
@@ -265,16 +263,7 @@ pub fn learn_policy<'py>(
     settings: Option<&Bound<'py, PyAny>>,
     progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyList>> {
-    let progress: Option<Py<PyAny>> = match progress {
-        Some(p) if !p.is_callable() => {
-            return Err(input(format!(
-                "progress must be a callable taking one iteration's dict, not a {}",
-                p.get_type().name()?
-            ))
-            .into());
-        }
-        p => p.map(|p| p.clone().unbind()),
-    };
+    let progress = callable(progress, "one iteration's dict")?;
     let m = crate::model::method(method)?;
     let iterations = count(iterations, "iterations")?;
     let seed = uint(seed, "seed")?;
@@ -301,20 +290,12 @@ pub fn learn_policy<'py>(
     let (learned, raised) = detached(py, move || {
         let mut raised: Option<PyErr> = None;
         let learned = learn_policy_observed(&p, &s, &mut |e| {
-            let seen = Python::attach(|py| -> PyResult<()> {
-                py.check_signals()?;
+            with_python(&mut raised, |py| {
                 if let (LearnEvent::Iteration(r), Some(f)) = (&e, &progress) {
                     f.call1(py, (to_python(py, *r)?,))?;
                 }
                 Ok(())
-            });
-            match seen {
-                Ok(()) => ControlFlow::Continue(()),
-                Err(err) => {
-                    raised.get_or_insert(err);
-                    ControlFlow::Break(())
-                }
-            }
+            })
         });
         Ok((learned, raised))
     })?;

@@ -193,3 +193,33 @@ def test_settings_reach_the_fit():
     s = model.training["settings"]
     assert s["learning_rate"] == 0.01 and s["one_step_iterations"] == 20 and s["iterations"] == 5
     assert msgp.defaults("fit")["learning_rate"] == 0.002
+
+
+def test_fit_reports_progress_and_stops_on_its_exception():
+    """`progress` sees every MSGP training iteration with its loss; an exception it raises
+    stops the fit, comes out of `fit` and leaves the model unfitted; a fit with `progress`
+    gives the same model as one without."""
+    data = msgp.synthetic_system(3, seed=0)
+    args = dict(history=(1, 1), inducing=10, iterations=8, seed=2, settings={"one_step_iterations": 20})
+    seen = []
+    model = msgp.Msgp(**args).fit(data["u_train"], data["y_train"], progress=seen.append)
+    assert [p["iteration"] for p in seen if p["stage"] == 1][:3] == [0, 1, 2]
+    assert all(np.isfinite(p["loss"]) and p["iterations"] == 8 for p in seen)
+    assert seen[-1]["elapsed"] >= seen[0]["elapsed"] >= 0.0
+    plain = msgp.Msgp(**args).fit(data["u_train"], data["y_train"])
+    assert all(np.array_equal(model.params[k], plain.params[k]) for k in plain.params)
+
+    class Enough(Exception):
+        pass
+
+    def stop_at_third(p):
+        if p["iteration"] == 2:
+            raise Enough()
+
+    stopped = msgp.Msgp(**args)
+    with pytest.raises(Enough):
+        stopped.fit(data["u_train"], data["y_train"], progress=stop_at_third)
+    with pytest.raises(msgp.NotFittedError):
+        stopped.params
+    with pytest.raises(msgp.InvalidInputError, match="callable"):
+        msgp.Msgp(**args).fit(data["u_train"], data["y_train"], progress="loud")

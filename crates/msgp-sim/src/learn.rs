@@ -19,7 +19,9 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use msgp_core::cost::SaturatingCost;
-use msgp_core::fit::{FitProgress, FitSettings, TrainingEpisode, fit_episodes, refit_episodes};
+use msgp_core::fit::{
+    FitProgress, FitSettings, TrainingEpisode, fit_episodes, fit_episodes_observed,
+};
 use msgp_core::gp::MeanFunction;
 use msgp_core::integrator::Integrator;
 use msgp_core::model::Method;
@@ -97,7 +99,7 @@ pub struct LearnSettings {
     /// the optimiser's coordinate scales (units of the problem, not a solution).
     pub gain_scale: [f64; 5],
     /// Warm starts (MSGP and linear-kf): from the second iteration on, each fit continues the
-    /// previous iteration's model for this many solver iterations ([`refit_episodes`]: its
+    /// previous iteration's model for this many solver iterations ([`msgp_core::fit::refit_episodes`]: its
     /// normaliser, pseudo-inputs and parameters) instead of starting over from a one-step fit
     /// (linear-kf: from its two cold starts); `None` starts over every time (the default).
     /// MSGP warm starts make iterations 2–8 4.5–6× faster, but on the five Figure 4 seeds the
@@ -492,8 +494,9 @@ pub fn learn_policy(
 }
 
 /// Runs the loop; `observe` sees its fits' and iterations' progress ([`LearnEvent`]) and can
-/// stop it: after a [`ControlFlow::Break`] the loop ends at the next event, returning
-/// [`SimError::Stopped`]. A fit is not cut short: a break during one takes effect when it ends.
+/// stop it: after a [`ControlFlow::Break`] the loop ends there, returning [`SimError::Stopped`]
+/// (an MSGP fit stops at its next solver iteration; its one-step start, and one-step and
+/// linear-kf fits, which report nothing, run to their end first).
 pub fn learn_policy_observed(
     params: &PendulumParams,
     settings: &LearnSettings,
@@ -593,31 +596,26 @@ pub fn learn_policy_observed(
         if observe(LearnEvent::FitStarted { iteration: it }).is_break() {
             return Err(stopped);
         }
-        let mut stop = false;
-        let mut fit_progress = |p: &FitProgress| {
-            stop |= observe(LearnEvent::Fit {
-                iteration: it,
-                progress: p,
-            })
-            .is_break();
-        };
-        let fitted = match (&previous_model, settings.warm_start) {
+        let warm = match (&previous_model, settings.warm_start) {
             (Some(prev), Some(n)) if matches!(settings.method, Method::Msgp | Method::LinearKf) => {
-                refit_episodes(
-                    &training,
-                    &FitSettings {
-                        iterations: n,
-                        ..fit_settings.clone()
-                    },
-                    prev,
-                    &mut fit_progress,
-                )
+                Some((prev, n))
             }
-            _ => fit_episodes(&training, &fit_settings, &mut fit_progress),
+            _ => None,
         };
-        if stop {
-            return Err(stopped);
-        }
+        let fitted = fit_episodes_observed(
+            &training,
+            &FitSettings {
+                iterations: warm.map_or(fit_settings.iterations, |(_, n)| n),
+                ..fit_settings.clone()
+            },
+            warm.map(|(prev, _)| prev),
+            &mut |p| {
+                observe(LearnEvent::Fit {
+                    iteration: it,
+                    progress: p,
+                })
+            },
+        );
         let (model, mut fit_report) = match fitted {
             Ok(fitted) => fitted,
             // the MSGP start (the one-step model rolled out over every episode) can already
@@ -637,6 +635,7 @@ pub fn learn_policy_observed(
                 ));
                 (model, report)
             }
+            Err(msgp_core::MsgpError::Stopped { .. }) => return Err(stopped),
             Err(e) => return Err(e.into()),
         };
         let fit_seconds = clock.elapsed().as_secs_f64();
@@ -681,6 +680,7 @@ pub fn learn_policy_observed(
                 e @ (msgp_core::MsgpError::NonFinite(_)
                 | msgp_core::MsgpError::NotPositiveDefinite { .. }),
             ) => (horizon as f64, 0.0, Some(e.to_string())),
+            Err(msgp_core::MsgpError::Stopped { .. }) => return Err(stopped),
             Err(e) => return Err(e.into()),
         };
 

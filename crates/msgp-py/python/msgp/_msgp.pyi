@@ -63,9 +63,12 @@ class Msgp:
         *,
         input_names: Optional[Sequence[str]] = None,
         output_names: Optional[Sequence[str]] = None,
+        progress: Optional[Callable[[Dict[str, Any]], Any]] = None,
     ) -> "Msgp":
         """Fits on inputs `u` and outputs `y` (arrays (n, d) or (n,), or lists of arrays for
-        several trajectories); returns self. Releases the GIL."""
+        several trajectories); returns self. Releases the GIL. `progress` is called with a
+        dict (stage, iteration, iterations, loss, validation, elapsed) after every training
+        iteration of an MSGP fit; Ctrl-C or an exception it raises stops the fit and raises."""
     def simulate(self, u: ArrayLike, y_init: ArrayLike) -> Tuple[Array, Array]:
         """Free simulation driven by `u` (T samples) from the first max(l_y, l_u) rows of
         `y_init`; returns (mean, var), each (T − max(l_y, l_u), d_y), original units."""
