@@ -363,6 +363,18 @@ pub fn fit(
     settings: &FitSettings,
     progress: &mut dyn FnMut(&FitProgress),
 ) -> Result<(Model, FitReport)> {
+    fit_observed(train, settings, &mut |p| {
+        progress(p);
+        ControlFlow::Continue(())
+    })
+}
+
+/// [`fit`] under an observer that can stop the MSGP training ([`fit_episodes_observed`]).
+pub fn fit_observed(
+    train: &[Trajectory],
+    settings: &FitSettings,
+    observe: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
+) -> Result<(Model, FitReport)> {
     let episodes: Vec<TrainingEpisode> = train
         .iter()
         .map(|t| TrainingEpisode {
@@ -370,7 +382,7 @@ pub fn fit(
             policy: None,
         })
         .collect();
-    fit_episodes(&episodes, settings, progress)
+    fit_episodes_observed(&episodes, settings, None, observe)
 }
 
 /// A training trajectory in original units and, for a feedback trajectory, the policy (in

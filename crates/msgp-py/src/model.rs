@@ -6,9 +6,7 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use msgp_core::fit::{
-    FitOptimizer, FitOptions, FitReport, FitSettings, TrainingEpisode, fit_episodes_observed,
-};
+use msgp_core::fit::{FitOptimizer, FitOptions, FitReport, FitSettings, fit_observed};
 use msgp_core::gp::MeanFunction;
 use msgp_core::model::{Method, Metrics, Model, pool, score};
 use msgp_core::model_file::{FitRecord, ModelFile};
@@ -339,15 +337,8 @@ impl Msgp {
         }
         let fitted = detached(py, move || -> Result<std::result::Result<Fitted, PyErr>> {
             let settings = Msgp::settings(&options, overrides.as_ref(), &train)?;
-            let episodes: Vec<TrainingEpisode> = train
-                .iter()
-                .map(|t| TrainingEpisode {
-                    traj: t.clone(),
-                    policy: None,
-                })
-                .collect();
             let mut raised = None;
-            let fitted = fit_episodes_observed(&episodes, &settings, None, &mut |p| {
+            let fitted = fit_observed(&train, &settings, &mut |p| {
                 with_python(&mut raised, |py| {
                     let Some(f) = &progress else {
                         return Ok(());
