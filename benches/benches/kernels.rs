@@ -7,10 +7,10 @@ use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, SamplingMode, criterion_group, criterion_main};
 use msgp_benches::{problem, window_state};
+use msgp_core::gp::kernel::kernel_matrix;
 use msgp_core::gp::{GpConfig, PreparedGp};
-use msgp_core::kernel::kernel_matrix;
-use msgp_core::linalg::JitterLog;
 use msgp_core::moments::moment_match;
+use msgp_core::numeric::linalg::JitterLog;
 use msgp_core::rollout::{Control, simulate};
 
 /// (D, m, T) of the two comparison problems.

@@ -8,9 +8,9 @@ use std::time::Duration;
 use criterion::{Criterion, SamplingMode, criterion_group, criterion_main};
 use msgp_benches::problem;
 use msgp_core::gp::{GpConfig, GpParams};
-use msgp_core::grad::{adjoint, dual};
-use msgp_core::linalg::JitterLog;
-use msgp_core::loss::{Complexity, msgp_loss};
+use msgp_core::loss::{self, Complexity, msgp_loss};
+use msgp_core::numeric::dual;
+use msgp_core::numeric::linalg::JitterLog;
 
 fn bench_loss(c: &mut Criterion) {
     let config = GpConfig::default();
@@ -36,7 +36,7 @@ fn bench_loss(c: &mut Criterion) {
             b.iter(|| {
                 let mut log = JitterLog::default();
                 black_box(
-                    adjoint::loss_and_gradient(
+                    loss::loss_and_gradient(
                         &params, &config, &spec, &episodes, complexity, &mut log,
                     )
                     .expect("grad"),

@@ -15,11 +15,11 @@ use std::time::Duration;
 
 use criterion::measurement::WallTime;
 use criterion::{BenchmarkGroup, Criterion, SamplingMode, criterion_group, criterion_main};
-use msgp_core::cost::SaturatingCost;
 use msgp_core::fit::{FitSettings, TrainingEpisode, fit_episodes};
-use msgp_core::grad::dual;
 use msgp_core::model::Method;
+use msgp_core::numeric::dual;
 use msgp_core::policy::{PidPolicy, PolicySpec};
+use msgp_core::policy_search::cost::SaturatingCost;
 use msgp_core::policy_search::{
     PidMask, PolicyProblem, PolicySearchSettings, optimise_pid_scaled_with_threads,
 };

@@ -1,10 +1,11 @@
 //! Shared set-ups for the criterion benchmarks in `benches/`.
 
 use msgp_core::data::Normalizer;
+use msgp_core::data::Trajectory;
 use msgp_core::data::{NoiseScale, SyntheticSystem};
 use msgp_core::gp::GpParams;
 use msgp_core::narx::NarxSpec;
-use msgp_core::trajectory::{Episode, Trajectory};
+use msgp_core::rollout::Episode;
 use nalgebra::{DMatrix, DVector};
 
 /// A seeded MSGP problem: `m` pseudo-inputs, history (l_y, l_u) = (d/2, d − d/2), `t` predicted

@@ -20,15 +20,14 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use msgp_benches::{problem, window_state};
+use msgp_core::gp::kernel::kernel_matrix;
 use msgp_core::gp::{GpConfig, GpParams, PreparedGp};
-use msgp_core::grad::adjoint;
-use msgp_core::kernel::kernel_matrix;
-use msgp_core::linalg::JitterLog;
-use msgp_core::loss::{Complexity, msgp_loss};
+use msgp_core::loss::{self, Complexity, msgp_loss};
 use msgp_core::moments::moment_match;
 use msgp_core::narx::NarxSpec;
+use msgp_core::numeric::linalg::JitterLog;
+use msgp_core::rollout::Episode;
 use msgp_core::rollout::{Control, simulate};
-use msgp_core::trajectory::Episode;
 use nalgebra::DMatrix;
 use serde_json::{Value, json};
 
@@ -116,7 +115,7 @@ fn dump(args: &Args) -> AnyResult<()> {
         &mut log,
     )?;
     let mut glog = JitterLog::default();
-    let (gl, grad) = adjoint::loss_and_gradient(
+    let (gl, grad) = loss::loss_and_gradient(
         &p.params,
         &p.config,
         &p.spec,
@@ -242,7 +241,7 @@ fn time(args: &Args) -> AnyResult<()> {
             })?,
             "grad" => measure("grad", &p, reps, 1, || {
                 let mut log = JitterLog::default();
-                black_box(adjoint::loss_and_gradient(
+                black_box(loss::loss_and_gradient(
                     &p.params,
                     &p.config,
                     &p.spec,

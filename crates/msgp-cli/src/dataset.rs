@@ -15,10 +15,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args;
+use msgp_core::data::Trajectory;
 use msgp_core::data::mcap::{McapLog, Signal};
 use msgp_core::data::table::{EPISODE_COLUMN, Table};
 use msgp_core::model::{Metrics, Simulation};
-use msgp_core::trajectory::Trajectory;
 
 /// Options that select the data (shared by `fit`, `eval` and `simulate`).
 #[derive(Debug, Args)]

@@ -5,12 +5,12 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
+use msgp_core::data::Trajectory;
 use msgp_core::fit::{FitOptimizer, FitOptions, FitProgress, fit};
 use msgp_core::gp::MeanFunction;
-use msgp_core::integrator::Integrator;
+use msgp_core::gp::integrator::Integrator;
 use msgp_core::model::Method;
 use msgp_core::model_file::{FitRecord, ModelFile};
-use msgp_core::trajectory::Trajectory;
 use serde_json::json;
 
 use crate::dataset::{

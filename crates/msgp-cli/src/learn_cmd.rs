@@ -14,7 +14,7 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 use msgp_core::model::Method;
-use msgp_core::start_window::StartWindow;
+use msgp_core::narx::start_window::StartWindow;
 use msgp_sim::learn::{
     IterationReport, LearnEvent, LearnOutcome, LearnSettings, learn_policy_observed,
 };

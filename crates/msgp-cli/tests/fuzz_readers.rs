@@ -9,12 +9,12 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::OnceLock;
 
+use msgp_core::data::Trajectory;
 use msgp_core::data::mcap::{McapLog, Signal};
 use msgp_core::data::table::Table;
 use msgp_core::data::{NoiseScale, SyntheticSystem};
 use msgp_core::fit::{FitSettings, fit};
 use msgp_core::model_file::{FitRecord, ModelFile};
-use msgp_core::trajectory::Trajectory;
 use proptest::prelude::*;
 use serde_json::Value;
 

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum MsgpError {
     /// A matrix that must be symmetric positive definite was not, even after the largest
-    /// jitter the [`JitterPolicy`](crate::linalg::JitterPolicy) allows.
+    /// jitter the [`JitterPolicy`](crate::numeric::linalg::JitterPolicy) allows.
     #[error(
         "{what} is not positive definite (pivot {pivot} = {value:e}) even with jitter {jitter:e}"
     )]

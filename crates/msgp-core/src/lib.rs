@@ -2,48 +2,42 @@
 //!
 //! Multi-step Gaussian processes (MSGP; Doerr et al., CoRL 2017): sparse GP-NARX dynamics models
 //! whose parameters are fitted to the likelihood of whole observed trajectories under
-//! free-running moment-matching predictions.
+//! free-running moment-matching predictions, and PILCO policy search on them.
 //!
-//! Module map:
-//! - [`scalar`]: the one scalar abstraction (f64 or forward-mode duals);
-//! - [`linalg`]: robust Cholesky with a recorded jitter policy;
-//! - [`kernel`], [`gp`]: SE-ARD kernel and the pseudo-input sparse GP;
-//! - [`moments`]: exact moment matching under Gaussian inputs;
-//! - [`narx`], [`rollout`], [`policy`]: the autoregressive window and open/closed-loop rollouts;
-//! - [`loss`]: the trajectory likelihood and complexity term;
-//! - [`kalman`]: the linear-Gaussian window model by the exact Kalman-filter likelihood;
-//! - [`grad`]: exact gradients.
+//! One module per concept of the paper, each depending only on the ones above it in this list
+//! (`scripts/check-modules` checks that the graph has no cycle):
+//! - [`error`]: the crate's one error type;
+//! - [`numeric`]: the [`Scalar`](numeric::Scalar) (f64 or forward-mode duals), robust Cholesky
+//!   with a recorded jitter policy, dual-number gradients, SIMD kernels, threads;
+//! - [`optim`]: objectives and solvers (Adam, L-BFGS) under an observer;
+//! - [`narx`]: the autoregressive window and how a rollout starts it;
+//! - [`data`]: trajectories, normalisation, CSV/MCAP readers, the paper's benchmarks;
+//! - [`gp`]: the SE-ARD kernel, the pseudo-input sparse GP's parameters and their flat layout,
+//!   the prepared (factorised) GP, integrating structure, k-means;
+//! - [`moments`]: exact moment matching under Gaussian inputs (generic, the f64 fast path behind
+//!   [`MomentMatch`](moments::MomentMatch), its VJP), the linear mean, the sine saturation;
+//! - [`policy`]: feedback policies with exact output moments (saturated PID, normalised units);
+//! - [`rollout`]: open- and closed-loop rollouts of the window's joint Gaussian, and their
+//!   adjoint sweep;
+//! - [`loss`]: the trajectory likelihood (eq. 4) with its complexity term, and its gradient;
+//! - [`model`]: the fitted model, its free simulation and scores;
+//! - [`fit`]: MSGP, the one-step baselines and linear-kf, from trajectories to a model;
+//! - [`model_file`]: the versioned model file (a model and its training record);
+//! - [`policy_search`]: PILCO's inner loop: expected saturating cost, its gradient, the search.
 
-pub mod baseline;
-pub mod cost;
 pub mod data;
-pub mod dense;
 pub mod error;
 pub mod fit;
 pub mod gp;
-pub mod grad;
-pub mod integrator;
-pub mod kalman;
-pub mod kernel;
-pub mod kmeans;
-pub mod linalg;
 pub mod loss;
-pub mod mean_fn;
-pub(crate) mod mm_f64;
 pub mod model;
 pub mod model_file;
 pub mod moments;
 pub mod narx;
+pub mod numeric;
 pub mod optim;
-mod parallel;
 pub mod policy;
-pub mod policy_cost;
 pub mod policy_search;
 pub mod rollout;
-pub mod saturation;
-pub mod scalar;
-mod simd;
-pub mod start_window;
-pub mod trajectory;
 
 pub use error::{MsgpError, Result};

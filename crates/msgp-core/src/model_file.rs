@@ -19,13 +19,13 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::data::Normalizer;
+use crate::data::Trajectory;
 use crate::error::{MsgpError, Result};
 use crate::fit::{FitReport, FitSettings};
 use crate::gp::{GpConfig, GpParams, MeanFunction, PreparedGp};
-use crate::linalg::{JitterLog, JitterPolicy};
 use crate::model::{Method, Model};
 use crate::narx::NarxSpec;
-use crate::trajectory::Trajectory;
+use crate::numeric::linalg::{JitterLog, JitterPolicy};
 
 /// Value of the `format` field.
 pub const FORMAT: &str = "msgp-model";

@@ -7,14 +7,15 @@ mod common;
 use common::{
     config, linear_feedback_episodes, normal, random_gp, rng, sys4_problem, two_output_trajectory,
 };
+use msgp_core::data::Trajectory;
 use msgp_core::gp::{GpConfig, GpParams, GpShape, MeanFunction, ParamGroup};
-use msgp_core::grad::{adjoint, dual};
-use msgp_core::linalg::JitterLog;
-use msgp_core::loss::{Complexity, msgp_loss};
+use msgp_core::loss::{self, Complexity, msgp_loss};
 use msgp_core::narx::NarxSpec;
+use msgp_core::narx::start_window::StartWindow;
+use msgp_core::numeric::dual;
+use msgp_core::numeric::linalg::JitterLog;
 use msgp_core::policy::PolicySpec;
-use msgp_core::start_window::StartWindow;
-use msgp_core::trajectory::{Episode, Excitation, Trajectory};
+use msgp_core::rollout::{Episode, Excitation};
 use nalgebra::DMatrix;
 
 fn compare(params: &GpParams<f64>, spec: &NarxSpec, episodes: &[Episode], complexity: Complexity) {
@@ -38,7 +39,7 @@ fn compare_with(
     })
     .expect("dual");
     let mut log = JitterLog::default();
-    let (lv, ga) = adjoint::loss_and_gradient(params, cfg, spec, episodes, complexity, &mut log)
+    let (lv, ga) = loss::loss_and_gradient(params, cfg, spec, episodes, complexity, &mut log)
         .expect("adjoint");
     assert!(
         (lv.total() - value).abs() <= 1e-11 * value.abs().max(1.0),
@@ -211,7 +212,7 @@ fn gradient_is_bit_identical_for_any_thread_count() {
         .collect();
     let run = |threads: usize| {
         let mut log = JitterLog::default();
-        adjoint::loss_and_gradient_with_threads(
+        loss::loss_and_gradient_with_threads(
             &params,
             &config(),
             &spec,

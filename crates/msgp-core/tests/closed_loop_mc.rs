@@ -10,12 +10,12 @@
 mod common;
 
 use common::{config, normal, rng};
-use msgp_core::cost::SaturatingCost;
 use msgp_core::gp::{GpParams, PreparedGp};
-use msgp_core::linalg::JitterLog;
 use msgp_core::narx::NarxSpec;
+use msgp_core::numeric::linalg::JitterLog;
 use msgp_core::policy::{FeedbackPolicy, PidPolicy};
-use msgp_core::policy_cost::closed_loop_cost;
+use msgp_core::policy_search::closed_loop_cost;
+use msgp_core::policy_search::cost::SaturatingCost;
 use msgp_core::rollout::StartState;
 use nalgebra::{DMatrix, DVector};
 use rand::RngExt;

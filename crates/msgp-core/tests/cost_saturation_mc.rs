@@ -4,9 +4,9 @@
 mod common;
 
 use common::{normal, random_cov, rng};
-use msgp_core::cost::SaturatingCost;
-use msgp_core::linalg::{JitterLog, JitterPolicy, cholesky};
-use msgp_core::saturation::{saturate, saturate_moments};
+use msgp_core::moments::saturation::{saturate, saturate_moments};
+use msgp_core::numeric::linalg::{JitterLog, JitterPolicy, cholesky};
+use msgp_core::policy_search::cost::SaturatingCost;
 use nalgebra::{DMatrix, DVector};
 
 const N: usize = 200_000;

@@ -10,15 +10,16 @@ use common::{
     config, linear_feedback_episodes, normal, random_cov, random_gp, rng, sys4_problem,
     two_output_trajectory,
 };
+use msgp_core::data::Trajectory;
 use msgp_core::gp::{GpParams, PreparedGp};
-use msgp_core::grad::dual::Dual;
-use msgp_core::linalg::JitterLog;
 use msgp_core::loss::{Complexity, msgp_loss};
 use msgp_core::moments::{moment_match, moment_match_generic};
 use msgp_core::narx::NarxSpec;
+use msgp_core::numeric::dual::Dual;
+use msgp_core::numeric::linalg::JitterLog;
+use msgp_core::numeric::scalar::Scalar;
+use msgp_core::rollout::Episode;
 use msgp_core::rollout::{Control, simulate};
-use msgp_core::scalar::Scalar;
-use msgp_core::trajectory::{Episode, Trajectory};
 use nalgebra::{DMatrix, DVector};
 
 /// max |a − b| / max(max |b|, floor) over the entries.
@@ -158,8 +159,8 @@ fn check_predictions(
     let pd: GpParams<Dual> = params.map(Dual::from_re);
     let gpd = PreparedGp::new(&pd, &config(), &mut log).expect("gp dual");
     let (lf, ld) = match &episode.excitation {
-        msgp_core::trajectory::Excitation::FeedForward => (None, None),
-        msgp_core::trajectory::Excitation::Feedback(p) => {
+        msgp_core::rollout::Excitation::FeedForward => (None, None),
+        msgp_core::rollout::Excitation::Feedback(p) => {
             (Some(p.lift::<f64>()), Some(p.lift::<Dual>()))
         }
     };

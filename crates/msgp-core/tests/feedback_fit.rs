@@ -2,10 +2,10 @@
 //! a feedback trajectory of synthetic system 4 under a known linear policy enters the loss in
 //! closed loop, and training lowers the loss.
 
+use msgp_core::data::Trajectory;
 use msgp_core::data::{NoiseScale, SyntheticSystem};
 use msgp_core::fit::{FitSettings, TrainingEpisode, fit_episodes};
 use msgp_core::policy::{LinearPolicy, PolicySpec};
-use msgp_core::trajectory::Trajectory;
 use nalgebra::{DMatrix, DVector};
 
 #[test]

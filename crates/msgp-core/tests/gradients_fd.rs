@@ -12,16 +12,16 @@ use common::{
     config, linear_feedback_episodes, random_gp, rng, sys4_problem, two_output_trajectory,
 };
 use msgp_core::gp::{GpConfig, GpParams, GpShape, MeanFunction, ParamGroup};
-use msgp_core::grad::dual::gradient;
-use msgp_core::linalg::JitterLog;
 use msgp_core::loss::{Complexity, msgp_loss};
+use msgp_core::moments::MomentMatch;
 use msgp_core::narx::NarxSpec;
-use msgp_core::scalar::Scalar;
-use msgp_core::start_window::StartWindow;
-use msgp_core::trajectory::Episode;
+use msgp_core::narx::start_window::StartWindow;
+use msgp_core::numeric::dual::gradient;
+use msgp_core::numeric::linalg::JitterLog;
+use msgp_core::rollout::Episode;
 use nalgebra::DMatrix;
 
-fn loss_at<T: Scalar>(
+fn loss_at<T: MomentMatch>(
     shape: GpShape,
     flat: &[T],
     cfg: &GpConfig,

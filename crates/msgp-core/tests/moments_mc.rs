@@ -10,9 +10,9 @@ mod common;
 
 use common::{config, normal, random_cov, random_gp, rng};
 use msgp_core::gp::{MeanFunction, PreparedGp};
-use msgp_core::linalg::{JitterLog, JitterPolicy, cholesky};
-use msgp_core::mean_fn::add_linear_mean;
+use msgp_core::moments::mean::add_linear_mean;
 use msgp_core::moments::moment_match;
+use msgp_core::numeric::linalg::{JitterLog, JitterPolicy, cholesky};
 use nalgebra::{DMatrix, DVector};
 
 const SAMPLES: usize = 200_000;

@@ -6,14 +6,15 @@ mod common;
 
 use common::{config, normal, random_cov, random_gp, rng};
 use msgp_core::data::Normalizer;
+use msgp_core::data::Trajectory;
 use msgp_core::gp::PreparedGp;
-use msgp_core::grad::dual::{Dual, gradient};
-use msgp_core::linalg::{JitterLog, JitterPolicy, cholesky};
+use msgp_core::moments::MomentMatch;
 use msgp_core::narx::NarxSpec;
+use msgp_core::numeric::dual::{Dual, gradient};
+use msgp_core::numeric::linalg::{JitterLog, JitterPolicy, cholesky};
+use msgp_core::numeric::scalar::Scalar;
 use msgp_core::policy::{FeedbackPolicy, Normalized, PidPolicy};
 use msgp_core::rollout::{Control, rollout};
-use msgp_core::scalar::Scalar;
-use msgp_core::trajectory::Trajectory;
 use nalgebra::{DMatrix, DVector};
 
 const N: usize = 200_000;
@@ -143,13 +144,13 @@ fn policy_gradients_through_a_closed_loop_rollout_match_finite_differences() {
     let traj = Trajectory::new(DMatrix::zeros(n, 1), y).expect("traj");
     let gains = [0.8, 0.3, 0.1, 0.2, 0.05];
     // a cost-like functional of the whole predicted trajectory
-    fn total<T: Scalar>(
+    fn total<T: MomentMatch>(
         params: &msgp_core::gp::GpParams<f64>,
         spec: &NarxSpec,
         traj: &Trajectory,
         g: &[T],
     ) -> msgp_core::Result<T> {
-        let p = params.map(msgp_core::scalar::c::<T>);
+        let p = params.map(msgp_core::numeric::scalar::c::<T>);
         let mut log = JitterLog::default();
         let gp = PreparedGp::new(&p, &config(), &mut log)?;
         let policy = pid(g);

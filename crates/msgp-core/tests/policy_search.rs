@@ -2,16 +2,16 @@
 //! saturating cost of a 30-step closed-loop rollout. The optimiser must find a stabilising gain
 //! and cut the expected cost; policy search is seeded and reproducible.
 
-use msgp_core::cost::SaturatingCost;
+use msgp_core::data::Trajectory;
 use msgp_core::fit::{FitSettings, fit};
 use msgp_core::model::Method;
 use msgp_core::model::Model;
 use msgp_core::policy::PidPolicy;
+use msgp_core::policy_search::cost::SaturatingCost;
 use msgp_core::policy_search::{
     PidMask, PolicyProblem, PolicySearchSettings, optimise_pid, optimise_pid_scaled,
     optimise_pid_scaled_with_threads,
 };
-use msgp_core::trajectory::Trajectory;
 use nalgebra::{DMatrix, DVector};
 use rand::{RngExt, SeedableRng, rngs::StdRng};
 

@@ -3,12 +3,13 @@
 //! in time, where every prediction is exact and the NLL is the log of the predicted variances,
 //! propagated by hand from `σ_y² H Hᵀ`.
 
+use msgp_core::data::Trajectory;
 use msgp_core::gp::{GpConfig, GpParams, MeanFunction};
-use msgp_core::linalg::JitterLog;
 use msgp_core::loss::{Complexity, msgp_loss};
 use msgp_core::narx::NarxSpec;
-use msgp_core::start_window::StartWindow;
-use msgp_core::trajectory::{Episode, Trajectory};
+use msgp_core::narx::start_window::StartWindow;
+use msgp_core::numeric::linalg::JitterLog;
+use msgp_core::rollout::Episode;
 use nalgebra::{DMatrix, DVector, Matrix2, Vector2};
 
 #[test]

@@ -2,7 +2,7 @@
 //! trajectories, Python containers ↔ JSON values (for settings and reports that serde
 //! describes).
 
-use msgp_core::trajectory::Trajectory;
+use msgp_core::data::Trajectory;
 use nalgebra::DMatrix;
 use numpy::ndarray::Array2;
 use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLikeDyn, PyUntypedArray};

@@ -6,11 +6,11 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
+use msgp_core::data::Trajectory;
 use msgp_core::fit::{FitOptimizer, FitOptions, FitReport, FitSettings, fit_observed};
 use msgp_core::gp::MeanFunction;
 use msgp_core::model::{Method, Metrics, Model, pool, score};
 use msgp_core::model_file::{FitRecord, ModelFile};
-use msgp_core::trajectory::Trajectory;
 use nalgebra::DMatrix;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};

@@ -9,10 +9,10 @@
 //! perturbed hand-tuned episodes by episodes of the given gains (what a loop iteration has
 //! seen). Prints the fitted linear mean, noise levels and length-scales, the training loss and
 //! the predictions.
-use msgp_core::cost::SaturatingCost;
 use msgp_core::fit::{TrainingEpisode, fit_episodes};
+use msgp_core::narx::start_window::StartWindow;
 use msgp_core::policy::PolicySpec;
-use msgp_core::start_window::StartWindow;
+use msgp_core::policy_search::cost::SaturatingCost;
 use msgp_sim::learn::{
     LearnSettings, episode_cost, episode_trajectory, modelled_policy, pendulum_problem, segments,
 };
@@ -124,16 +124,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         for t in &training {
             let traj = model.normalizer.apply(&t.traj);
             eps.push(match &t.policy {
-                None => msgp_core::trajectory::Episode::feed_forward(traj),
-                Some(p) => msgp_core::trajectory::Episode {
+                None => msgp_core::rollout::Episode::feed_forward(traj),
+                Some(p) => msgp_core::rollout::Episode {
                     traj,
-                    excitation: msgp_core::trajectory::Excitation::Feedback(Box::new(
+                    excitation: msgp_core::rollout::Excitation::Feedback(Box::new(
                         p.normalized(&model.normalizer)?,
                     )),
                 },
             });
         }
-        let mut log = msgp_core::linalg::JitterLog::default();
+        let mut log = msgp_core::numeric::linalg::JitterLog::default();
         let v = msgp_core::loss::msgp_loss(
             &model.params,
             &model.config,

@@ -5,7 +5,7 @@
 //! make the loop pass it except by luck.
 //!
 //! `cargo run --release -p msgp-sim --example true_cost -- [horizon_s] [w_theta,w_x] [seed]`
-use msgp_core::cost::SaturatingCost;
+use msgp_core::policy_search::cost::SaturatingCost;
 use msgp_sim::learn::episode_cost;
 use msgp_sim::{
     EpisodeConfig, PendulumParams, PidPdGains, PidPdPolicy, Saturation, StabilityCriteria,

@@ -3,8 +3,8 @@
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
+use crate::data::Trajectory;
 use crate::error::{MsgpError, Result};
-use crate::trajectory::Trajectory;
 
 /// Per-column mean and standard deviation of inputs and outputs, from training data.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 
 use super::Benchmark;
 use super::table::Table;
+use crate::data::Trajectory;
 use crate::error::{MsgpError, Result};
-use crate::trajectory::Trajectory;
 
 /// Environment variable naming the folder with the real series.
 pub const DATA_DIR_VAR: &str = "MSGP_DATA_DIR";

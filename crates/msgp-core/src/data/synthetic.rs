@@ -15,8 +15,8 @@ use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
 use super::Benchmark;
+use crate::data::Trajectory;
 use crate::error::{MsgpError, Result};
-use crate::trajectory::Trajectory;
 
 /// How to read the `s` of Table 2's `N(0, s)`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]

@@ -15,8 +15,8 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::DMatrix;
 
+use crate::data::Trajectory;
 use crate::error::{MsgpError, Result};
-use crate::trajectory::Trajectory;
 
 /// Name of the column whose value changes mark the start of a new trajectory.
 pub const EPISODE_COLUMN: &str = "episode";

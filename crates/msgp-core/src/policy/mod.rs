@@ -12,7 +12,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::{MsgpError, Result};
-use crate::scalar::Scalar;
+use crate::numeric::scalar::Scalar;
 
 /// Moments of a policy output `o = [u_t; p_t]`.
 #[derive(Clone, Debug)]
@@ -176,7 +176,7 @@ impl PolicySpec {
 
     /// The policy on scalar type `T`.
     pub fn lift<T: Scalar>(&self) -> Box<dyn FeedbackPolicy<T>> {
-        let c = crate::scalar::c::<T>;
+        let c = crate::numeric::scalar::c::<T>;
         let pid = |p: &PidPolicy<f64>| PidPolicy {
             kp: p.kp.map(c),
             ki: p.ki.map(c),

@@ -11,7 +11,7 @@ use super::pid::PidVjp;
 use super::{FeedbackPolicy, PidPolicy, PolicyMoments};
 use crate::data::Normalizer;
 use crate::error::Result;
-use crate::scalar::{Scalar, c};
+use crate::numeric::scalar::{Scalar, c};
 
 /// Wraps a policy in original units for a rollout in normalised units.
 #[derive(Clone, Debug, PartialEq)]
@@ -151,7 +151,7 @@ mod tests {
     use rand_distr::{Distribution, StandardNormal};
 
     use super::*;
-    use crate::grad::dual::{Dual, gradient, weighted_sum};
+    use crate::numeric::dual::{Dual, gradient, weighted_sum};
 
     /// The closed-form VJP of a normalised PID policy's moment map equals the gradient of
     /// `⟨ō_mean, mean⟩ + ⟨ō_cov, cov⟩ + ⟨C̄, C⟩` by duals through the whole map, with respect

@@ -15,8 +15,8 @@ use nalgebra::{DMatrix, DVector};
 
 use super::{FeedbackPolicy, PolicyMoments};
 use crate::error::{MsgpError, Result};
-use crate::saturation::saturate_moments;
-use crate::scalar::{Scalar, c};
+use crate::moments::saturation::saturate_moments;
+use crate::numeric::scalar::{Scalar, c};
 
 /// A saturated PID policy (see the module docs).
 #[derive(Clone, Debug, PartialEq)]
@@ -88,7 +88,7 @@ impl<T: Scalar> PidPolicy<T> {
 
     /// The saturation at a point (unit slope at 0).
     pub fn saturate(u_tilde: f64, u_max: f64) -> f64 {
-        crate::saturation::saturate(2.0 * u_tilde / (3.0 * u_max), u_max)
+        crate::moments::saturation::saturate(2.0 * u_tilde / (3.0 * u_max), u_max)
     }
 
     /// One step at a point: returns `(u_t, p_t)` from `y_t` and `p_{t−1} = [y_{t−1}; I_{t−1}]`.
@@ -228,7 +228,7 @@ fn saturation_vjp(
     cov_bar: &DMatrix<f64>,
     c_bar: &DMatrix<f64>,
 ) -> Result<(DVector<f64>, DMatrix<f64>)> {
-    use crate::grad::dual::{moments_gradient, weighted_sum};
+    use crate::numeric::dual::{moments_gradient, weighted_sum};
     moments_gradient(m, s, |md, sd| {
         let sat = saturate_moments(md, sd, u_max);
         Ok(weighted_sum(&[

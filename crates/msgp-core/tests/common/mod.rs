@@ -45,7 +45,7 @@ pub fn sys4_problem(
     m: usize,
     spec: &msgp_core::narx::NarxSpec,
     len: usize,
-) -> (GpParams<f64>, msgp_core::trajectory::Trajectory) {
+) -> (GpParams<f64>, msgp_core::data::Trajectory) {
     let mut params = random_gp(r, m, spec.input_dim(), 1);
     let sys = msgp_core::data::SyntheticSystem::new(4).expect("sys");
     let bench = sys.generate(seed, Default::default()).expect("gen");
@@ -62,20 +62,20 @@ pub fn sys4_problem(
 }
 
 /// Two outputs, one input, `n` samples of smooth signals with a little noise.
-pub fn two_output_trajectory(r: &mut StdRng, n: usize) -> msgp_core::trajectory::Trajectory {
+pub fn two_output_trajectory(r: &mut StdRng, n: usize) -> msgp_core::data::Trajectory {
     let y = DMatrix::from_fn(n, 2, |t, j| {
         0.5 * ((t as f64) * 0.2 + j as f64).sin() + 0.05 * normal(r)
     });
     let u = DMatrix::from_fn(n, 1, |t, _| 0.3 * ((t as f64) * 0.13).cos());
-    msgp_core::trajectory::Trajectory::new(u, y).expect("traj")
+    msgp_core::data::Trajectory::new(u, y).expect("traj")
 }
 
 /// The trajectory once under a linear feedback policy (closed loop) and once open loop.
 pub fn linear_feedback_episodes(
-    traj: &msgp_core::trajectory::Trajectory,
-) -> Vec<msgp_core::trajectory::Episode> {
+    traj: &msgp_core::data::Trajectory,
+) -> Vec<msgp_core::rollout::Episode> {
     use msgp_core::policy::{LinearPolicy, PolicySpec};
-    use msgp_core::trajectory::{Episode, Excitation};
+    use msgp_core::rollout::{Episode, Excitation};
     let policy = LinearPolicy::new(
         DMatrix::from_row_slice(1, 2, &[-0.6, 0.3]),
         DVector::from_vec(vec![0.05]),

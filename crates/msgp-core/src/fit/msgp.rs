@@ -1,0 +1,364 @@
+//! MSGP training (paper section 3): the one-step sparse GP-NARX fit as the start, then Adam or
+//! L-BFGS on the trajectory likelihood ([`crate::loss`]) with its exact adjoint gradient, early
+//! stopping on a held-out tail of the training data, and an optional refit on all of it.
+//!
+//! ## Guarding against noise collapse
+//! The trajectory likelihood can be lowered by shrinking the noise variances while the free
+//! simulation gets worse. Two guards, both documented in `docs/design.md`:
+//! 1. a variance floor on `σ_x²` and `σ_y²` ([`FitSettings::noise_floor`], normalised units),
+//!    built into the parametrisation `σ² = floor + e^θ`;
+//! 2. early stopping on a held-out tail of the *training* data: the last
+//!    [`FitSettings::validation_fraction`] of each training trajectory is kept out of training,
+//!    its free-simulation NLL is computed every [`FitSettings::eval_every`] iterations, and the
+//!    parameters with the best validation NLL are returned. The test data are never seen.
+
+use std::ops::ControlFlow;
+use std::time::Instant;
+
+use super::one_step::{OneStepSettings, fit_one_step, one_step_pairs};
+use super::{FIT_LBFGS, FitOptimizer, FitProgress, FitReport, FitSettings, TrainingEpisode};
+use crate::data::{Normalizer, Trajectory};
+use crate::error::{MsgpError, Result};
+use crate::gp::integrator::Structure;
+use crate::gp::{GpConfig, GpParams, GpShape, MeanFunction, ParamGroup};
+use crate::loss::{Complexity, loss_and_gradient, msgp_loss};
+use crate::model::{Method, Model};
+use crate::narx::NarxSpec;
+use crate::numeric::linalg::JitterLog;
+use crate::optim::{Adam, Flow, Objective, Solver, minimize};
+use crate::rollout::{Episode, Excitation};
+
+/// The MSGP fit of normalised trajectories `norm` (the `episodes`' own, in order), from the
+/// one-step start or from `previous`'s parameters.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn fit_msgp(
+    episodes: &[TrainingEpisode],
+    norm: &[Trajectory],
+    normalizer: Normalizer,
+    spec: NarxSpec,
+    settings: &FitSettings,
+    previous: Option<&Model>,
+    one_step: &OneStepSettings,
+    start: Instant,
+    progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
+    mut report: FitReport,
+) -> Result<(Model, FitReport)> {
+    // split each trajectory into a training head and a validation tail.
+    // Feedback episodes train in closed loop under their (normalised) policy and are not split.
+    let w = spec.warmup();
+    let mut head_eps = Vec::new();
+    let mut all_eps = Vec::new();
+    let mut tails = Vec::new();
+    for (t, ep) in norm.iter().zip(episodes) {
+        if let Some(p) = &ep.policy {
+            let fb = Episode {
+                traj: t.clone(),
+                excitation: Excitation::Feedback(Box::new(p.normalized(&normalizer)?)),
+            };
+            head_eps.push(fb.clone());
+            all_eps.push(fb);
+            continue;
+        }
+        all_eps.push(Episode::feed_forward(t.clone()));
+        let n_val = (t.len() as f64 * settings.validation_fraction).round() as usize;
+        if settings.validation_fraction > 0.0 && n_val >= 10 && t.len() - n_val > w + 10 {
+            head_eps.push(Episode::feed_forward(t.slice(0, t.len() - n_val)));
+            tails.push(Episode::feed_forward(t.slice(t.len() - n_val - w, t.len())));
+        } else {
+            head_eps.push(Episode::feed_forward(t.clone()));
+        }
+    }
+    let config = GpConfig {
+        noise_floor: settings.noise_floor,
+        mean: settings.mean,
+        start: settings.start_window,
+        ..GpConfig::default()
+    };
+    let mut stage = Stage {
+        spec,
+        config,
+        settings,
+        start,
+        progress,
+        report: &mut report,
+    };
+    let init = match previous {
+        Some(p) => p.params.clone(),
+        None => stage.initial(&head_eps, one_step)?,
+    };
+    let (mut chosen, best_iteration) =
+        stage.train(init, &head_eps, &tails, settings.iterations, 1)?;
+    stage.report.best_iteration = best_iteration;
+    if settings.refit && !tails.is_empty() {
+        // stage 2: the same number of iterations on the whole training data
+        let init = match previous {
+            Some(p) => p.params.clone(),
+            None => stage.initial(&all_eps, one_step)?,
+        };
+        chosen = if best_iteration == 0 {
+            init
+        } else {
+            stage.train(init, &all_eps, &[], best_iteration, 2)?.0
+        };
+    }
+    report.train_seconds = start.elapsed().as_secs_f64();
+    let model = Model {
+        method: Method::Msgp,
+        spec,
+        params: chosen,
+        config,
+        normalizer,
+    };
+    Ok((model, report))
+}
+
+struct MsgpObjective<'a> {
+    shape: GpShape,
+    spec: NarxSpec,
+    config: GpConfig,
+    episodes: &'a [Episode],
+    complexity: Complexity,
+    log: JitterLog,
+    /// The numerical failure of the latest evaluation, if it failed (the loss is then reported
+    /// as NaN).
+    failure: Option<MsgpError>,
+}
+
+impl Objective for MsgpObjective<'_> {
+    fn value_and_gradient(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>)> {
+        let params = GpParams::from_flat(self.shape, x)?;
+        let evaluated = loss_and_gradient(
+            &params,
+            &self.config,
+            &self.spec,
+            self.episodes,
+            self.complexity,
+            &mut self.log,
+        );
+        let (v, mut g) = match evaluated {
+            Err(e @ (MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_))) => {
+                self.failure = Some(e);
+                return Ok((f64::NAN, vec![0.0; x.len()]));
+            }
+            other => other?,
+        };
+        // a line search may step back from a failed trial: only a failure at the end counts
+        self.failure = None;
+        let scale = 1.0 / v.steps.max(1) as f64;
+        g.iter_mut().for_each(|gi| *gi *= scale);
+        Ok((v.total() * scale, g))
+    }
+}
+
+/// Mean NLL per step of free simulations of `episodes` (normalised units): the MSGP loss
+/// without its complexity term.
+fn validation_nll(
+    params: &GpParams<f64>,
+    config: &GpConfig,
+    spec: &NarxSpec,
+    episodes: &[Episode],
+) -> Result<f64> {
+    let mut log = JitterLog::default();
+    let v = msgp_loss(params, config, spec, episodes, Complexity::None, &mut log)?;
+    Ok(v.nll / v.steps.max(1) as f64)
+}
+
+/// One MSGP training run: initialisation and Adam with optional early stopping.
+struct Stage<'a, 'p> {
+    spec: NarxSpec,
+    config: GpConfig,
+    settings: &'a FitSettings,
+    start: Instant,
+    progress: &'p mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
+    report: &'a mut FitReport,
+}
+
+impl Stage<'_, '_> {
+    /// The sparse one-step GP-NARX fit on `episodes`, with the one-step noise split equally
+    /// between process and observation noise.
+    fn initial(
+        &mut self,
+        episodes: &[Episode],
+        one_step: &OneStepSettings,
+    ) -> Result<GpParams<f64>> {
+        let refs: Vec<&Trajectory> = episodes.iter().map(|e| &e.traj).collect();
+        let data = one_step_pairs(&self.spec, &refs)?;
+        let mut init = fit_one_step(
+            &data,
+            self.settings.inducing,
+            one_step,
+            &self.config,
+            &Structure::new(&self.settings.integrators, &self.spec),
+            self.settings.seed,
+            &mut self.report.jitter,
+        )?;
+        let floor = self.config.noise_floor;
+        for a in 0..self.spec.dy {
+            let total = init.log_process_noise[a].exp() + floor;
+            let half = (0.5 * total - floor).max(1e-3 * floor);
+            init.log_process_noise[a] = half.ln();
+            init.log_obs_noise[a] = half.ln();
+        }
+        let m = init.pseudo_inputs.nrows();
+        let predicted: usize = episodes
+            .iter()
+            .map(|e| e.traj.len() - self.spec.warmup())
+            .sum();
+        if self.settings.complexity == Complexity::NegHalfLogDet && predicted <= m {
+            return Err(MsgpError::InvalidSetting {
+                name: "inducing",
+                reason: format!(
+                    "the complexity term −½log|K̃| is bounded only when the training rollouts predict \
+                     more steps ({predicted}) than there are pseudo-inputs ({m}); use fewer pseudo-inputs"
+                ),
+            });
+        }
+        Ok(init)
+    }
+
+    /// The solver from `init` for up to `iterations` steps. With validation episodes, checks them
+    /// every `eval_every` steps, stops after `patience` checks without improvement and returns the
+    /// parameters of the best validation NLL and their iteration; otherwise returns the iterate of
+    /// the lowest training loss (the last one, unless a late Adam step threw the loss up).
+    fn train(
+        &mut self,
+        init: GpParams<f64>,
+        episodes: &[Episode],
+        tails: &[Episode],
+        iterations: usize,
+        stage: u8,
+    ) -> Result<(GpParams<f64>, usize)> {
+        let shape = init.shape()?;
+        let mut active = vec![true; shape.len()];
+        let no_mean = (self.config.mean == MeanFunction::Zero).then_some(ParamGroup::LinearMean);
+        for g in self.settings.frozen.iter().chain(no_mean.iter()) {
+            for i in shape.group_range(*g) {
+                active[i] = false;
+            }
+        }
+        // what integrating outputs fix (`linear_mean` and `log_lengthscales` flatten by rows)
+        let structure = Structure::new(&self.settings.integrators, &self.spec);
+        let mean_start = shape.group_range(ParamGroup::LinearMean).start;
+        for c in &structure.fixed {
+            active[mean_start + c.row * shape.d + c.col] = false;
+        }
+        let ls_start = shape.group_range(ParamGroup::Lengthscales).start;
+        for row in 0..shape.e {
+            for &col in &structure.ignored {
+                active[ls_start + row * shape.d + col] = false;
+            }
+        }
+        // outputs without a GP (`pseudo_targets` flattens by pseudo-input, then output)
+        let targets_start = shape.group_range(ParamGroup::PseudoTargets).start;
+        let sf_start = shape.group_range(ParamGroup::SignalVar).start;
+        for &a in &structure.without_gp {
+            for i in 0..shape.m {
+                active[targets_start + i * shape.e + a] = false;
+            }
+            for k in 0..shape.d {
+                active[ls_start + a * shape.d + k] = false;
+            }
+            active[sf_start + a] = false;
+        }
+        let mut objective = MsgpObjective {
+            shape,
+            spec: self.spec,
+            config: self.config,
+            episodes,
+            complexity: self.settings.complexity,
+            log: JitterLog::default(),
+            failure: None,
+        };
+        let solver = match self.settings.optimizer {
+            FitOptimizer::Adam => Solver::Adam(Adam {
+                learning_rate: self.settings.learning_rate,
+                ..Adam::default()
+            }),
+            FitOptimizer::Lbfgs => Solver::Lbfgs(FIT_LBFGS),
+        };
+        let (spec, config, settings, start) = (self.spec, self.config, self.settings, self.start);
+        let every = match settings.optimizer {
+            FitOptimizer::Adam => settings.eval_every.max(1),
+            FitOptimizer::Lbfgs => 1,
+        };
+        let mut best: (f64, Vec<f64>, usize) = (f64::INFINITY, init.to_flat(), 0);
+        let mut since_best = 0usize;
+        let mut good: Option<(Vec<f64>, usize)> = None;
+        let report = &mut *self.report;
+        let progress = &mut *self.progress;
+        let mut last_it = iterations;
+        let mut stopped = None;
+        let (last_x, _) = minimize(
+            &mut objective,
+            &solver,
+            init.to_flat(),
+            &active,
+            iterations + 1,
+            |it, loss, x| {
+                if loss.is_nan() {
+                    // the parameters of this step failed numerically (see `failure`)
+                    return Ok(Flow::Stop);
+                }
+                good = Some((x.to_vec(), it));
+                last_it = it;
+                // without a validation tail, the best iterate is the one of lowest training loss:
+                // Adam's steps at the loop's step size throw the loss up now and then (by up to
+                // 2.7 nats per step on the loop's data), for tens of iterations, also at the last
+                if tails.is_empty() && loss < best.0 {
+                    best = (loss, x.to_vec(), it);
+                }
+                let mut validation = None;
+                if !tails.is_empty() && (it % every == 0 || it == iterations) {
+                    let p = GpParams::from_flat(shape, x)?;
+                    let v = validation_nll(&p, &config, &spec, tails)?;
+                    validation = Some(v);
+                    report.history.push((it, loss, v));
+                    if v < best.0 {
+                        best = (v, x.to_vec(), it);
+                        since_best = 0;
+                    } else {
+                        since_best += 1;
+                    }
+                }
+                report.iterations_run += 1;
+                let seen = progress(&FitProgress {
+                    stage,
+                    iteration: it,
+                    iterations,
+                    loss,
+                    validation,
+                    elapsed: start.elapsed().as_secs_f64(),
+                });
+                if seen.is_break() {
+                    stopped = Some(it);
+                    return Ok(Flow::Stop);
+                }
+                if it == iterations || (!tails.is_empty() && since_best >= settings.patience) {
+                    return Ok(Flow::Stop);
+                }
+                Ok(Flow::Continue)
+            },
+        )?;
+        report.jitter.merge(&objective.log);
+        if let Some(iteration) = stopped {
+            return Err(MsgpError::Stopped { iteration });
+        }
+        let (x, it) = match (objective.failure.take(), good) {
+            (Some(e), None) => return Err(e),
+            (Some(e), Some((x, it))) => {
+                report.numerical_stop = Some(format!(
+                    "stage {stage}: stopped at iteration {} of {iterations}: {e}; kept iteration {it}",
+                    it + 1
+                ));
+                if best.0.is_finite() {
+                    (best.1, best.2)
+                } else {
+                    (x, it)
+                }
+            }
+            (None, _) if tails.is_empty() && !best.0.is_finite() => (last_x, last_it),
+            (None, _) => (best.1, best.2),
+        };
+        Ok((GpParams::from_flat(shape, &x)?, it))
+    }
+}

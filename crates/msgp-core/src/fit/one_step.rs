@@ -1,0 +1,747 @@
+//! The one-step baselines: GP-NARX trained by the marginal likelihood (eq. 5) on one-step pairs,
+//! and PILCO's variant with penalties on the signal-to-noise ratio and extreme length-scales
+//! (appendix A.1.1; PILCO's `hypCurb`: `Σ_d ((log ℓ_d − log std(x_d)) / log 100)^30 +
+//! ((log σ_f − log σ_n) / log 500)^30`).
+//!
+//! The fitted full GP is then made sparse for moment-matching rollouts: `m` pseudo-inputs from
+//! seeded k-means over the training windows and pseudo-targets chosen so that the sparse mean
+//! `k(x)ᵀ K̃_m⁻¹ ȳ` equals the DTC/projected-process mean
+//! `k(x)ᵀ (σ_n² K_mm + K_mn K_nm)⁻¹ K_mn y`, i.e. `ȳ = K̃_m (σ_n² K_mm + K_mn K_nm)⁻¹ K_mn y`.
+//! This sparse GP-NARX is also MSGP's initialisation, as in the paper.
+//!
+//! With a linear prior mean ([`MeanFunction::Linear`]) the map `A` is an instrumental-variables
+//! ARX fit of the targets on the windows (see [`OneStepData`]), and the GP is fitted to what it
+//! leaves over.
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::data::Trajectory;
+use crate::error::{MsgpError, Result};
+use crate::gp::integrator::{FixedCoefficient, IGNORED_LENGTHSCALE, NO_GP_SIGNAL_VAR, Structure};
+use crate::gp::kernel::kernel_matrix;
+use crate::gp::kmeans::kmeans;
+use crate::gp::{GpConfig, GpParams, MeanFunction};
+use crate::narx::NarxSpec;
+use crate::numeric::dense::DenseChol;
+use crate::numeric::linalg::JitterLog;
+use crate::optim::{Adam, Flow, Objective, Solver, minimize};
+
+const LN_2PI: f64 = 1.837_877_066_409_345_3;
+
+/// Extra lags of the instrument window beyond the regressor's (`l_y + 2` outputs and
+/// `l_u + 2` inputs): an over-identified instrumental-variables estimate.
+const INSTRUMENT_EXTRA_LAGS: usize = 2;
+
+/// One-step training pairs: windows `x̃_t` (N × D) and next outputs `y_{t+1}` (N × E), and for
+/// the pairs with enough history, *instruments* for the linear prior mean.
+///
+/// The measured outputs in `x̃_t` carry the observation noise that also enters the target
+/// (errors in variables), so least squares of `y_{t+1}` on `x̃_t` is biased: on a fast-sampled
+/// mechanical system it can turn `θ_{t+1} ≈ 2θ_t − θ_{t−1}` into a random walk. The instruments
+/// are the signals at times `≤ t − l_y` (`l_y + 2` output and `l_u + 2` input lags of the window
+/// at `t − l_y`): correlated with `x̃_t` through the dynamics, but not with the observation noise
+/// of `y_{t−l_y+1}, …, y_{t+1}` (white noise), nor — under feedback — with inputs computed from
+/// those noisy outputs.
+#[derive(Clone, Debug)]
+pub struct OneStepData {
+    /// Inputs.
+    pub x: DMatrix<f64>,
+    /// Targets.
+    pub y: DMatrix<f64>,
+    /// Rows of `x`/`y` that have instruments.
+    pub instrumented: Vec<usize>,
+    /// Their instruments (one row per entry of `instrumented`).
+    pub z: DMatrix<f64>,
+}
+
+/// Builds one-step pairs from every trajectory.
+pub fn one_step_pairs(spec: &NarxSpec, trajs: &[&Trajectory]) -> Result<OneStepData> {
+    let d = spec.input_dim();
+    let zspec = NarxSpec {
+        ly: spec.ly + INSTRUMENT_EXTRA_LAGS,
+        lu: spec.lu + INSTRUMENT_EXTRA_LAGS,
+        ..*spec
+    };
+    let mut rows_x: Vec<Vec<f64>> = Vec::new();
+    let mut rows_y: Vec<Vec<f64>> = Vec::new();
+    let mut rows_z: Vec<Vec<f64>> = Vec::new();
+    let mut instrumented = Vec::new();
+    for traj in trajs {
+        traj.check(spec)?;
+        for t in (spec.warmup() - 1)..(traj.len() - 1) {
+            if t >= spec.ly + zspec.warmup() - 1 {
+                instrumented.push(rows_x.len());
+                rows_z.push(zspec.window(&traj.y, &traj.u, t - spec.ly));
+            }
+            rows_x.push(spec.window(&traj.y, &traj.u, t));
+            rows_y.push((0..spec.dy).map(|j| traj.y[(t + 1, j)]).collect());
+        }
+    }
+    let n = rows_x.len();
+    Ok(OneStepData {
+        x: DMatrix::from_fn(n, d, |i, k| rows_x[i][k]),
+        y: DMatrix::from_fn(n, spec.dy, |i, j| rows_y[i][j]),
+        z: DMatrix::from_fn(rows_z.len(), zspec.input_dim(), |i, k| rows_z[i][k]),
+        instrumented,
+    })
+}
+
+/// Hyperparameters of one output's full GP.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Hyper {
+    /// `log ℓ_d`.
+    pub log_lengthscales: Vec<f64>,
+    /// `log σ_f²`.
+    pub log_signal_var: f64,
+    /// `log(σ_n² − floor)`.
+    pub log_noise: f64,
+}
+
+impl Hyper {
+    fn to_vec(&self) -> Vec<f64> {
+        let mut v = self.log_lengthscales.clone();
+        v.push(self.log_signal_var);
+        v.push(self.log_noise);
+        v
+    }
+    fn from_vec(v: &[f64]) -> Self {
+        let d = v.len() - 2;
+        Self {
+            log_lengthscales: v[..d].to_vec(),
+            log_signal_var: v[d],
+            log_noise: v[d + 1],
+        }
+    }
+}
+
+/// Negative log marginal likelihood (eq. 5) of one output, optionally with PILCO's penalties.
+struct Marginal {
+    /// The inputs, each column centred (the SE kernel sees only differences).
+    xc: DMatrix<f64>,
+    y: DVector<f64>,
+    config: GpConfig,
+    /// `Some(std of each input dimension)` adds PILCO's penalties.
+    pilco_std: Option<Vec<f64>>,
+    log: JitterLog,
+}
+
+impl Marginal {
+    fn new(
+        x: &DMatrix<f64>,
+        y: DVector<f64>,
+        config: GpConfig,
+        pilco_std: Option<Vec<f64>>,
+    ) -> Self {
+        let mut xc = x.clone();
+        for mut col in xc.column_iter_mut() {
+            let mean = col.mean();
+            col.add_scalar_mut(-mean);
+        }
+        Self {
+            xc,
+            y,
+            config,
+            pilco_std,
+            log: JitterLog::default(),
+        }
+    }
+}
+
+impl Objective for Marginal {
+    fn value_and_gradient(&mut self, p: &[f64]) -> Result<(f64, Vec<f64>)> {
+        let (n, d) = self.xc.shape();
+        let h = Hyper::from_vec(p);
+        let inv_l2: Vec<f64> = h
+            .log_lengthscales
+            .iter()
+            .map(|l| (-2.0 * l).exp())
+            .collect();
+        let sf2 = h.log_signal_var.exp();
+        let sn2 = self.config.noise_floor + h.log_noise.exp();
+        let kf = kernel_matrix(&self.xc, &self.xc, &inv_l2, sf2);
+        let mut k = kf.clone();
+        for i in 0..n {
+            k[(i, i)] += sn2;
+        }
+        let ch = DenseChol::new(
+            &k,
+            &self.config.jitter,
+            "one-step GP kernel matrix",
+            &mut self.log,
+        )?;
+        let kinv = ch.inverse();
+        let alpha = &kinv * &self.y;
+        let kdiag = kinv.diagonal();
+        let mut value = 0.5 * self.y.dot(&alpha) + 0.5 * ch.log_det() + 0.5 * n as f64 * LN_2PI;
+        // dNLL/dθ = −½ tr((ααᵀ − K⁻¹) ∂K/∂θ) = −½ Σᵢⱼ Gᵢⱼ ∂log kᵢⱼ/∂θ, G = (ααᵀ − K⁻¹) ∘ K_f;
+        // ∂log kᵢⱼ/∂log ℓ_d = (xᵢ_d − xⱼ_d)² / ℓ_d², and Σᵢⱼ Gᵢⱼ (xᵢ − xⱼ)² =
+        // Σᵢ xᵢ² (rᵢ + cᵢ) − 2 xᵀ G x with r, c the row and column sums of G: one n × n × d
+        // product instead of a scalar loop over the pairs (the inputs are centred, which leaves
+        // the differences as they are and keeps the expanded terms small)
+        let mut g = kinv;
+        for j in 0..n {
+            for i in 0..n {
+                g[(i, j)] = (alpha[i] * alpha[j] - g[(i, j)]) * kf[(i, j)];
+            }
+        }
+        let tr_sf: f64 = g.iter().sum();
+        let rows = g.column_sum();
+        let cols = g.row_sum();
+        let gx = &g * &self.xc;
+        let mut grad = vec![0.0; d + 2];
+        for (dd, gr) in grad.iter_mut().take(d).enumerate() {
+            let mut q = 0.0;
+            for i in 0..n {
+                let xi = self.xc[(i, dd)];
+                q += xi * (xi * (rows[i] + cols[i]) - 2.0 * gx[(i, dd)]);
+            }
+            *gr = -0.5 * q * inv_l2[dd];
+        }
+        grad[d] = -0.5 * tr_sf;
+        let tr_w: f64 = (0..n).map(|i| alpha[i] * alpha[i] - kdiag[i]).sum();
+        grad[d + 1] = -0.5 * tr_w * h.log_noise.exp();
+        if let Some(std) = &self.pilco_std {
+            let p30 = |z: f64| z.powi(30);
+            let dp30 = |z: f64| 30.0 * z.powi(29);
+            let lls = 100f64.ln();
+            for dd in 0..d {
+                let z = (h.log_lengthscales[dd] - std[dd].ln()) / lls;
+                value += p30(z);
+                grad[dd] += dp30(z) / lls;
+            }
+            let lsnr = 500f64.ln();
+            // log σ_f − log σ_n, with σ_n² = floor + e^θ
+            let z = (0.5 * h.log_signal_var - 0.5 * sn2.ln()) / lsnr;
+            value += p30(z);
+            grad[d] += dp30(z) * 0.5 / lsnr;
+            grad[d + 1] -= dp30(z) * 0.5 / lsnr * h.log_noise.exp() / sn2;
+        }
+        Ok((value, grad))
+    }
+}
+
+/// Settings of the one-step fit.
+#[derive(Clone, Copy, Debug)]
+pub struct OneStepSettings {
+    /// Adam iterations on the marginal likelihood.
+    pub iterations: usize,
+    /// Adam step size.
+    pub learning_rate: f64,
+    /// Add PILCO's penalties.
+    pub pilco_penalty: bool,
+    /// Most one-step pairs used for hyperparameters (an evenly spaced subset beyond that).
+    pub max_pairs: usize,
+}
+
+impl Default for OneStepSettings {
+    fn default() -> Self {
+        Self {
+            iterations: 300,
+            learning_rate: 0.05,
+            pilco_penalty: false,
+            max_pairs: 1000,
+        }
+    }
+}
+
+fn column_std(x: &DMatrix<f64>, d: usize) -> f64 {
+    let n = x.nrows() as f64;
+    let mean = x.column(d).sum() / n;
+    let var = x.column(d).iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+    var.sqrt().max(1e-6)
+}
+
+/// The linear prior mean `A` (E × D) on the normalised pairs: two-stage least squares with the
+/// instruments of [`OneStepData`] when at least `4 · dim(z)` pairs have them, else ridge least
+/// squares `argmin ‖Y − X Aᵀ‖² + λ‖A‖²`. Both use the ridge `λ = 1e-6 N` on their Gram
+/// matrices. The `fixed` coefficients (of integrating outputs, [`crate::gp::integrator`]) are set,
+/// and each row's other coefficients are fitted to what they leave over.
+///
+/// 2SLS: `Aᵀ = (Bᵀ G⁻¹ B)⁻¹ Bᵀ G⁻¹ C` with `G = ZᵀZ`, `B = ZᵀX`, `C = ZᵀY`, i.e. least squares of
+/// `Y` on the projection of `X` onto the instruments.
+pub(crate) fn arx_linear_mean(
+    data: &OneStepData,
+    config: &GpConfig,
+    fixed: &[FixedCoefficient],
+    log: &mut JitterLog,
+) -> Result<DMatrix<f64>> {
+    let (d, e) = (data.x.ncols(), data.y.ncols());
+    let mut a = DMatrix::zeros(e, d);
+    let mut is_fixed = vec![vec![false; d]; e];
+    for c in fixed {
+        a[(c.row, c.col)] = c.value;
+        is_fixed[c.row][c.col] = true;
+    }
+    // rows with the same free columns are solved together (all rows, when nothing is fixed)
+    let mut groups: Vec<(Vec<usize>, Vec<usize>)> = Vec::new();
+    for (row, flags) in is_fixed.iter().enumerate() {
+        let free: Vec<usize> = (0..d).filter(|&k| !flags[k]).collect();
+        match groups.iter_mut().find(|(cols, _)| *cols == free) {
+            Some((_, rows)) => rows.push(row),
+            None => groups.push((free, vec![row])),
+        }
+    }
+    // the targets less the fixed part
+    let y = &data.y - &data.x * a.transpose();
+    for (cols, rows) in groups {
+        if cols.is_empty() {
+            continue;
+        }
+        let x = data.x.select_columns(&cols);
+        let y = y.select_columns(&rows);
+        let at = arx_solve(data, &x, &y, config, log)?; // free × rows
+        for (i, &row) in rows.iter().enumerate() {
+            for (k, &col) in cols.iter().enumerate() {
+                a[(row, col)] = at[(k, i)];
+            }
+        }
+    }
+    Ok(a)
+}
+
+/// `Aᵀ` of `y ≈ x Aᵀ` by two-stage least squares with `data`'s instruments, or ridge least
+/// squares (see [`arx_linear_mean`]).
+fn arx_solve(
+    data: &OneStepData,
+    x: &DMatrix<f64>,
+    y: &DMatrix<f64>,
+    config: &GpConfig,
+    log: &mut JitterLog,
+) -> Result<DMatrix<f64>> {
+    let ridge = |mut g: DMatrix<f64>, n: usize| {
+        for k in 0..g.nrows() {
+            g[(k, k)] += 1e-6 * n as f64;
+        }
+        g
+    };
+    let ni = data.instrumented.len();
+    if ni >= 4 * data.z.ncols() {
+        let x = x.select_rows(&data.instrumented);
+        let y = y.select_rows(&data.instrumented);
+        let zt = data.z.transpose();
+        let g = DenseChol::new(
+            &ridge(&zt * &data.z, ni),
+            &config.jitter,
+            "ZᵀZ + λI (instruments of the linear prior mean)",
+            log,
+        )?;
+        let b = &zt * &x;
+        let gb = g.solve(&b);
+        let gc = g.solve(&(&zt * &y));
+        let normal = DenseChol::new(
+            &ridge(b.transpose() * &gb, ni),
+            &config.jitter,
+            "Bᵀ G⁻¹ B + λI (two-stage least squares)",
+            log,
+        )?;
+        return Ok(normal.solve(&(b.transpose() * gc)));
+    }
+    let n = x.nrows();
+    let ch = DenseChol::new(
+        &ridge(x.transpose() * x, n),
+        &config.jitter,
+        "XᵀX + λI (linear prior mean)",
+        log,
+    )?;
+    Ok(ch.solve(&(x.transpose() * y)))
+}
+
+/// Fits one-step GP-NARX hyperparameters per output and projects onto `m` pseudo-inputs.
+/// Returns the sparse model (process noise = one-step noise, observation noise at the floor).
+pub fn fit_one_step(
+    data: &OneStepData,
+    m: usize,
+    settings: &OneStepSettings,
+    config: &GpConfig,
+    structure: &Structure,
+    seed: u64,
+    log: &mut JitterLog,
+) -> Result<GpParams<f64>> {
+    let threads = crate::numeric::parallel::thread_count();
+    fit_one_step_with_threads(data, m, settings, config, structure, seed, threads, log)
+}
+
+/// [`fit_one_step`] with the outputs on up to `threads` threads; the result does not depend
+/// on `threads`.
+#[allow(clippy::too_many_arguments)]
+fn fit_one_step_with_threads(
+    data: &OneStepData,
+    m: usize,
+    settings: &OneStepSettings,
+    config: &GpConfig,
+    structure: &Structure,
+    seed: u64,
+    threads: usize,
+    log: &mut JitterLog,
+) -> Result<GpParams<f64>> {
+    let (n, d) = data.x.shape();
+    let e = data.y.ncols();
+    if n < 2 {
+        return Err(MsgpError::Data(format!(
+            "{n} one-step pairs are too few to fit a GP"
+        )));
+    }
+    let linear_mean = match config.mean {
+        MeanFunction::Zero => DMatrix::zeros(e, d),
+        MeanFunction::Linear => arx_linear_mean(data, config, &structure.fixed, log)?,
+    };
+    // the targets the GP models: what the prior mean leaves over
+    let targets = &data.y - &data.x * linear_mean.transpose();
+    // the GP's inputs: the windows with the coordinates it ignores at zero
+    let mut gx = data.x.clone();
+    for &k in &structure.ignored {
+        gx.column_mut(k).fill(0.0);
+    }
+    let stride = n.div_ceil(settings.max_pairs.max(1));
+    let idx: Vec<usize> = (0..n).step_by(stride).collect();
+    let xs = DMatrix::from_fn(idx.len(), d, |i, k| gx[(idx[i], k)]);
+    let std: Vec<f64> = (0..d)
+        .map(|k| match structure.ignored.contains(&k) {
+            true => IGNORED_LENGTHSCALE,
+            false => column_std(&gx, k),
+        })
+        .collect();
+
+    let pseudo = if m >= n {
+        gx.clone()
+    } else {
+        kmeans(&gx, m, 30, seed)?
+    };
+    let mm = pseudo.nrows();
+    let mut params = GpParams {
+        pseudo_inputs: pseudo.clone(),
+        pseudo_targets: DMatrix::zeros(mm, e),
+        log_lengthscales: DMatrix::zeros(e, d),
+        log_signal_var: DVector::zeros(e),
+        log_process_noise: DVector::zeros(e),
+        log_obs_noise: DVector::from_element(e, (1e-3 * config.noise_floor).ln()),
+        linear_mean,
+    };
+    // the outputs are independent fits: one per thread (faer runs sequentially), their
+    // results and jitter records taken in output order, so any thread count gives the same bits
+    let outputs: Vec<usize> = (0..e).collect();
+    let fit_output = |_: usize, &a: &usize| -> Result<(Hyper, DVector<f64>, JitterLog)> {
+        let mut log = JitterLog::default();
+        let ys = DVector::from_fn(idx.len(), |i, _| targets[(idx[i], a)]);
+        let var_y = {
+            let mean = ys.mean();
+            ys.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (ys.len() as f64 - 1.0).max(1.0)
+        }
+        .max(1e-6);
+        if structure.without_gp.contains(&a) {
+            // no GP: what the linear mean leaves over is noise (pseudo-targets stay zero)
+            let h = Hyper {
+                log_lengthscales: std.iter().map(|s| s.ln()).collect(),
+                log_signal_var: NO_GP_SIGNAL_VAR.ln(),
+                log_noise: (var_y - config.noise_floor)
+                    .max(1e-3 * config.noise_floor)
+                    .ln(),
+            };
+            return Ok((h, DVector::zeros(mm), log));
+        }
+        let init = Hyper {
+            log_lengthscales: std.iter().map(|s| s.ln()).collect(),
+            log_signal_var: var_y.ln(),
+            log_noise: (0.05 * var_y).ln(),
+        };
+        let mut objective = Marginal::new(
+            &xs,
+            ys,
+            *config,
+            settings.pilco_penalty.then(|| std.clone()),
+        );
+        let adam = Solver::Adam(Adam {
+            learning_rate: settings.learning_rate,
+            ..Adam::default()
+        });
+        let mut active = vec![true; d + 2];
+        for &k in &structure.ignored {
+            active[k] = false;
+        }
+        let mut best = (f64::INFINITY, init.to_vec());
+        let (x, v) = minimize(
+            &mut objective,
+            &adam,
+            init.to_vec(),
+            &active,
+            settings.iterations,
+            |_, v, x| {
+                if v < best.0 {
+                    best = (v, x.to_vec());
+                }
+                Ok(Flow::Continue)
+            },
+        )?;
+        let h = if v.is_finite() && v < best.0 {
+            Hyper::from_vec(&x)
+        } else {
+            Hyper::from_vec(&best.1)
+        };
+        log.merge(&objective.log);
+
+        // project onto the pseudo-inputs (DTC mean)
+        let inv_l2: Vec<f64> = h
+            .log_lengthscales
+            .iter()
+            .map(|l| (-2.0 * l).exp())
+            .collect();
+        let sf2 = h.log_signal_var.exp();
+        let sn2 = config.noise_floor + h.log_noise.exp();
+        let yfull = DVector::from_fn(n, |i, _| targets[(i, a)]);
+        let ybar = if m >= n {
+            yfull
+        } else {
+            let kmm = kernel_matrix(&pseudo, &pseudo, &inv_l2, sf2);
+            let kmn = kernel_matrix(&pseudo, &gx, &inv_l2, sf2);
+            let a_mat = &kmm * sn2 + &kmn * kmn.transpose();
+            let ch = DenseChol::new(&a_mat, &config.jitter, "σ² K_mm + K_mn K_nm", &mut log)?;
+            let rhs = &kmn * &yfull;
+            let sol = ch.solve(&DMatrix::from_column_slice(mm, 1, rhs.as_slice()));
+            let mut kt = kmm;
+            for i in 0..mm {
+                kt[(i, i)] += sn2;
+            }
+            DVector::from_column_slice((&kt * sol).as_slice())
+        };
+        Ok((h, ybar, log))
+    };
+    let fits = crate::numeric::parallel::map_indexed(&outputs, threads, fit_output);
+    for (a, fit) in fits.into_iter().enumerate() {
+        let (h, ybar, olog) = fit?;
+        log.merge(&olog);
+        params.pseudo_targets.set_column(a, &ybar);
+        for k in 0..d {
+            params.log_lengthscales[(a, k)] = h.log_lengthscales[k];
+        }
+        params.log_signal_var[a] = h.log_signal_var;
+        params.log_process_noise[a] = h.log_noise;
+    }
+    Ok(params)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A smooth multisine (`n` × 1): the inputs of a window are predictable from older ones, so
+    /// older signals are strong instruments.
+    fn multisine(n: usize) -> DMatrix<f64> {
+        DMatrix::from_fn(n, 1, |t, _| {
+            [(0.07, 0.3), (0.19, 1.1), (0.31, 2.0), (0.53, 0.7)]
+                .iter()
+                .map(|(w, phase)| (w * t as f64 + phase).sin())
+                .sum::<f64>()
+        })
+    }
+
+    /// A lightly damped resonance sampled fast, `y_{t+1} = 1.9 y_t − 0.95 y_{t−1} + 0.1 u_t`,
+    /// measured with 20% noise: least squares turns the lag coefficients towards a random walk,
+    /// the instruments recover them.
+    #[test]
+    fn instruments_remove_the_errors_in_variables_bias_of_the_linear_mean() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let n = 4000;
+        let mut latent = vec![0.0; n];
+        let u = multisine(n);
+        for t in 1..n - 1 {
+            latent[t + 1] = 1.9 * latent[t] - 0.95 * latent[t - 1] + 0.1 * u[(t, 0)];
+        }
+        let std = {
+            let m = latent.iter().sum::<f64>() / n as f64;
+            (latent.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n as f64).sqrt()
+        };
+        let y = DMatrix::from_fn(n, 1, |t, _| {
+            let z: f64 = StandardNormal.sample(&mut rng);
+            latent[t] + 0.2 * std * z
+        });
+        let traj = Trajectory::new(u, y).expect("trajectory");
+        let spec = NarxSpec::siso(2, 1);
+        let data = one_step_pairs(&spec, &[&traj]).expect("pairs");
+        assert_eq!(data.instrumented.len(), data.x.nrows() - 4);
+        let mut log = JitterLog::default();
+        let config = GpConfig::default();
+        let iv = arx_linear_mean(&data, &config, &[], &mut log).expect("iv");
+        let ls = {
+            let plain = OneStepData {
+                instrumented: Vec::new(),
+                z: DMatrix::zeros(0, data.z.ncols()),
+                ..data.clone()
+            };
+            arx_linear_mean(&plain, &config, &[], &mut log).expect("ls")
+        };
+        // 20% noise is enough to bias least squares by more than 0.1 on each lag
+        assert!((ls[(0, 0)] - 1.9).abs() > 0.1, "{ls}");
+        assert!((ls[(0, 1)] + 0.95).abs() > 0.1, "{ls}");
+        assert!((iv[(0, 0)] - 1.9).abs() < 0.02, "{iv}");
+        assert!((iv[(0, 1)] + 0.95).abs() < 0.02, "{iv}");
+        assert!((iv[(0, 2)] - 0.1).abs() < 0.01, "{iv}");
+    }
+
+    /// Two outputs measured with noise: a resonance `y₀` and a double integrator `y₁` of the
+    /// same input. With `y₁` declared integrating, its own-lag coefficients are exactly
+    /// `[2, −1]`, `y₀`'s row ignores `y₁`, and the other coefficients are estimated around
+    /// them.
+    #[test]
+    fn an_integrating_output_fixes_its_lags_and_fits_the_rest() {
+        use crate::gp::integrator::Integrator;
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let n = 3000;
+        let u = multisine(n);
+        let mut latent = DMatrix::<f64>::zeros(n, 2);
+        for t in 1..n - 1 {
+            latent[(t + 1, 0)] = 1.9 * latent[(t, 0)] - 0.95 * latent[(t - 1, 0)] + 0.1 * u[(t, 0)];
+            latent[(t + 1, 1)] = 2.0 * latent[(t, 1)] - latent[(t - 1, 1)] + 0.002 * u[(t, 0)];
+        }
+        let y = DMatrix::from_fn(n, 2, |t, j| {
+            let z: f64 = StandardNormal.sample(&mut rng);
+            latent[(t, j)] + [0.05, 0.01][j] * z
+        });
+        let traj = Trajectory::new(u, y).expect("trajectory");
+        let spec = NarxSpec {
+            ly: 2,
+            lu: 1,
+            dy: 2,
+            du: 1,
+        };
+        let data = one_step_pairs(&spec, &[&traj]).expect("pairs");
+        let fixed = Structure::new(
+            &[Integrator {
+                output: 1,
+                order: 2,
+                linear: false,
+            }],
+            &spec,
+        )
+        .fixed;
+        let mut log = JitterLog::default();
+        let config = GpConfig::default();
+        let free = arx_linear_mean(&data, &config, &[], &mut log).expect("free");
+        let a = arx_linear_mean(&data, &config, &fixed, &mut log).expect("fixed");
+        let (y1, y1_lag1, u0) = (spec.y_index(0, 1), spec.y_index(1, 1), spec.u_index(0, 0));
+        assert_eq!(a[(1, y1)], 2.0);
+        assert_eq!(a[(1, y1_lag1)], -1.0);
+        assert!((a[(1, u0)] - 0.002).abs() < 2e-4, "{a}");
+        for k in [spec.y_index(0, 0), spec.y_index(1, 0)] {
+            assert!(a[(1, k)].abs() < 0.02, "{a}");
+        }
+        // y₀'s row: zero on y₁'s lags, its own estimated as without the declaration
+        assert_eq!(a[(0, y1)], 0.0);
+        assert_eq!(a[(0, y1_lag1)], 0.0);
+        for (k, truth) in [
+            (spec.y_index(0, 0), 1.9),
+            (spec.y_index(1, 0), -0.95),
+            (u0, 0.1),
+        ] {
+            assert!((a[(0, k)] - truth).abs() < 0.02, "{a}");
+            assert!((a[(0, k)] - free[(0, k)]).abs() < 0.01, "{a} vs {free}");
+        }
+    }
+
+    fn problem() -> (DMatrix<f64>, DVector<f64>) {
+        let x = DMatrix::from_fn(40, 3, |i, k| ((i * 7 + k * 3) as f64 * 0.37).sin());
+        let y = DVector::from_fn(40, |i, _| {
+            (x[(i, 0)] * 2.0).sin() + 0.3 * x[(i, 2)] + 0.05 * ((i as f64) * 1.3).cos()
+        });
+        (x, y)
+    }
+
+    fn check(pilco: bool) {
+        let (x, y) = problem();
+        let std: Vec<f64> = (0..3).map(|k| column_std(&x, k)).collect();
+        let mut obj = Marginal::new(&x, y, GpConfig::default(), pilco.then_some(std));
+        // near the penalties' active region for the PILCO case
+        let p = vec![-0.3, 0.4, 4.0, 0.2, -3.0];
+        let (_, g) = obj.value_and_gradient(&p).expect("value");
+        for i in 0..p.len() {
+            let h = 1e-4;
+            let mut f = |d: f64| {
+                let mut q = p.clone();
+                q[i] += d;
+                obj.value_and_gradient(&q).expect("value").0
+            };
+            let fd = (8.0 * (f(h) - f(-h)) - (f(2.0 * h) - f(-2.0 * h))) / (12.0 * h);
+            assert!(
+                (fd - g[i]).abs() <= 1e-6 * fd.abs().max(1.0),
+                "param {i}: analytic {} vs fd {fd}",
+                g[i]
+            );
+        }
+    }
+
+    #[test]
+    fn outputs_fitted_on_two_threads_give_the_same_bits() {
+        let (x, y0) = problem();
+        let y = DMatrix::from_fn(x.nrows(), 3, |i, a| match a {
+            0 => y0[i],
+            1 => (x[(i, 1)] * 1.5).cos() - 0.2 * x[(i, 0)],
+            _ => x[(i, 2)] * x[(i, 0)],
+        });
+        let data = OneStepData {
+            x,
+            y,
+            instrumented: Vec::new(),
+            z: DMatrix::zeros(0, 3),
+        };
+        let settings = OneStepSettings {
+            iterations: 30,
+            ..OneStepSettings::default()
+        };
+        let run_on = |data: &OneStepData, threads: usize| {
+            let mut log = JitterLog::default();
+            fit_one_step_with_threads(
+                data,
+                12,
+                &settings,
+                &GpConfig::default(),
+                &Structure::default(),
+                4,
+                threads,
+                &mut log,
+            )
+            .expect("fit")
+        };
+        let one = run_on(&data, 1).to_flat();
+        for threads in [2, 3] {
+            let p = run_on(&data, threads).to_flat();
+            assert!(
+                one.iter().zip(&p).all(|(a, b)| a.to_bits() == b.to_bits()),
+                "{threads} threads"
+            );
+        }
+        // each output's fit is its own: output 1 alone gives the same hyperparameters and
+        // pseudo-targets as in the three-output fit on three threads
+        let alone = OneStepData {
+            y: data.y.columns(1, 1).into_owned(),
+            ..data.clone()
+        };
+        let (p1, p3) = (run_on(&alone, 1), run_on(&data, 3));
+        assert_eq!(p1.log_lengthscales.row(0), p3.log_lengthscales.row(1));
+        assert_eq!(p1.log_signal_var[0], p3.log_signal_var[1]);
+        assert_eq!(p1.log_process_noise[0], p3.log_process_noise[1]);
+        assert_eq!(p1.pseudo_targets.column(0), p3.pseudo_targets.column(1));
+        assert_ne!(p3.log_signal_var[0], p3.log_signal_var[1]);
+    }
+
+    #[test]
+    fn marginal_likelihood_gradient_matches_finite_differences() {
+        check(false);
+        check(true);
+    }
+
+    #[test]
+    fn one_step_pairs_follow_the_window_layout() {
+        let t = Trajectory::siso(&[1.0, 2.0, 3.0, 4.0], &[10.0, 20.0, 30.0, 40.0]).expect("traj");
+        let spec = NarxSpec::siso(2, 1);
+        let d = one_step_pairs(&spec, &[&t]).expect("pairs");
+        assert_eq!(d.x.nrows(), 2);
+        assert_eq!(
+            d.x.row(0).iter().copied().collect::<Vec<_>>(),
+            vec![20.0, 10.0, 2.0]
+        );
+        assert_eq!(d.y[(0, 0)], 30.0);
+    }
+}

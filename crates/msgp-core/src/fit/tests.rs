@@ -1,0 +1,492 @@
+//! Tests of the fits (every method) through the public entry points.
+
+use super::*;
+use crate::gp::PreparedGp;
+use crate::rollout::{Control, rollout};
+use nalgebra::DMatrix;
+
+fn traj(n: usize) -> Trajectory {
+    let u: Vec<f64> = (0..n).map(|i| (i as f64 * 0.3).sin()).collect();
+    let y: Vec<f64> = (0..n).map(|i| (i as f64 * 0.2).cos()).collect();
+    Trajectory::siso(&u, &y).expect("finite")
+}
+
+fn options(method: Method, inducing: Option<usize>, iterations: Option<usize>) -> FitOptions {
+    FitOptions {
+        method,
+        ly: 2,
+        lu: 3,
+        inducing,
+        iterations,
+        seed: 7,
+        mean: MeanFunction::Zero,
+        integrators: Vec::new(),
+        optimizer: FitOptimizer::Adam,
+    }
+}
+
+/// A warm start continues the previous model: zero iterations give it back unchanged (same
+/// parameters and normaliser, although the new data would normalise differently), more
+/// iterations lower the loss on the new data from there, and a model of another shape is
+/// refused.
+#[test]
+fn a_warm_start_continues_the_previous_model() {
+    let first: Vec<TrainingEpisode> = [traj(60), traj(50)]
+        .into_iter()
+        .map(|traj| TrainingEpisode { traj, policy: None })
+        .collect();
+    let settings = FitSettings {
+        ly: 2,
+        lu: 2,
+        inducing: 12,
+        iterations: 15,
+        validation_fraction: 0.0,
+        ..FitSettings::default()
+    };
+    let (previous, _) = fit_episodes(&first, &settings, &mut |_| {}).expect("first fit");
+    // more data, with another mean and scale
+    let mut more = first.clone();
+    let u: Vec<f64> = (0..70).map(|i| 2.0 + (i as f64 * 0.17).sin()).collect();
+    let y: Vec<f64> = (0..70)
+        .map(|i| 1.0 + 3.0 * (i as f64 * 0.11).cos())
+        .collect();
+    more.push(TrainingEpisode {
+        traj: Trajectory::siso(&u, &y).expect("finite"),
+        policy: None,
+    });
+    let zero = FitSettings {
+        iterations: 0,
+        ..settings.clone()
+    };
+    let (same, _) = refit_episodes(&more, &zero, &previous, &mut |_| {}).expect("refit 0");
+    assert_eq!(same.params, previous.params);
+    assert_eq!(same.normalizer, previous.normalizer);
+    let mut losses = Vec::new();
+    let (cont, report) =
+        refit_episodes(&more, &settings, &previous, &mut |p| losses.push(p.loss)).expect("refit");
+    assert_eq!(report.iterations_run, 16);
+    assert_eq!(cont.normalizer, previous.normalizer);
+    assert_eq!(cont.params.pseudo_inputs, previous.params.pseudo_inputs);
+    assert!(
+        losses[losses.len() - 1] < losses[0] - 1e-3,
+        "{} → {}",
+        losses[0],
+        losses[losses.len() - 1]
+    );
+    // from scratch on the same data, the start is the one-step fit: another first loss
+    let mut scratch = Vec::new();
+    fit_episodes(&more, &zero, &mut |p| scratch.push(p.loss)).expect("scratch");
+    assert_ne!(scratch[0], losses[0]);
+    for (bad, needle) in [
+        (
+            FitSettings {
+                inducing: 13,
+                ..settings.clone()
+            },
+            "13",
+        ),
+        (
+            FitSettings {
+                method: Method::GpNarx,
+                ..settings.clone()
+            },
+            "only MSGP",
+        ),
+        (
+            FitSettings {
+                lu: 3,
+                ..settings.clone()
+            },
+            "(2, 3)",
+        ),
+    ] {
+        let e = refit_episodes(&more, &bad, &previous, &mut |_| {}).expect_err("refused");
+        assert!(e.to_string().contains(needle), "{e}");
+    }
+}
+
+/// 80 samples of `y_t = 0.9 y_{t−1} + 0.5 u_{t−1} + a sin(3 y_{t−1})` under a sine input.
+fn first_order(a: f64) -> Trajectory {
+    let u: Vec<f64> = (0..80).map(|i| (i as f64 * 0.37).sin()).collect();
+    let mut y = vec![0.0; 80];
+    for t in 1..80 {
+        y[t] = 0.9 * y[t - 1] + 0.5 * u[t - 1] + a * (y[t - 1] * 3.0).sin();
+    }
+    Trajectory::siso(&u, &y).expect("finite")
+}
+
+/// Without a validation tail the fit returns the iterate of lowest training loss: a step
+/// size large enough to throw the loss up near the end of the run (but not to fail
+/// numerically) ends above its best, and the fit still returns the best iterate, bit for
+/// bit the parameters of the same fit stopped at that iteration.
+#[test]
+fn without_validation_the_fit_returns_its_lowest_training_loss() {
+    let traj = first_order(0.2);
+    let settings = FitSettings {
+        ly: 1,
+        lu: 1,
+        inducing: 10,
+        iterations: 300,
+        learning_rate: 0.04,
+        validation_fraction: 0.0,
+        mean: MeanFunction::Linear,
+        ..FitSettings::default()
+    };
+    let mut losses = Vec::new();
+    let (model, report) = fit(std::slice::from_ref(&traj), &settings, &mut |p| {
+        losses.push(p.loss)
+    })
+    .expect("fit");
+    assert!(
+        report.numerical_stop.is_none(),
+        "{:?}",
+        report.numerical_stop
+    );
+    assert_eq!(losses.len(), settings.iterations + 1);
+    let (best, lowest) = losses
+        .iter()
+        .copied()
+        .enumerate()
+        .fold((0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
+    assert!(
+        best < settings.iterations && losses[settings.iterations] > lowest + 1e-2,
+        "the run must end above its best for the test to mean anything: {losses:?}"
+    );
+    assert_eq!(report.best_iteration, best);
+    let stopped = FitSettings {
+        iterations: best,
+        ..settings.clone()
+    };
+    let (at_best, _) =
+        fit(std::slice::from_ref(&traj), &stopped, &mut |_| {}).expect("fit to the best");
+    assert_eq!(model.params, at_best.params);
+}
+
+/// An observer that breaks stops the MSGP training at that iteration with
+/// [`MsgpError::Stopped`]; one that never breaks gives what [`fit_episodes`] gives.
+#[test]
+fn an_observer_can_stop_a_fit() {
+    let episodes = [TrainingEpisode {
+        traj: first_order(0.2),
+        policy: None,
+    }];
+    let settings = FitSettings {
+        ly: 1,
+        lu: 1,
+        inducing: 10,
+        iterations: 40,
+        validation_fraction: 0.0,
+        mean: MeanFunction::Linear,
+        ..FitSettings::default()
+    };
+    let mut seen = Vec::new();
+    let err = fit_episodes_observed(&episodes, &settings, None, &mut |p| {
+        seen.push(p.iteration);
+        if p.iteration == 5 {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    })
+    .expect_err("stopped");
+    assert!(matches!(err, MsgpError::Stopped { iteration: 5 }), "{err}");
+    assert_eq!(seen, (0..=5).collect::<Vec<_>>());
+    let (observed, _) = fit_episodes_observed(&episodes, &settings, None, &mut |_| {
+        ControlFlow::Continue(())
+    })
+    .expect("fit");
+    let (plain, _) = fit_episodes(&episodes, &settings, &mut |_| {}).expect("fit");
+    assert_eq!(observed.params, plain.params);
+}
+
+#[test]
+fn a_numerically_failing_step_keeps_parameters_that_evaluate() {
+    // an absurd step size drives the rollout covariances to overflow within a few steps
+    let traj = first_order(0.0);
+    let settings = FitSettings {
+        ly: 1,
+        lu: 1,
+        inducing: 10,
+        iterations: 200,
+        learning_rate: 30.0,
+        validation_fraction: 0.0,
+        mean: MeanFunction::Linear,
+        ..FitSettings::default()
+    };
+    let (model, report) =
+        fit(std::slice::from_ref(&traj), &settings, &mut |_| {}).expect("fit survives");
+    let stop = report
+        .numerical_stop
+        .expect("the step size is absurd enough to fail");
+    assert!(stop.contains("kept iteration"), "{stop}");
+    assert!(report.iterations_run < 201);
+    // the kept parameters evaluate
+    let mut log = JitterLog::default();
+    let gp = PreparedGp::new(&model.params, &model.config, &mut log).expect("kept model");
+    let norm = model.normalizer.apply(&traj);
+    rollout(
+        &gp,
+        &model.spec,
+        &norm,
+        &Control::FeedForward,
+        norm.len(),
+        &mut log,
+        |_| Ok(()),
+    )
+    .expect("kept model rolls out");
+}
+
+/// `y₀` a first-order lag `a y₀ + b u`, `y₁` a double integrator of `d u`, from rest, and
+/// their measurements with a deterministic ripple of amplitude `ripple`; returns the clean
+/// outputs too. `y₁` declared a kinematic double integrator: [`KINEMATIC_Y1`].
+fn lag_and_double_integrator(
+    u: DMatrix<f64>,
+    (a, b, d): (f64, f64, f64),
+    ripple: f64,
+) -> (DMatrix<f64>, Trajectory) {
+    let n = u.nrows();
+    let mut y = DMatrix::<f64>::zeros(n, 2);
+    for t in 1..n - 1 {
+        y[(t + 1, 0)] = a * y[(t, 0)] + b * u[(t, 0)];
+        y[(t + 1, 1)] = 2.0 * y[(t, 1)] - y[(t - 1, 1)] + d * u[(t, 0)];
+    }
+    let measured = y.map(|v| v + ripple * (10.0 * v / ripple).sin());
+    (y, Trajectory::new(u, measured).expect("trajectory"))
+}
+
+const KINEMATIC_Y1: crate::gp::integrator::Integrator = crate::gp::integrator::Integrator {
+    output: 1,
+    order: 2,
+    linear: true,
+};
+
+/// A linear-kf fit of a double integrator driven by a command with a non-zero mean: the
+/// model is scaled, not centred (a centred linear model without intercept would lose the
+/// mean command's constant acceleration, and its free simulation would drift away
+/// quadratically), keeps the declared coefficients and has no GP.
+#[test]
+fn a_linear_kf_fit_simulates_an_integrator_under_a_mean_command() {
+    let n = 200;
+    let u = DMatrix::from_fn(n, 1, |t, _| 0.5 + 0.3 * (0.1 * t as f64).sin());
+    let (clean, traj) = lag_and_double_integrator(u, (0.9, 0.1, 1e-3), 1e-4);
+    let integrators = vec![KINEMATIC_Y1];
+    let settings = FitSettings {
+        method: Method::LinearKf,
+        ly: 2,
+        lu: 1,
+        iterations: 200,
+        integrators: integrators.clone(),
+        ..FitSettings::default()
+    };
+    let (model, report) = fit(std::slice::from_ref(&traj), &settings, &mut |_| {}).expect("fit");
+    assert_eq!(model.method, Method::LinearKf);
+    assert!(report.iterations_run > 0);
+    assert!(model.normalizer.u_mean.iter().all(|&m| m == 0.0));
+    assert!(model.normalizer.y_mean.iter().all(|&m| m == 0.0));
+    for c in &Structure::new(&integrators, &model.spec).fixed {
+        assert_eq!(model.params.linear_mean[(c.row, c.col)], c.value);
+    }
+    assert!(model.params.pseudo_targets.iter().all(|&v| v == 0.0));
+    // free simulation over 200 steps: the mean command alone moves y₁ by ≈ 10 units
+    let sim = model.simulate(&traj).expect("simulate");
+    let last = sim.mean.nrows() - 1;
+    let err = (sim.mean[(last, 1)] - clean[(n - 1, 1)]).abs();
+    assert!(
+        err < 0.05 * clean[(n - 1, 1)].abs(),
+        "end effector off by {err}"
+    );
+    let err0 = (sim.mean[(last, 0)] - clean[(n - 1, 0)]).abs();
+    assert!(err0 < 0.01, "first output off by {err0}");
+}
+
+/// A linear-kf warm start continues the previous model: zero iterations return its
+/// parameters and units exactly, more iterations do not make the filter's likelihood of the
+/// new data worse than there, and a model of another method is refused.
+#[test]
+fn a_linear_kf_fit_continues_the_previous_model() {
+    let n = 200;
+    let u = DMatrix::from_fn(n, 1, |t, _| 0.5 + 0.3 * (0.1 * t as f64).sin());
+    let (_, traj) = lag_and_double_integrator(u, (0.9, 0.1, 1e-3), 1e-4);
+    let episode = |t: Trajectory| TrainingEpisode {
+        traj: t,
+        policy: None,
+    };
+    let settings = FitSettings {
+        method: Method::LinearKf,
+        ly: 2,
+        lu: 1,
+        iterations: 100,
+        integrators: vec![KINEMATIC_Y1],
+        ..FitSettings::default()
+    };
+    let (first, _) =
+        fit_episodes(&[episode(traj.slice(0, 120))], &settings, &mut |_| {}).expect("fit");
+    let all = [episode(traj.clone())];
+    let again = |iterations| {
+        refit_episodes(
+            &all,
+            &FitSettings {
+                iterations,
+                ..settings.clone()
+            },
+            &first,
+            &mut |_| {},
+        )
+        .expect("warm start")
+        .0
+    };
+    let same = again(0);
+    assert_eq!(same.params, first.params);
+    assert_eq!(same.normalizer, first.normalizer);
+    let more = again(50);
+    let nll = |m: &Model| {
+        let t = m.normalizer.apply(&traj);
+        let p = crate::fit::linear_kf::KalmanParams {
+            a: m.params.linear_mean.clone(),
+            log_process_noise: m.params.log_process_noise.clone(),
+            log_obs_noise: m.params.log_obs_noise.clone(),
+        };
+        let mut log = JitterLog::default();
+        crate::fit::linear_kf::kalman_nll(&p, &m.spec, &[&t], &m.config.jitter, &mut log)
+            .expect("filter")
+            .0
+    };
+    assert!(
+        nll(&more) <= nll(&first),
+        "{} > {}",
+        nll(&more),
+        nll(&first)
+    );
+    let (gp, _) = fit_episodes(
+        &all,
+        &FitSettings {
+            method: Method::GpNarx,
+            inducing: 10,
+            one_step_iterations: 5,
+            mean: MeanFunction::Linear,
+            ..settings.clone()
+        },
+        &mut |_| {},
+    )
+    .expect("gp-narx fit");
+    assert!(refit_episodes(&all, &settings, &gp, &mut |_| {}).is_err());
+}
+
+/// A driven double integrator `y₁` next to a damped output `y₀`: declared a linear
+/// integrator, `y₁`'s coefficients, the GP's length-scales on its lags and `y₁`'s absent GP
+/// come out of an MSGP fit exactly as the declaration set them, while the rest of the model
+/// was trained.
+#[test]
+fn an_msgp_fit_keeps_what_an_integrating_output_fixes() {
+    use crate::gp::integrator::{IGNORED_LENGTHSCALE, NO_GP_SIGNAL_VAR, Structure};
+    let n = 120;
+    let u = DMatrix::from_fn(n, 1, |t, _| {
+        (0.3 * t as f64).sin() + (0.71 * t as f64).cos()
+    });
+    let (_, traj) = lag_and_double_integrator(u, (0.8, 0.3, 0.01), 1e-3);
+    let integrators = vec![KINEMATIC_Y1];
+    let settings = FitSettings {
+        ly: 2,
+        lu: 1,
+        inducing: 15,
+        iterations: 20,
+        learning_rate: 0.01,
+        validation_fraction: 0.0,
+        mean: MeanFunction::Linear,
+        integrators: integrators.clone(),
+        ..FitSettings::default()
+    };
+    let (model, _) = fit(std::slice::from_ref(&traj), &settings, &mut |_| {}).expect("fit");
+    let structure = Structure::new(&integrators, &model.spec);
+    let p = &model.params;
+    for c in &structure.fixed {
+        assert_eq!(p.linear_mean[(c.row, c.col)], c.value, "{}", p.linear_mean);
+    }
+    for &col in &structure.ignored {
+        assert_eq!(p.log_lengthscales[(0, col)], IGNORED_LENGTHSCALE.ln());
+        assert!(p.pseudo_inputs.column(col).iter().all(|&v| v == 0.0));
+    }
+    // `linear`: y₁ has no GP
+    assert_eq!(structure.without_gp, vec![1]);
+    assert!(p.pseudo_targets.column(1).iter().all(|&v| v == 0.0));
+    assert_eq!(p.log_signal_var[1], NO_GP_SIGNAL_VAR.ln());
+    // the free part was trained: the same fit without Adam steps differs
+    let (start, _) = fit(
+        std::slice::from_ref(&traj),
+        &FitSettings {
+            iterations: 0,
+            ..settings.clone()
+        },
+        &mut |_| {},
+    )
+    .expect("start");
+    let u0 = model.spec.u_index(0, 0);
+    assert_ne!(p.linear_mean[(1, u0)], start.params.linear_mean[(1, u0)]);
+    // an integrator without the linear mean is refused
+    let err = fit(
+        std::slice::from_ref(&traj),
+        &FitSettings {
+            mean: MeanFunction::Zero,
+            ..settings
+        },
+        &mut |_| {},
+    )
+    .expect_err("needs the linear mean");
+    assert!(err.to_string().contains("integrators"), "{err}");
+}
+
+#[test]
+fn options_default_inducing_and_iterations() {
+    // 2 × (50 − 3) = 94 windows → 47 pseudo-inputs; 1000 − 3 windows → capped at 100
+    let s = options(Method::Msgp, None, Some(30))
+        .settings(&[traj(50), traj(50)])
+        .expect("settings");
+    assert_eq!(
+        (s.inducing, s.iterations, s.one_step_iterations),
+        (47, 30, 300)
+    );
+    assert_eq!((s.ly, s.lu, s.seed), (2, 3, 7));
+    let s = options(Method::GpNarx, None, Some(30))
+        .settings(&[traj(1000)])
+        .expect("settings");
+    assert_eq!(
+        (s.inducing, s.iterations, s.one_step_iterations),
+        (100, 400, 30)
+    );
+    let s = options(Method::PilcoNarx, Some(5), None)
+        .settings(&[traj(4)])
+        .expect("settings");
+    assert_eq!((s.inducing, s.one_step_iterations), (5, 300));
+    let d = FitSettings::default();
+    assert_eq!(
+        (s.learning_rate, s.frozen.clone()),
+        (d.learning_rate, d.frozen)
+    );
+}
+
+#[test]
+fn options_refuse_bad_input_clearly() {
+    let e = options(Method::Msgp, None, None)
+        .settings(&[traj(10), traj(3)])
+        .expect_err("short");
+    assert!(
+        e.to_string()
+            .contains("training trajectory 1 has 3 samples"),
+        "{e}"
+    );
+    let e = options(Method::Msgp, None, None)
+        .settings(&[])
+        .expect_err("empty");
+    assert!(e.to_string().contains("no training trajectories"), "{e}");
+    let e = options(Method::Msgp, Some(0), None)
+        .settings(&[traj(10)])
+        .expect_err("m = 0");
+    assert!(e.to_string().contains("inducing"), "{e}");
+    let e = FitOptions {
+        ly: 0,
+        ..options(Method::Msgp, None, None)
+    }
+    .settings(&[traj(10)])
+    .expect_err("l_y = 0");
+    assert!(e.to_string().contains("l_y"), "{e}");
+}

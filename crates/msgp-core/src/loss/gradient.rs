@@ -1,0 +1,295 @@
+//! The gradient of the MSGP loss ([`super::msgp_loss`]) by the adjoint sweep
+//! (`crate::rollout::adjoint`): every episode's rollout scored by the likelihood of its
+//! measured outputs, then the pull-back through the GP's preparation (`β = K̃⁻¹ȳ`, `K̃⁻¹`,
+//! `log|K̃|`, `K̃ = K + σ_x² I`) to the parameters. Tested against forward-mode duals through
+//! [`super::msgp_loss`] (`tests/adjoint_vs_dual.rs`).
+
+use nalgebra::{DMatrix, DVector};
+
+use super::{Complexity, LossValue, complexity_term, gaussian_nll};
+use crate::data::Trajectory;
+use crate::error::{MsgpError, Result};
+use crate::gp::kernel::kernel_matrix;
+use crate::gp::{GpConfig, GpParams, GpShape, PreparedGp};
+use crate::moments::vjp::GpAdjoint;
+use crate::narx::NarxSpec;
+use crate::numeric::dual::Dual;
+use crate::numeric::linalg::{JitterLog, JitterPolicy, cholesky};
+use crate::numeric::parallel::{map_indexed, thread_count};
+use crate::policy::{FeedbackPolicy, PolicySpec};
+use crate::rollout::adjoint::{AdjointPolicy, PolicyVjp, StepScore, rollout_adjoint};
+use crate::rollout::window::{StartState, initial_window};
+use crate::rollout::{Episode, Excitation};
+
+/// The MSGP loss's step score: `−log N(y_t; mean, cov)` of the measured output.
+struct MeasuredNll<'a>(&'a Trajectory);
+
+impl StepScore for MeasuredNll<'_> {
+    fn value(
+        &self,
+        t: usize,
+        mean: &DVector<f64>,
+        cov: &DMatrix<f64>,
+        jitter: &JitterPolicy,
+        log: &mut JitterLog,
+    ) -> Result<f64> {
+        let yrow: Vec<f64> = (0..mean.len()).map(|j| self.0.y[(t, j)]).collect();
+        gaussian_nll(&yrow, mean, cov, jitter, log)
+    }
+
+    fn vjp(
+        &self,
+        t: usize,
+        mean: &DVector<f64>,
+        cov: &DMatrix<f64>,
+        jitter: &JitterPolicy,
+    ) -> Result<(DVector<f64>, DMatrix<f64>)> {
+        // NLL = ½[rᵀV⁻¹r + log|V|]
+        let resid = DVector::from_fn(mean.len(), |j, _| self.0.y[(t, j)] - mean[j]);
+        let vch = cholesky(cov, jitter, "predictive covariance")?;
+        let vinv = vch.inverse();
+        let alpha = &vinv * &resid;
+        let cov_bar = (&vinv - &alpha * alpha.transpose()) * 0.5;
+        Ok((-alpha, cov_bar))
+    }
+}
+
+/// The MSGP loss of one episode: its free-running prediction from the measured window (open
+/// loop on its inputs, or closed loop under its policy), scored by the likelihood of the
+/// measured outputs. Adds the GP adjoints to `adj`; returns the NLL and the number of steps.
+fn episode_adjoint(
+    gp: &PreparedGp<f64>,
+    spec: &NarxSpec,
+    traj: &Trajectory,
+    policy: Option<&PolicySpec>,
+    adj: &mut GpAdjoint,
+    log: &mut JitterLog,
+) -> Result<(f64, usize)> {
+    let d = spec.input_dim();
+    let pol: Option<Box<dyn FeedbackPolicy<f64>>> = policy.map(|p| p.lift::<f64>());
+    // the episode's policy is fixed (no parameters): lifted to duals once
+    let pol_dual: Option<Box<dyn FeedbackPolicy<Dual>>> = policy.map(|p| p.lift::<Dual>());
+    let moments;
+    // the policy's vector–Jacobian product in closed form where it has one (the duals through
+    // `moments` are its reference)
+    let vjp = policy.filter(|p| p.has_closed_form_vjp()).map(|p| {
+        move |qm: &DVector<f64>,
+              qc: &DMatrix<f64>,
+              mean_bar: &DVector<f64>,
+              cov_bar: &DMatrix<f64>,
+              c_bar: &DMatrix<f64>| {
+            let (qm_bar, qc_bar, _) = p.moments_vjp(qm, qc, mean_bar, cov_bar, c_bar)?;
+            Ok((qm_bar, qc_bar, Vec::new()))
+        }
+    });
+    let adjoint_policy = match (pol.as_deref(), pol_dual.as_deref()) {
+        (Some(p), Some(pd)) => {
+            moments = move |_: &[Dual], qm: &DVector<Dual>, qc: &DMatrix<Dual>| pd.moments(qm, qc);
+            Some(AdjointPolicy {
+                policy: p,
+                moments: &moments,
+                vjp: vjp.as_ref().map(|f| f as &PolicyVjp<'_>),
+                theta: &[],
+            })
+        }
+        _ => None,
+    };
+    let ds = pol.as_ref().map_or(0, |p| p.state_dim());
+    let first = initial_window(gp, spec, traj, gp.start)?;
+    let t0 = first.t0;
+    let (wmu, wsigma) = (&first.mean, &first.cov);
+    let mut mu = DVector::<f64>::zeros(d + ds);
+    let mut sigma = DMatrix::<f64>::zeros(d + ds, d + ds);
+    mu.rows_mut(0, d).copy_from(wmu);
+    sigma.view_mut((0, 0), (d, d)).copy_from(wsigma);
+    if let Some(p) = &pol {
+        let p0 = p.initial_state(&traj.y, &traj.u, t0);
+        mu.rows_mut(d, ds).copy_from(&p0);
+    }
+    let start = StartState {
+        mean: mu,
+        cov: sigma,
+    };
+    let out = rollout_adjoint(
+        gp,
+        spec,
+        &start,
+        &MeasuredNll(traj),
+        Some(&traj.u),
+        adjoint_policy.as_ref(),
+        t0,
+        traj.len(),
+        adj,
+        log,
+    )?;
+    // the start window's output covariance is the observation noise times its pattern
+    for j in 0..spec.dy {
+        for k in 0..spec.ly {
+            for k2 in 0..spec.ly {
+                adj.sy2[j] += first.pattern[(k, k2)]
+                    * out.start_cov[(spec.y_index(k, j), spec.y_index(k2, j))];
+            }
+        }
+    }
+    Ok((out.total, out.steps))
+}
+
+/// What one episode contributes to the loss and its adjoints.
+struct EpisodeOut {
+    adj: GpAdjoint,
+    nll: f64,
+    steps: usize,
+    log: JitterLog,
+}
+
+/// Value and gradient (in [`GpParams::to_flat`] layout) of the MSGP loss, by the adjoint sweep.
+/// Episodes run on [`thread_count`] threads; the result is bit-identical for any thread count.
+pub fn loss_and_gradient(
+    params: &GpParams<f64>,
+    config: &GpConfig,
+    spec: &NarxSpec,
+    episodes: &[Episode],
+    complexity: Complexity,
+    log: &mut JitterLog,
+) -> Result<(LossValue<f64>, Vec<f64>)> {
+    loss_and_gradient_with_threads(
+        params,
+        config,
+        spec,
+        episodes,
+        complexity,
+        thread_count(),
+        log,
+    )
+}
+
+/// [`loss_and_gradient`] with the episodes on up to `threads` threads (1: the calling thread
+/// only). Every episode accumulates its own adjoints and the episodes are summed in order, so
+/// the result does not depend on `threads`.
+pub fn loss_and_gradient_with_threads(
+    params: &GpParams<f64>,
+    config: &GpConfig,
+    spec: &NarxSpec,
+    episodes: &[Episode],
+    complexity: Complexity,
+    threads: usize,
+    log: &mut JitterLog,
+) -> Result<(LossValue<f64>, Vec<f64>)> {
+    let shape: GpShape = params.shape()?;
+    let GpShape { m, d, e } = shape;
+    let gp = PreparedGp::new(params, config, log)?;
+    // one adjoint accumulator per episode, summed in episode order: the result does not depend
+    // on how many threads ran the episodes
+    let run = |k: usize, ep: &Episode| -> Result<EpisodeOut> {
+        ep.traj
+            .check(spec)
+            .map_err(|err| MsgpError::Data(format!("episode {k}: {err}")))?;
+        let policy = match &ep.excitation {
+            Excitation::FeedForward => None,
+            Excitation::Feedback(p) => Some(p.as_ref()),
+        };
+        let mut adj = GpAdjoint::zeros(m, d, e);
+        let mut elog = JitterLog::default();
+        let (nll, steps) = episode_adjoint(&gp, spec, &ep.traj, policy, &mut adj, &mut elog)?;
+        Ok(EpisodeOut {
+            adj,
+            nll,
+            steps,
+            log: elog,
+        })
+    };
+    let outs = map_indexed(episodes, threads, run);
+    let mut adj = GpAdjoint::zeros(m, d, e);
+    let mut nll = 0.0;
+    let mut steps = 0;
+    for out in outs {
+        let out = out?;
+        adj.add(&out.adj);
+        log.merge(&out.log);
+        nll += out.nll;
+        steps += out.steps;
+    }
+    let comp = complexity_term(params, &gp, complexity);
+    let mut ybar = DMatrix::<f64>::zeros(m, e);
+    let mut logdet_bar = vec![0.0; e];
+    for a in 0..e {
+        match complexity {
+            Complexity::None => {}
+            Complexity::HalfLogDet => logdet_bar[a] = 0.5,
+            Complexity::NegHalfLogDet => logdet_bar[a] = -0.5,
+            Complexity::PseudoDataNll => {
+                logdet_bar[a] = 0.5;
+                // ½ ȳᵀβ with β = K̃⁻¹ȳ: d/dȳ = β (symmetric K̃), routed as ȳ̄ += ½β, β̄ += ½ȳ
+                for i in 0..m {
+                    ybar[(i, a)] += 0.5 * gp.outputs[a].beta[i];
+                }
+                let ycol = params.pseudo_targets.column(a).into_owned();
+                adj.beta[a] += ycol * 0.5;
+            }
+        }
+    }
+
+    // pull through the preparation: β = K̃⁻¹ȳ, K̃⁻¹, log|K̃|, K̃ = K + σx² I
+    let mut inv_l2_bar = adj.inv_l2.clone();
+    let mut sf2_bar = adj.sf2.clone();
+    let mut sx2_bar = adj.sx2.clone();
+    for (a, o) in gp.outputs.iter().enumerate() {
+        let w = &o.kinv * &adj.beta[a];
+        for i in 0..m {
+            ybar[(i, a)] += w[i];
+        }
+        let ktbar =
+            -(&o.kinv * &adj.kinv[a] * &o.kinv) - &w * o.beta.transpose() + &o.kinv * logdet_bar[a];
+        sx2_bar[a] += ktbar.trace();
+        let k = kernel_matrix(
+            &params.pseudo_inputs,
+            &params.pseudo_inputs,
+            &o.inv_l2,
+            o.sf2,
+        );
+        for i in 0..m {
+            for j in 0..m {
+                let g = ktbar[(i, j)] * k[(i, j)];
+                if g == 0.0 {
+                    continue;
+                }
+                sf2_bar[a] += g / o.sf2;
+                for dd in 0..d {
+                    let diff = params.pseudo_inputs[(i, dd)] - params.pseudo_inputs[(j, dd)];
+                    inv_l2_bar[(a, dd)] -= 0.5 * g * diff * diff;
+                    adj.xbar[(i, dd)] -= g * o.inv_l2[dd] * diff;
+                    adj.xbar[(j, dd)] += g * o.inv_l2[dd] * diff;
+                }
+            }
+        }
+    }
+    // the gradient in the parameters' own shape (log length-scales and log variances through
+    // their exponentials), flattened in the one layout of `GpParams::to_flat`
+    let gradient = GpParams {
+        pseudo_inputs: adj.xbar,
+        pseudo_targets: ybar,
+        log_lengthscales: DMatrix::from_fn(e, d, |a, dd| {
+            -2.0 * gp.outputs[a].inv_l2[dd] * inv_l2_bar[(a, dd)]
+        }),
+        log_signal_var: DVector::from_fn(e, |a, _| sf2_bar[a] * gp.outputs[a].sf2),
+        log_process_noise: DVector::from_fn(e, |a, _| {
+            sx2_bar[a] * (gp.outputs[a].sx2 - config.noise_floor)
+        }),
+        log_obs_noise: DVector::from_fn(e, |a, _| {
+            adj.sy2[a] * (gp.outputs[a].sy2 - config.noise_floor)
+        }),
+        linear_mean: if gp.linear_mean.is_some() {
+            adj.lin
+        } else {
+            DMatrix::zeros(e, d)
+        },
+    };
+    Ok((
+        LossValue {
+            nll,
+            complexity: comp,
+            steps,
+        },
+        gradient.to_flat(),
+    ))
+}

@@ -1,0 +1,180 @@
+//! A fitted model in context: NARX spec, GP parameters, normalisation; free simulation and
+//! evaluation in original units.
+
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+
+use crate::data::Normalizer;
+use crate::data::Trajectory;
+use crate::data::dataset::Part;
+use crate::error::{MsgpError, Result};
+use crate::gp::{GpConfig, GpParams, PreparedGp};
+use crate::narx::NarxSpec;
+use crate::numeric::linalg::JitterLog;
+use crate::rollout::{Control, simulate};
+
+mod metrics;
+
+pub use metrics::{Metrics, pool, score};
+
+/// How the model was trained.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Method {
+    /// One-step GP-NARX, marginal likelihood (eq. 5).
+    GpNarx,
+    /// One-step GP-NARX with PILCO's hyperparameter penalties.
+    PilcoNarx,
+    /// Multi-step GP: trajectory likelihood (eq. 7).
+    Msgp,
+    /// The linear-Gaussian window model (no GP) by the exact Kalman-filter likelihood
+    /// ([`crate::fit::linear_kf`]).
+    LinearKf,
+}
+
+impl Method {
+    /// Name used on the command line and in reports.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Method::GpNarx => "gp-narx",
+            Method::PilcoNarx => "pilco-narx",
+            Method::Msgp => "msgp",
+            Method::LinearKf => "linear-kf",
+        }
+    }
+
+    /// Every method, the paper's first.
+    pub const ALL: [Method; 4] = [
+        Method::Msgp,
+        Method::GpNarx,
+        Method::PilcoNarx,
+        Method::LinearKf,
+    ];
+
+    /// The method called `name` (see [`name`](Self::name)).
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == name)
+    }
+}
+
+/// A model ready to simulate.
+#[derive(Clone, Debug)]
+pub struct Model {
+    /// Training method.
+    pub method: Method,
+    /// NARX layout.
+    pub spec: NarxSpec,
+    /// GP parameters (normalised units).
+    pub params: GpParams<f64>,
+    /// Noise floor and jitter policy.
+    pub config: GpConfig,
+    /// Training statistics.
+    pub normalizer: Normalizer,
+}
+
+/// A free simulation in original units.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Simulation {
+    /// First simulated time index (`max(l_y, l_u)`).
+    pub start: usize,
+    /// Predicted output means (steps × d_y).
+    pub mean: DMatrix<f64>,
+    /// Predicted output variances, observation noise included (steps × d_y).
+    pub var: DMatrix<f64>,
+}
+
+impl Model {
+    /// Open-loop free simulation of `traj` (original units) from its first `max(l_y, l_u)`
+    /// samples, driven by its inputs.
+    pub fn simulate(&self, traj: &Trajectory) -> Result<Simulation> {
+        traj.check(&self.spec)?;
+        let norm = self.normalizer.apply(traj);
+        let mut log = JitterLog::default();
+        let gp = PreparedGp::new(&self.params, &self.config, &mut log)?;
+        let steps = simulate(
+            &gp,
+            &self.spec,
+            &norm,
+            &Control::FeedForward,
+            traj.len(),
+            &mut log,
+        )?;
+        let dy = self.spec.dy;
+        let n = steps.len();
+        let mut mean = DMatrix::zeros(n, dy);
+        let mut var = DMatrix::zeros(n, dy);
+        for (i, s) in steps.iter().enumerate() {
+            for j in 0..dy {
+                mean[(i, j)] = self.normalizer.y_to_original(j, s.mean[j]);
+                var[(i, j)] = self.normalizer.y_var_to_original(j, s.cov[(j, j)]);
+            }
+        }
+        Ok(Simulation {
+            start: self.spec.warmup(),
+            mean,
+            var,
+        })
+    }
+
+    /// Free simulation of `traj` scored against its measured outputs.
+    pub fn evaluate(&self, traj: &Trajectory) -> Result<Metrics> {
+        let sim = self.simulate(traj)?;
+        score(&sim, traj)
+    }
+
+    /// Free simulation and scores of every part of a dataset; an error names the part.
+    pub fn simulate_parts(&self, parts: &[Part]) -> Result<Vec<Simulated>> {
+        parts
+            .iter()
+            .map(|p| {
+                let named = |what: &str, e: MsgpError| {
+                    MsgpError::Data(format!("{what} {}: {e}", p.label()))
+                };
+                let sim = self.simulate(&p.traj).map_err(|e| named("simulating", e))?;
+                let metrics = score(&sim, &p.traj).map_err(|e| named("scoring", e))?;
+                Ok(Simulated {
+                    part: p.clone(),
+                    sim,
+                    metrics,
+                })
+            })
+            .collect()
+    }
+}
+
+/// A simulated part of a dataset, ready for metrics, plots and CSV.
+#[derive(Clone, Debug)]
+pub struct Simulated {
+    /// The measured data.
+    pub part: Part,
+    /// The free simulation.
+    pub sim: Simulation,
+    /// Its metrics.
+    pub metrics: Metrics,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pooled_metrics_weight_by_steps() {
+        let a = Metrics {
+            rmse: 1.0,
+            nll: 1.0,
+            coverage_2sigma: 1.0,
+            steps: 1,
+        };
+        let b = Metrics {
+            rmse: 2.0,
+            nll: 4.0,
+            coverage_2sigma: 0.0,
+            steps: 3,
+        };
+        let p = pool(&[a, b], 1).expect("steps");
+        assert!((p.rmse - (13.0f64 / 4.0).sqrt()).abs() < 1e-15);
+        assert!((p.nll - 13.0 / 4.0).abs() < 1e-15);
+        assert!((p.coverage_2sigma - 0.25).abs() < 1e-15);
+        assert_eq!(pool(&[a], 1), Some(a));
+        assert_eq!(pool(&[], 1), None);
+    }
+}

@@ -1,0 +1,16 @@
+//! The numerical floor every model layer stands on: the [`Scalar`](scalar::Scalar) the generic
+//! code runs on (f64 or forward-mode duals), robust Cholesky factorisations with a recorded
+//! jitter policy ([`linalg`], and [`dense`] for the large one-step matrices), the dual-number
+//! gradient machinery ([`dual`]), the f64 SIMD building blocks of the fast kernels (`simd`,
+//! crate-private) and deterministic fan-out over threads ([`parallel`]).
+//!
+//! Nothing here knows about GPs, windows or trajectories.
+
+pub mod dense;
+pub mod dual;
+pub mod linalg;
+pub mod parallel;
+pub mod scalar;
+pub(crate) mod simd;
+
+pub use scalar::{Scalar, c};

@@ -1,0 +1,27 @@
+//! Policy search on a learned model (PILCO's inner loop): minimise the expected saturating cost
+//! of a closed-loop moment-matching rollout over the gains of a saturated PID policy, with exact
+//! gradients and Adam with seeded restarts around the current gains. The gradients come from
+//! the rollout's adjoint sweep ([`PolicyProblem::gradient`]; ≈ 3× faster than forward-mode
+//! duals over the five gains, BENCHMARKS.md); the duals ([`policy_gradient_duals`]) stay the
+//! reference it is tested against.
+//!
+//! Everything the user specifies (gains, cost target and widths, start state) is in original
+//! units; the model's normalisation is applied exactly inside.
+
+//!
+//! Modules: [`cost`] (the saturating cost and its Gaussian moments), [`objective`] (the
+//! closed-loop expected cost, the problem, the gain mask), [`gradient`] (adjoint and dual
+//! gradients over the gains), [`search`] (the optimiser).
+
+pub mod cost;
+pub mod gradient;
+pub mod objective;
+pub mod search;
+
+pub use cost::SaturatingCost;
+pub use gradient::{DualPolicyMap, PolicyVjp, closed_loop_cost_gradient, policy_gradient_duals};
+pub use objective::{PidMask, PolicyProblem, RolloutCost, closed_loop_cost};
+pub use search::{
+    PolicySearchResult, PolicySearchSettings, optimise_pid, optimise_pid_scaled,
+    optimise_pid_scaled_with_threads,
+};

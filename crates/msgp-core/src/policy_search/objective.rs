@@ -1,0 +1,284 @@
+//! The policy-search objective: the expected saturating cost of a closed-loop moment-matching
+//! rollout, summed over the horizon (closed form per step), with per-step variances for
+//! reporting ([`closed_loop_cost`]); the problem a learned model, a start and a cost pose
+//! ([`PolicyProblem`], original units, normalised exactly inside), and which PID gains move
+//! ([`PidMask`]). Generic over [`Scalar`], so forward-mode duals over the handful of gains are
+//! the reference of the adjoint gradient ([`super::gradient`]).
+
+use nalgebra::{DMatrix, DVector};
+
+use super::cost::{CostMoments, SaturatingCost};
+use super::gradient::closed_loop_cost_gradient;
+use crate::error::{MsgpError, Result};
+use crate::gp::PreparedGp;
+use crate::model::Model;
+use crate::moments::MomentMatch;
+use crate::narx::NarxSpec;
+use crate::numeric::dual::Dual;
+use crate::numeric::linalg::JitterLog;
+use crate::numeric::scalar::{Scalar, c};
+use crate::policy::{FeedbackPolicy, Normalized, PidPolicy};
+use crate::rollout::{Control, StartState, rollout_from};
+
+/// Expected cost of a closed-loop rollout.
+#[derive(Clone, Debug)]
+pub struct RolloutCost<T: Scalar> {
+    /// `Σ_t E[c(y_t)]`.
+    pub total: T,
+    /// Per-step mean and variance of the cost.
+    pub steps: Vec<CostMoments<T>>,
+}
+
+/// Runs `policy` in closed loop on the model from `start` over `t0..horizon` and accumulates the
+/// expected cost of the predicted observations.
+pub fn closed_loop_cost<T: MomentMatch>(
+    gp: &PreparedGp<T>,
+    spec: &NarxSpec,
+    start: &StartState<T>,
+    policy: &dyn FeedbackPolicy<T>,
+    t0: usize,
+    horizon: usize,
+    cost: &SaturatingCost,
+    log: &mut JitterLog,
+) -> Result<RolloutCost<T>> {
+    let mut steps = Vec::with_capacity(horizon.saturating_sub(t0));
+    let mut total = T::zero();
+    let mut cost_log = JitterLog::default();
+    rollout_from(
+        gp,
+        spec,
+        start,
+        &Control::Feedback(policy),
+        None,
+        t0,
+        horizon,
+        log,
+        |p| {
+            let m = cost.moments(&p.mean, &p.cov, &gp.jitter, &mut cost_log)?;
+            total += m.mean;
+            steps.push(m);
+            Ok(())
+        },
+    )?;
+    log.merge(&cost_log);
+    Ok(RolloutCost { total, steps })
+}
+
+/// Which PID gains are optimised: `true` entries of the three d_u × d_y masks are free.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PidMask {
+    /// Free entries of `K_p`.
+    pub kp: DMatrix<bool>,
+    /// Free entries of `K_i`.
+    pub ki: DMatrix<bool>,
+    /// Free entries of `K_d`.
+    pub kd: DMatrix<bool>,
+}
+
+impl PidMask {
+    /// Number of free gains.
+    pub fn len(&self) -> usize {
+        [&self.kp, &self.ki, &self.kd]
+            .iter()
+            .map(|m| m.iter().filter(|b| **b).count())
+            .sum()
+    }
+
+    /// True when nothing is free.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The free gains of `p` as a vector (K_p, then K_i, then K_d; column-major).
+    pub fn pack(&self, p: &PidPolicy<f64>) -> Vec<f64> {
+        self.pack_matrices(&p.kp, &p.ki, &p.kd)
+    }
+
+    /// The free entries of three d_u × d_y matrices (gains or their adjoints), in
+    /// [`PidMask::pack`]'s order.
+    fn pack_matrices(&self, kp: &DMatrix<f64>, ki: &DMatrix<f64>, kd: &DMatrix<f64>) -> Vec<f64> {
+        let mut v = Vec::new();
+        for (m, g) in [(&self.kp, kp), (&self.ki, ki), (&self.kd, kd)] {
+            v.extend(m.iter().zip(g.iter()).filter(|(b, _)| **b).map(|(_, x)| *x));
+        }
+        v
+    }
+
+    /// `base` with its free gains replaced by `x`.
+    pub fn unpack<T: Scalar>(&self, base: &PidPolicy<f64>, x: &[T]) -> PidPolicy<T> {
+        let mut k = 0;
+        let mut fill = |m: &DMatrix<bool>, g: &DMatrix<f64>| {
+            DMatrix::from_fn(g.nrows(), g.ncols(), |i, j| {
+                if m[(i, j)] {
+                    k += 1;
+                    x[k - 1]
+                } else {
+                    c::<T>(g[(i, j)])
+                }
+            })
+        };
+        let kp = fill(&self.kp, &base.kp);
+        let ki = fill(&self.ki, &base.ki);
+        let kd = fill(&self.kd, &base.kd);
+        PidPolicy {
+            kp,
+            ki,
+            kd,
+            period: base.period,
+            u_max: base.u_max.clone(),
+        }
+    }
+}
+
+/// The problem: model, start, cost and horizon, all in original units.
+#[derive(Debug)]
+pub struct PolicyProblem<'a> {
+    /// The learned dynamics model.
+    pub model: &'a Model,
+    /// Mean of the latent outputs at rest before the rollout (original units, d_y).
+    pub y0_mean: Vec<f64>,
+    /// Variance of the latent outputs at rest (original units, d_y).
+    pub y0_var: Vec<f64>,
+    /// Inputs before the rollout (original units, d_u).
+    pub u0: Vec<f64>,
+    /// Cost on the predicted observations (original units).
+    pub cost: SaturatingCost,
+    /// Number of predicted steps.
+    pub horizon: usize,
+}
+
+impl PolicyProblem<'_> {
+    /// Start state in normalised units: every output lag at `y0` (latent, variance `y0_var`,
+    /// fully correlated across lags: the system is at rest), inputs at `u0`, and the policy
+    /// state `[y_{−1}; I = 0]` with `y_{−1}` the observation of the latent start (original
+    /// units, observation noise included, correlated with the window).
+    pub(crate) fn start<T: Scalar>(&self, policy_state: usize) -> StartState<T> {
+        let spec = self.model.spec;
+        let n = &self.model.normalizer;
+        let d = spec.input_dim();
+        let mut mean = DVector::<T>::zeros(d + policy_state);
+        let mut cov = DMatrix::<T>::zeros(d + policy_state, d + policy_state);
+        for k in 0..spec.ly {
+            for j in 0..spec.dy {
+                mean[spec.y_index(k, j)] = c((self.y0_mean[j] - n.y_mean[j]) / n.y_std[j]);
+                for k2 in 0..spec.ly {
+                    cov[(spec.y_index(k, j), spec.y_index(k2, j))] =
+                        c(self.y0_var[j] / (n.y_std[j] * n.y_std[j]));
+                }
+            }
+        }
+        for k in 0..spec.lu {
+            for j in 0..spec.du {
+                mean[spec.u_index(k, j)] = c((self.u0[j] - n.u_mean[j]) / n.u_std[j]);
+            }
+        }
+        // the policy's previous observation: the latent start plus observation noise, correlated
+        // with every output lag of the window (a derivative term then sees measurement noise,
+        // not the whole spread of the start state)
+        for j in 0..spec.dy.min(policy_state) {
+            let std = n.y_std[j];
+            let sy2 = self.model.params.log_obs_noise[j].exp() + self.model.config.noise_floor;
+            mean[d + j] = c(self.y0_mean[j]);
+            cov[(d + j, d + j)] = c(self.y0_var[j] + sy2 * std * std);
+            for k in 0..spec.ly {
+                let i = spec.y_index(k, j);
+                cov[(d + j, i)] = c(self.y0_var[j] / std);
+                cov[(i, d + j)] = c(self.y0_var[j] / std);
+            }
+        }
+        StartState { mean, cov }
+    }
+
+    /// Normalised cost.
+    fn normalised_cost(&self) -> SaturatingCost {
+        let n = &self.model.normalizer;
+        let dy = self.cost.target.len();
+        SaturatingCost {
+            target: DVector::from_fn(dy, |j, _| (self.cost.target[j] - n.y_mean[j]) / n.y_std[j]),
+            a: DMatrix::from_fn(self.cost.a.nrows(), dy, |i, j| {
+                self.cost.a[(i, j)] * n.y_std[j]
+            }),
+        }
+    }
+
+    /// Expected total cost of `mask.unpack(initial, g)` and its gradient with respect to the
+    /// packed free gains `g`, by the adjoint sweep of the closed-loop rollout (a few rollouts'
+    /// work whatever the number of gains; [`policy_gradient_duals`] is the reference).
+    pub fn gradient(
+        &self,
+        mask: &PidMask,
+        initial: &PidPolicy<f64>,
+        g: &[f64],
+    ) -> Result<(f64, Vec<f64>)> {
+        if g.len() != mask.len() {
+            return Err(MsgpError::Shape(format!(
+                "{} gains given, the mask frees {}",
+                g.len(),
+                mask.len()
+            )));
+        }
+        let mut log = JitterLog::default();
+        let gp = PreparedGp::new(&self.model.params, &self.model.config, &mut log)?;
+        let normalizer = &self.model.normalizer;
+        let policy = Normalized {
+            inner: mask.unpack::<f64>(initial, g),
+            normalizer: normalizer.clone(),
+        };
+        let moments = |th: &[Dual], qm: &DVector<Dual>, qc: &DMatrix<Dual>| {
+            Normalized {
+                inner: mask.unpack::<Dual>(initial, th),
+                normalizer: normalizer.clone(),
+            }
+            .moments(qm, qc)
+        };
+        // the policy map's VJP in closed form (the duals through `moments` are its reference)
+        let vjp = |qm: &DVector<f64>,
+                   qc: &DMatrix<f64>,
+                   mean_bar: &DVector<f64>,
+                   cov_bar: &DMatrix<f64>,
+                   c_bar: &DMatrix<f64>| {
+            let (qm_bar, qc_bar, gains) = policy.moments_vjp(qm, qc, mean_bar, cov_bar, c_bar)?;
+            let theta_bar = mask.pack_matrices(&gains.kp, &gains.ki, &gains.kd);
+            Ok((qm_bar, qc_bar, theta_bar))
+        };
+        let start = self.start::<f64>(policy.state_dim());
+        let t0 = self.model.spec.warmup();
+        closed_loop_cost_gradient(
+            &gp,
+            &self.model.spec,
+            &start,
+            &policy,
+            &moments,
+            Some(&vjp),
+            g,
+            t0,
+            t0 + self.horizon,
+            &self.normalised_cost(),
+            &mut log,
+        )
+    }
+
+    /// Expected total cost of `policy` and the per-step (mean, variance) of the cost.
+    pub fn evaluate<T: MomentMatch>(&self, policy: &PidPolicy<T>) -> Result<(T, Vec<(T, T)>)> {
+        let params = self.model.params.map(c::<T>);
+        let mut log = JitterLog::default();
+        let gp = PreparedGp::new(&params, &self.model.config, &mut log)?;
+        let wrapped = Normalized {
+            inner: policy.clone(),
+            normalizer: self.model.normalizer.clone(),
+        };
+        let start = self.start::<T>(wrapped.state_dim());
+        let t0 = self.model.spec.warmup();
+        let rc = closed_loop_cost(
+            &gp,
+            &self.model.spec,
+            &start,
+            &wrapped,
+            t0,
+            t0 + self.horizon,
+            &self.normalised_cost(),
+            &mut log,
+        )?;
+        Ok((rc.total, rc.steps.iter().map(|s| (s.mean, s.var)).collect()))
+    }
+}

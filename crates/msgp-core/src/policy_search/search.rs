@@ -1,0 +1,438 @@
+//! The search: Adam with seeded restarts around the current gains, each gain on its own scale,
+//! minimising [`PolicyProblem`]'s expected cost by its adjoint gradient.
+
+use rand::{SeedableRng, rngs::StdRng};
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+
+use super::gradient::policy_gradient;
+use super::objective::{PidMask, PolicyProblem};
+use crate::error::{MsgpError, Result};
+use crate::numeric::parallel::{map_indexed, thread_count};
+use crate::optim::{Adam, AdamState};
+use crate::policy::PidPolicy;
+
+/// Settings of the policy optimisation.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PolicySearchSettings {
+    /// Adam steps per start.
+    pub iterations: usize,
+    /// Adam step size, relative to each gain's scale (`max(|g₀|, typical)`, see
+    /// [`optimise_pid_scaled`]).
+    pub learning_rate: f64,
+    /// Extra starts: the current gains perturbed by `restart_spread` (relative), seeded.
+    pub restarts: usize,
+    /// Relative size of the restart perturbations.
+    pub restart_spread: f64,
+    /// Seed of the restarts and candidates.
+    pub seed: u64,
+    /// Random candidates screened on the model before the gradient starts: each free gain is
+    /// drawn from `N(0, (candidate_spread · scale)²)` around zero (signs included, so
+    /// no sign of the gains is assumed), evaluated in f64, and the `candidate_starts` cheapest
+    /// become extra Adam starts. 0 switches the screening off.
+    pub candidates: usize,
+    /// Relative width of the candidate distribution.
+    pub candidate_spread: f64,
+    /// How many of the best candidates are refined by Adam.
+    pub candidate_starts: usize,
+    /// Trust region of one search, in units of each gain's scale: every start, candidate and
+    /// Adam iterate keeps `|g − g₀| ≤ trust_region · scale` gain by gain, and the candidates
+    /// are drawn around `g₀` instead of zero. Keeps the new gains where the model has seen data
+    /// (a model fitted to a few episodes is least reliable for gains far from them). 0 (the
+    /// default) switches it off.
+    #[serde(default)]
+    pub trust_region: f64,
+}
+
+impl Default for PolicySearchSettings {
+    fn default() -> Self {
+        Self {
+            iterations: 60,
+            learning_rate: 0.05,
+            restarts: 2,
+            restart_spread: 0.3,
+            seed: 0,
+            candidates: 0,
+            candidate_spread: 2.0,
+            candidate_starts: 2,
+            trust_region: 0.0,
+        }
+    }
+}
+
+/// Result of a policy optimisation.
+#[derive(Clone, Debug)]
+pub struct PolicySearchResult {
+    /// The best gains found.
+    pub policy: PidPolicy<f64>,
+    /// Their expected total cost.
+    pub expected_cost: f64,
+    /// Per-step (mean, variance) of the cost under the best gains.
+    pub steps: Vec<(f64, f64)>,
+}
+
+/// Minimises the expected cost over the free gains, starting from `initial` and from
+/// `settings.restarts` seeded perturbations of it; returns the best. Each gain's scale (of the
+/// Adam steps, restarts and candidates) is `max(|g₀|, 1)`.
+pub fn optimise_pid(
+    problem: &PolicyProblem<'_>,
+    initial: &PidPolicy<f64>,
+    mask: &PidMask,
+    settings: &PolicySearchSettings,
+) -> Result<PolicySearchResult> {
+    let typical = vec![1.0; mask.len()];
+    optimise_pid_scaled(problem, initial, mask, &typical, settings)
+}
+
+/// [`optimise_pid`] with each free gain's scale `max(|g₀|, typical)`, `typical` packed like
+/// [`PidMask::pack`]: a gain that has come near zero keeps the scale of its kind, so the
+/// candidates and the Adam steps can still reach typical magnitudes again.
+pub fn optimise_pid_scaled(
+    problem: &PolicyProblem<'_>,
+    initial: &PidPolicy<f64>,
+    mask: &PidMask,
+    typical: &[f64],
+    settings: &PolicySearchSettings,
+) -> Result<PolicySearchResult> {
+    optimise_pid_scaled_with_threads(problem, initial, mask, typical, settings, thread_count())
+}
+
+/// [`optimise_pid_scaled`] on up to `threads` threads (the screened candidates and the Adam
+/// starts are independent; 1: the calling thread only). The result does not depend on
+/// `threads`.
+pub fn optimise_pid_scaled_with_threads(
+    problem: &PolicyProblem<'_>,
+    initial: &PidPolicy<f64>,
+    mask: &PidMask,
+    typical: &[f64],
+    settings: &PolicySearchSettings,
+    threads: usize,
+) -> Result<PolicySearchResult> {
+    if mask.is_empty() {
+        return Err(MsgpError::InvalidSetting {
+            name: "policy search",
+            reason: "no free gains".into(),
+        });
+    }
+    if typical.len() != mask.len() || typical.iter().any(|t| !(t.is_finite() && *t > 0.0)) {
+        return Err(MsgpError::InvalidSetting {
+            name: "policy search scales",
+            reason: format!(
+                "need {} positive finite typical gain magnitudes, got {typical:?}",
+                mask.len()
+            ),
+        });
+    }
+    if !(settings.trust_region.is_finite() && settings.trust_region >= 0.0) {
+        return Err(MsgpError::InvalidSetting {
+            name: "trust_region",
+            reason: format!("must be finite and ≥ 0, got {}", settings.trust_region),
+        });
+    }
+    let x0 = mask.pack(initial);
+    let scale: Vec<f64> = x0
+        .iter()
+        .zip(typical)
+        .map(|(g, t)| g.abs().max(*t))
+        .collect();
+    // the trust region as a projection of gains (identity when it is off)
+    let tr = settings.trust_region;
+    let project = |x: &mut [f64]| {
+        if tr > 0.0 {
+            for ((g, g0), s) in x.iter_mut().zip(&x0).zip(&scale) {
+                *g = g.clamp(g0 - tr * s, g0 + tr * s);
+            }
+        }
+    };
+    // `centre + spread · scale · z`, z ~ N(0, I), kept in the trust region
+    let draw = |rng: &mut StdRng, centre: &[f64], spread: f64| {
+        let mut x: Vec<f64> = centre
+            .iter()
+            .zip(&scale)
+            .map(|(c, s)| {
+                let z: f64 = StandardNormal.sample(rng);
+                c + spread * s * z
+            })
+            .collect();
+        project(&mut x);
+        x
+    };
+    let mut rng = StdRng::seed_from_u64(settings.seed);
+    let mut starts = vec![x0.clone()];
+    for _ in 0..settings.restarts {
+        starts.push(draw(&mut rng, &x0, settings.restart_spread));
+    }
+    if settings.candidates > 0 {
+        let centre: Vec<f64> = if tr > 0.0 {
+            x0.clone()
+        } else {
+            vec![0.0; x0.len()]
+        };
+        // drawn in sequence (one stream), evaluated in parallel
+        let drawn: Vec<Vec<f64>> = (0..settings.candidates)
+            .map(|_| draw(&mut rng, &centre, settings.candidate_spread))
+            .collect();
+        let values = map_indexed(&drawn, threads, |_, x| {
+            Ok(problem.evaluate(&mask.unpack::<f64>(initial, x))?.0)
+        });
+        // a candidate whose rollout fails numerically is simply not a start
+        let mut screened: Vec<(f64, Vec<f64>)> = values
+            .into_iter()
+            .zip(drawn)
+            .filter_map(|(v, x)| v.ok().filter(|v| v.is_finite()).map(|v| (v, x)))
+            .collect();
+        screened.sort_by(|a, b| a.0.total_cmp(&b.0));
+        starts.extend(
+            screened
+                .into_iter()
+                .take(settings.candidate_starts)
+                .map(|(_, x)| x),
+        );
+    }
+    let active: Vec<usize> = (0..x0.len()).collect();
+    // each start's Adam run is independent; its best (value, gains), earliest first on ties
+    let run_start = |_: usize, start: &Vec<f64>| -> Result<Option<(f64, Vec<f64>)>> {
+        let mut best: Option<(f64, Vec<f64>)> = None;
+        // optimise in scaled coordinates z = g / scale so one step size fits every gain
+        let mut z: Vec<f64> = start.iter().zip(&scale).map(|(g, s)| g / s).collect();
+        let adam = Adam {
+            learning_rate: settings.learning_rate,
+            ..Adam::default()
+        };
+        let mut state = AdamState::new(z.len());
+        let on = vec![true; z.len()];
+        for _ in 0..settings.iterations {
+            let g: Vec<f64> = z.iter().zip(&scale).map(|(z, s)| z * s).collect();
+            let evaluated = policy_gradient(problem, mask, initial, &g, &active);
+            let (value, grad) = match evaluated {
+                // gains whose rollout fails numerically end this start; the best so far stays
+                Err(MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_)) => break,
+                other => other?,
+            };
+            if value.is_finite() && best.as_ref().is_none_or(|b| value < b.0) {
+                best = Some((value, g.clone()));
+            }
+            let gz: Vec<f64> = grad.iter().zip(&scale).map(|(d, s)| d * s).collect();
+            adam.step(&mut state, &mut z, &gz, &on);
+            if tr > 0.0 {
+                for ((z, g0), s) in z.iter_mut().zip(&x0).zip(&scale) {
+                    *z = z.clamp(g0 / s - tr, g0 / s + tr);
+                }
+            }
+        }
+        let g: Vec<f64> = z.iter().zip(&scale).map(|(z, s)| z * s).collect();
+        if let Ok((value, _)) = problem.evaluate(&mask.unpack::<f64>(initial, &g))
+            && value.is_finite()
+            && best.as_ref().is_none_or(|b| value < b.0)
+        {
+            best = Some((value, g));
+        }
+        Ok(best)
+    };
+    let mut best: Option<(f64, Vec<f64>)> = None;
+    // reduced in start order with a strict `<`: the same answer for any thread count
+    for found in map_indexed(&starts, threads, run_start) {
+        if let Some((value, g)) = found?
+            && best.as_ref().is_none_or(|b| value < b.0)
+        {
+            best = Some((value, g));
+        }
+    }
+    let (value, g) =
+        best.ok_or_else(|| MsgpError::NonFinite("every policy-search start diverged".into()))?;
+    let policy = mask.unpack::<f64>(initial, &g);
+    let (_, steps) = problem.evaluate(&policy)?;
+    Ok(PolicySearchResult {
+        policy,
+        expected_cost: value,
+        steps,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::Trajectory;
+    use crate::fit::{FitSettings, fit};
+    use crate::gp::MeanFunction;
+    use crate::model::Method;
+    use crate::model::Model;
+    use crate::policy_search::{SaturatingCost, policy_gradient_duals};
+    use nalgebra::{DMatrix, DVector};
+
+    /// A one-step GP-NARX model (l_y = 2, l_u = 1, m = 20) of two outputs
+    /// `cos(0.1t + j) + extra(t, j)` driven by `u = sin(0.31t)`.
+    fn two_output_model(extra: impl Fn(usize, usize) -> f64) -> Model {
+        two_output_model_with(extra, MeanFunction::Zero)
+    }
+
+    fn two_output_model_with(extra: impl Fn(usize, usize) -> f64, mean: MeanFunction) -> Model {
+        let n = 120;
+        let u = DMatrix::from_fn(n, 1, |t, _| (t as f64 * 0.31).sin());
+        let y = DMatrix::from_fn(n, 2, |t, j| (t as f64 * 0.1 + j as f64).cos() + extra(t, j));
+        let traj = Trajectory::new(u, y).expect("traj");
+        let settings = FitSettings {
+            method: Method::GpNarx,
+            ly: 2,
+            lu: 1,
+            inducing: 20,
+            one_step_iterations: 30,
+            mean,
+            ..FitSettings::default()
+        };
+        fit(&[traj], &settings, &mut |_| {}).expect("fit").0
+    }
+
+    /// The search's gradient (one dual lane per free gain) equals the generic 8-lane dual
+    /// gradient to rounding and central finite differences to their truncation error.
+    #[test]
+    fn the_adjoint_search_gradient_matches_duals_and_finite_differences() {
+        for mean in [MeanFunction::Zero, MeanFunction::Linear] {
+            search_gradient_matches_duals_and_finite_differences(mean);
+        }
+    }
+
+    #[test]
+    fn the_gradient_refuses_gains_that_do_not_fit_the_mask() {
+        let model = two_output_model(|_, _| 0.0);
+        let problem = PolicyProblem {
+            model: &model,
+            y0_mean: vec![0.0, 0.0],
+            y0_var: vec![0.01, 0.01],
+            u0: vec![0.0],
+            cost: SaturatingCost::with_widths(DVector::zeros(2), &[0.5, 0.5]).expect("cost"),
+            horizon: 5,
+        };
+        let initial = PidPolicy::new(
+            DMatrix::zeros(1, 2),
+            DMatrix::zeros(1, 2),
+            DMatrix::zeros(1, 2),
+            0.1,
+            vec![2.0],
+        )
+        .expect("policy");
+        let mask = PidMask {
+            kp: DMatrix::from_element(1, 2, true),
+            ki: DMatrix::from_element(1, 2, false),
+            kd: DMatrix::from_element(1, 2, true),
+        };
+        let err = problem
+            .gradient(&mask, &initial, &[0.1, 0.2, 0.3])
+            .expect_err("three gains for a mask that frees four");
+        assert!(
+            err.to_string().contains("3 gains given, the mask frees 4"),
+            "{err}"
+        );
+        assert!(problem.gradient(&mask, &initial, &[0.1; 4]).is_ok());
+    }
+
+    fn search_gradient_matches_duals_and_finite_differences(mean: MeanFunction) {
+        // outputs that follow the input, so the gains matter
+        let model = two_output_model_with(|t, _| 0.3 * (t as f64 * 0.31 - 0.4).sin(), mean);
+        let problem = PolicyProblem {
+            model: &model,
+            y0_mean: vec![0.2, -0.1],
+            y0_var: vec![0.01, 0.02],
+            u0: vec![0.0],
+            cost: SaturatingCost::with_widths(DVector::zeros(2), &[0.5, 0.5]).expect("cost"),
+            horizon: 30,
+        };
+        let initial = PidPolicy::new(
+            DMatrix::from_row_slice(1, 2, &[-0.3, 0.2]),
+            DMatrix::from_row_slice(1, 2, &[0.05, -0.02]),
+            DMatrix::from_row_slice(1, 2, &[0.1, 0.04]),
+            0.1,
+            vec![2.0],
+        )
+        .expect("policy");
+        let mask = PidMask {
+            kp: DMatrix::from_element(1, 2, true),
+            ki: DMatrix::from_element(1, 2, true),
+            kd: DMatrix::from_element(1, 2, true),
+        };
+        let g = mask.pack(&initial);
+        let active: Vec<usize> = (0..g.len()).collect();
+        // the search's gradient: the adjoint sweep
+        let (value, grad) = policy_gradient(&problem, &mask, &initial, &g, &active).expect("grad");
+        // the references: duals with one lane per gain, and with eight
+        let (value6, grad6) =
+            policy_gradient_duals(&problem, &mask, &initial, &g, &active).expect("grad6");
+        let (value8, grad8) = crate::numeric::dual::gradient(&g, &active, 1, |gd| {
+            Ok(problem.evaluate(&mask.unpack(&initial, gd))?.0)
+        })
+        .expect("grad8");
+        assert_eq!(value6.to_bits(), value8.to_bits());
+        assert_eq!(grad6, grad8);
+        let f = |x: &[f64]| {
+            problem
+                .evaluate(&mask.unpack::<f64>(&initial, x))
+                .expect("f")
+                .0
+        };
+        // the f64 run takes the vectorised moment-matching path: equal up to rounding
+        let v64 = f(&g);
+        assert!((value - v64).abs() <= 1e-12 * v64.abs(), "{value} vs {v64}");
+        let scale = grad.iter().fold(0.0f64, |m, d| m.max(d.abs()));
+        assert!(scale > 1e-3, "a gradient to compare: {grad:?}");
+        assert!(
+            (value8 - v64).abs() <= 1e-12 * v64.abs(),
+            "{value8} vs {v64}"
+        );
+        for i in 0..g.len() {
+            // different orders of the same arithmetic: equal to rounding
+            assert!(
+                (grad[i] - grad8[i]).abs() <= 1e-10 * scale,
+                "{i}: adjoint {grad:?} vs duals {grad8:?}"
+            );
+            let h = 1e-5;
+            let (mut gp, mut gm) = (g.clone(), g.clone());
+            gp[i] += h;
+            gm[i] -= h;
+            let fd = (f(&gp) - f(&gm)) / (2.0 * h);
+            assert!(
+                (grad[i] - fd).abs() <= 1e-6 * scale,
+                "{i}: dual {} vs fd {fd}",
+                grad[i]
+            );
+        }
+    }
+
+    #[test]
+    fn the_policy_start_sees_observation_noise_not_the_start_spread() {
+        // two outputs, so the window has several output lags per output
+        let model = two_output_model(|t, j| 0.01 * ((t * 7 + j) as f64).sin());
+        let y0_var = [0.04, 0.09];
+        let problem = PolicyProblem {
+            model: &model,
+            y0_mean: vec![0.2, -0.1],
+            y0_var: y0_var.to_vec(),
+            u0: vec![0.0],
+            cost: SaturatingCost::with_widths(DVector::zeros(2), &[0.5, 0.5]).expect("cost"),
+            horizon: 5,
+        };
+        let start = problem.start::<f64>(4);
+        let (spec, norm) = (model.spec, &model.normalizer);
+        let d = spec.input_dim();
+        for j in 0..2 {
+            let std = norm.y_std[j];
+            let sy2 = model.params.log_obs_noise[j].exp() + model.config.noise_floor;
+            let p = d + j;
+            assert!((start.mean[p] - problem.y0_mean[j]).abs() < 1e-15);
+            for k in 0..spec.ly {
+                // the policy's previous observation minus the latent output at lag k, in
+                // original units: only observation noise (the old deterministic start gave
+                // this difference the whole y0_var, a random kick to any derivative term)
+                let i = spec.y_index(k, j);
+                let var_diff = start.cov[(p, p)] + std * std * start.cov[(i, i)]
+                    - 2.0 * std * start.cov[(p, i)];
+                let want = sy2 * std * std;
+                assert!(
+                    (var_diff - want).abs() <= 1e-12 * y0_var[j],
+                    "output {j} lag {k}: {var_diff:e} vs {want:e}"
+                );
+            }
+            // and nothing links the two outputs
+            assert_eq!(start.cov[(d, d + 1)], 0.0);
+        }
+    }
+}

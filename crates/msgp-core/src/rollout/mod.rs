@@ -1,0 +1,16 @@
+//! Free-running moment-matching rollouts over the NARX window (paper section 3.3), open loop
+//! (given inputs) or closed loop (a known feedback policy), and their adjoint sweep.
+//!
+//! Modules: [`forward`] (the rollout: one loop, any scalar), `window` (the Gaussian state and
+//! its one-step layout), `adjoint` (the hand-derived reverse sweep, f64), [`episode`] (a
+//! trajectory and how its inputs were produced).
+
+pub(crate) mod adjoint;
+pub mod episode;
+pub mod forward;
+pub(crate) mod window;
+
+pub use episode::{Episode, Excitation};
+pub(crate) use forward::rollout_started;
+pub use forward::{Control, StepPrediction, rollout, rollout_from, simulate};
+pub use window::StartState;

@@ -1,0 +1,333 @@
+//! PILCO with MSGP (or one-step GP-NARX) models on the simulated pendulum: learning to balance
+//! from scratch (paper section 4.2).
+//!
+//! The loop: `random_rollouts` episodes of smooth random excitation → fit the model on every
+//! episode so far (random ones feed-forward, policy ones in closed loop under the gains that ran
+//! them, the paper's `L_fb`) → optimise the PID + PD gains on the model (expected saturating
+//! cost of a closed-loop moment-matching rollout from rest, exact dual gradients) → run them on
+//! the simulator for one episode → repeat. After every iteration the simulator's stability test
+//! judges the gains; it is neither interaction time nor training data. Optionally, from the
+//! second iteration on, an MSGP fit continues the previous model ([`LearnSettings::warm_start`]).
+//!
+//! Outputs are `[θ, x]` (measured), the input is the commanded acceleration; the modelled policy
+//! is [`msgp_core::policy::PidPolicy`] with the sine saturation that the simulator's policy
+//! applies when its gains say `saturation: sine`.
+
+mod episodes;
+mod problem;
+mod report;
+mod settings;
+
+pub use episodes::{episode_trajectory, segments};
+use episodes::{feedback_episode, interact, msgp_segments};
+use problem::gains_from;
+pub use problem::{episode_cost, modelled_policy, pendulum_problem};
+pub use report::{IterationReport, LearnOutcome};
+pub use settings::{
+    END_EFFECTOR_INTEGRATOR, END_EFFECTOR_KINEMATIC, LINEAR_KF_POLICY_HORIZON_SECONDS,
+    LINEAR_KF_WARM_START, LearnSettings, learn_excitation,
+};
+
+use std::ops::ControlFlow;
+
+use nalgebra::{DMatrix, DVector};
+
+use msgp_core::fit::{
+    FitProgress, FitSettings, TrainingEpisode, fit_episodes, fit_episodes_observed,
+};
+use msgp_core::model::Method;
+use msgp_core::policy_search::cost::SaturatingCost;
+use msgp_core::policy_search::{PidMask, PolicySearchSettings, optimise_pid_scaled};
+
+use crate::controller::{PidPdGains, RandomExcitation, Saturation};
+use crate::episode::Episode;
+use crate::error::SimError;
+use crate::params::PendulumParams;
+use crate::stability::{StabilityCriteria, stability_test};
+
+/// What the loop reports while it runs ([`learn_policy_observed`]).
+#[derive(Clone, Copy, Debug)]
+pub enum LearnEvent<'a> {
+    /// The model fit of policy iteration `iteration` (from 1) starts.
+    FitStarted {
+        /// The policy iteration.
+        iteration: usize,
+    },
+    /// The model fit of policy iteration `iteration` finished a solver iteration (MSGP fits
+    /// only: one-step and linear-kf fits report nothing until they end).
+    Fit {
+        /// The policy iteration.
+        iteration: usize,
+        /// The fit's own progress.
+        progress: &'a FitProgress,
+    },
+    /// The policy search of an iteration starts (its fit has ended).
+    SearchStarted {
+        /// The policy iteration.
+        iteration: usize,
+    },
+    /// A policy iteration completed.
+    Iteration(&'a IterationReport),
+}
+
+/// Runs the loop; `progress` sees each iteration as it completes.
+pub fn learn_policy(
+    params: &PendulumParams,
+    settings: &LearnSettings,
+    progress: &mut dyn FnMut(&IterationReport),
+) -> Result<LearnOutcome, SimError> {
+    learn_policy_observed(params, settings, &mut |e| {
+        if let LearnEvent::Iteration(r) = e {
+            progress(r)
+        }
+        ControlFlow::Continue(())
+    })
+}
+
+/// Runs the loop; `observe` sees its fits' and iterations' progress ([`LearnEvent`]) and can
+/// stop it: after a [`ControlFlow::Break`] the loop ends there, returning [`SimError::Stopped`]
+/// (an MSGP fit stops at its next solver iteration; its one-step start, and one-step and
+/// linear-kf fits, which report nothing, run to their end first).
+pub fn learn_policy_observed(
+    params: &PendulumParams,
+    settings: &LearnSettings,
+    observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
+) -> Result<LearnOutcome, SimError> {
+    params.validate()?;
+    let mut episodes: Vec<Episode> = Vec::new();
+    let mut training: Vec<TrainingEpisode> = Vec::new();
+    let mut seconds = 0.0;
+    if let Some(bad) = settings.gain_scale.iter().find(|g| !g.is_finite()) {
+        return Err(SimError::invalid(
+            "gain_scale",
+            *bad,
+            "typical gain magnitudes must be finite",
+        ));
+    }
+    if settings.random_policies > settings.random_rollouts {
+        return Err(SimError::invalid(
+            "random_policies",
+            settings.random_policies as f64,
+            "at most random_rollouts of the random episodes can run a random policy",
+        ));
+    }
+    let mut random_policies = Vec::new();
+    for k in 0..settings.random_rollouts {
+        let seed = settings.seed.wrapping_mul(1000).wrapping_add(k as u64);
+        if k < settings.random_policies {
+            let gains = random_gains(seed, &settings.gain_scale);
+            let (ep, entries) = feedback_episode(params, &gains, settings, seed, &mut seconds)?;
+            training.extend(entries);
+            episodes.push(ep);
+            let stable =
+                stability_test(params, &gains, settings.seed, &StabilityCriteria::default())?
+                    .passed;
+            random_policies.push((gains, stable));
+            continue;
+        }
+        let mut excitation = RandomExcitation::new(seed, &settings.excitation)?;
+        let ep = interact(
+            params,
+            &mut excitation,
+            settings.episode_seconds,
+            seed,
+            &mut seconds,
+        )?;
+        let parts = msgp_segments(episode_trajectory(&ep)?, settings.ff_segment, settings)?;
+        training.extend(
+            parts
+                .into_iter()
+                .map(|traj| TrainingEpisode { traj, policy: None }),
+        );
+        episodes.push(ep);
+    }
+    let cost = SaturatingCost::with_widths(DVector::from_element(2, 0.0), &settings.cost_widths)?;
+    let horizon = (settings.episode_seconds * params.control_rate_hz).round() as usize;
+    let policy_horizon =
+        (settings.policy_horizon_seconds * params.control_rate_hz).round() as usize;
+    if policy_horizon == 0 || horizon == 0 {
+        return Err(SimError::invalid(
+            "policy_horizon_seconds",
+            settings
+                .policy_horizon_seconds
+                .min(settings.episode_seconds),
+            "the episode and the policy horizon need at least one control step",
+        ));
+    }
+    let s = settings.gain_scale;
+    let mut gains = PidPdGains {
+        kp_x: s[0],
+        ki_x: s[1],
+        kd_x: s[2],
+        kp_theta: s[3],
+        kd_theta: s[4],
+        saturation: Saturation::Sine,
+    };
+    let mask = PidMask {
+        kp: DMatrix::from_element(1, 2, true),
+        ki: DMatrix::from_row_slice(1, 2, &[false, true]),
+        kd: DMatrix::from_element(1, 2, true),
+    };
+    // the optimiser's coordinate scales: a gain near zero keeps its kind's typical magnitude
+    let typical: Vec<f64> = mask
+        .pack(&modelled_policy(&gains, params)?)
+        .into_iter()
+        .map(f64::abs)
+        .collect();
+    let mut reports = Vec::new();
+    let mut previous_model: Option<msgp_core::model::Model> = None;
+    for it in 1..=settings.iterations {
+        let fit_settings = FitSettings {
+            method: settings.method,
+            seed: settings.seed.wrapping_add(it as u64),
+            ..settings.fit.clone()
+        };
+        let clock = std::time::Instant::now();
+        let stopped = SimError::Stopped { iteration: it };
+        if observe(LearnEvent::FitStarted { iteration: it }).is_break() {
+            return Err(stopped);
+        }
+        let warm = match (&previous_model, settings.warm_start) {
+            (Some(prev), Some(n)) if matches!(settings.method, Method::Msgp | Method::LinearKf) => {
+                Some((prev, n))
+            }
+            _ => None,
+        };
+        let fitted = fit_episodes_observed(
+            &training,
+            &FitSettings {
+                iterations: warm.map_or(fit_settings.iterations, |(_, n)| n),
+                ..fit_settings.clone()
+            },
+            warm.map(|(prev, _)| prev),
+            &mut |p| {
+                observe(LearnEvent::Fit {
+                    iteration: it,
+                    progress: p,
+                })
+            },
+        );
+        let (model, mut fit_report) = match fitted {
+            Ok(fitted) => fitted,
+            // the MSGP start (the one-step model rolled out over every episode) can already
+            // fail numerically; the iteration then runs on that one-step model
+            Err(
+                e @ (msgp_core::MsgpError::NonFinite(_)
+                | msgp_core::MsgpError::NotPositiveDefinite { .. }),
+            ) if settings.method == Method::Msgp => {
+                let one_step = FitSettings {
+                    method: Method::GpNarx,
+                    ..fit_settings.clone()
+                };
+                let (model, mut report) = fit_episodes(&training, &one_step, &mut |_| {})?;
+                report.numerical_stop = Some(format!(
+                    "the MSGP fit failed at its start ({e}); this iteration used the one-step \
+                     GP-NARX model"
+                ));
+                (model, report)
+            }
+            Err(msgp_core::MsgpError::Stopped { .. }) => return Err(stopped),
+            Err(e) => return Err(e.into()),
+        };
+        let fit_seconds = clock.elapsed().as_secs_f64();
+        // a one-step fallback model is not continued: the next fit starts over
+        if settings.warm_start.is_some() {
+            previous_model = (model.method == settings.method).then(|| model.clone());
+        }
+        let problem = pendulum_problem(&model, params, cost.clone(), policy_horizon);
+        let search = PolicySearchSettings {
+            seed: settings
+                .search
+                .seed
+                .wrapping_add(settings.seed)
+                .wrapping_add(it as u64),
+            ..settings.search
+        };
+        if observe(LearnEvent::SearchStarted { iteration: it }).is_break() {
+            return Err(stopped);
+        }
+        let clock = std::time::Instant::now();
+        let searched = optimise_pid_scaled(
+            &problem,
+            &modelled_policy(&gains, params)?,
+            &mask,
+            &typical,
+            &search,
+        );
+        let search_seconds = clock.elapsed().as_secs_f64();
+        let (predicted, var, search_failure) = match searched {
+            Ok(result) => {
+                gains = gains_from(&result.policy);
+                // reported over the episode's length, comparable with the cost measured on the
+                // system
+                let episode_steps = &result.steps[..horizon.min(result.steps.len())];
+                let predicted: f64 = episode_steps.iter().map(|(m, _)| m).sum();
+                let var: f64 = episode_steps.iter().map(|(_, v)| v).sum();
+                (predicted, var, None)
+            }
+            // the model's rollouts diverge for every start: it predicts failure whatever the
+            // gains (every step costs 1); the gains stay and the episode adds data
+            Err(
+                e @ (msgp_core::MsgpError::NonFinite(_)
+                | msgp_core::MsgpError::NotPositiveDefinite { .. }),
+            ) => (horizon as f64, 0.0, Some(e.to_string())),
+            Err(msgp_core::MsgpError::Stopped { .. }) => return Err(stopped),
+            Err(e) => return Err(e.into()),
+        };
+
+        let seed = settings
+            .seed
+            .wrapping_mul(1000)
+            .wrapping_add(500 + it as u64);
+        let (ep, entries) = feedback_episode(params, &gains, settings, seed, &mut seconds)?;
+        let warm = settings.fit.ly.max(settings.fit.lu);
+        let actual = episode_cost(&ep, &cost, warm, horizon);
+        training.extend(entries);
+        episodes.push(ep);
+        let stable =
+            stability_test(params, &gains, settings.seed, &StabilityCriteria::default())?.passed;
+        let report = IterationReport {
+            iteration: it,
+            predicted_cost: predicted,
+            predicted_cost_std: var.sqrt(),
+            actual_cost: actual,
+            interaction_seconds: seconds,
+            stable,
+            fit_seconds,
+            search_seconds,
+            fit_numerical_stop: fit_report.numerical_stop.take(),
+            search_failure,
+            gains,
+        };
+        if observe(LearnEvent::Iteration(&report)).is_break() {
+            return Err(stopped);
+        }
+        reports.push(report);
+    }
+    Ok(LearnOutcome {
+        iterations: reports,
+        episodes,
+        final_gains: gains,
+        random_policies,
+    })
+}
+
+/// A random policy's gains: each drawn uniformly in `[0, 2 scale]`, sine saturation.
+pub fn random_gains(seed: u64, scale: &[f64; 5]) -> PidPdGains {
+    use rand::{RngExt, SeedableRng};
+    let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(crate::seed::rng_for(
+        seed,
+        crate::seed::Stream::RandomGains,
+    ));
+    let mut g = [0.0; 5];
+    for (gk, s) in g.iter_mut().zip(scale) {
+        *gk = rng.random_range(0.0..=2.0 * s.abs());
+    }
+    PidPdGains {
+        saturation: Saturation::Sine,
+        ..PidPdGains::from_array(g)
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,79 @@
+//! What the loop reports: one record per iteration and the whole outcome.
+
+use serde::{Deserialize, Serialize};
+
+use crate::controller::PidPdGains;
+use crate::episode::Episode;
+
+/// One iteration of the loop.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IterationReport {
+    /// 1-based iteration.
+    pub iteration: usize,
+    /// Expected total cost on the model, from rest, over the episode's length (the policy is
+    /// optimised over the longer `policy_horizon_seconds`).
+    pub predicted_cost: f64,
+    /// Its standard deviation (per-step variances summed; correlations over time ignored).
+    pub predicted_cost_std: f64,
+    /// Cost of the episode actually run, on the measured outputs.
+    pub actual_cost: f64,
+    /// Interaction time so far, random rollouts included \[s\].
+    pub interaction_seconds: f64,
+    /// Whether the gains passed the simulator's stability test.
+    pub stable: bool,
+    /// Wall-clock seconds of the model fit.
+    #[serde(default)]
+    pub fit_seconds: f64,
+    /// Wall-clock seconds of the policy optimisation.
+    #[serde(default)]
+    pub search_seconds: f64,
+    /// Why the model fit stopped early, when a training step failed numerically (the fit then
+    /// keeps the parameters of lowest loss among those that evaluated).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fit_numerical_stop: Option<String>,
+    /// Set when every policy-search start diverged on the model: the previous gains ran again
+    /// and the predicted cost is the episode's maximum (every step 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub search_failure: Option<String>,
+    /// The gains run in this iteration.
+    pub gains: PidPdGains,
+}
+
+/// Everything the loop produced.
+#[derive(Clone, Debug)]
+pub struct LearnOutcome {
+    /// Per-iteration reports.
+    pub iterations: Vec<IterationReport>,
+    /// Every interaction episode, random ones first.
+    pub episodes: Vec<Episode>,
+    /// The last gains.
+    pub final_gains: PidPdGains,
+    /// The random policies' gains and whether each passed the stability test (which, as after
+    /// every iteration, is neither interaction nor training data).
+    pub random_policies: Vec<(PidPdGains, bool)>,
+}
+
+impl LearnOutcome {
+    /// First iteration whose gains passed the stability test.
+    pub fn first_stable_iteration(&self) -> Option<usize> {
+        self.iterations
+            .iter()
+            .find(|r| r.stable)
+            .map(|r| r.iteration)
+    }
+
+    /// The iteration whose gains to keep: the first that passed the stability test, else the
+    /// one with the lowest measured episode cost (the earliest on ties; NaN costs never win).
+    /// The loop itself ends on its last gains, which a later bad model may have spoiled.
+    pub fn best_iteration(&self) -> Option<&IterationReport> {
+        self.iterations.iter().find(|r| r.stable).or_else(|| {
+            self.iterations
+                .iter()
+                .filter(|r| !r.actual_cost.is_nan())
+                .fold(None, |best: Option<&IterationReport>, r| match best {
+                    Some(b) if b.actual_cost <= r.actual_cost => Some(b),
+                    _ => Some(r),
+                })
+        })
+    }
+}
