@@ -11,6 +11,7 @@ use msgp_core::gp::{GpConfig, GpParams};
 use msgp_core::loss::{self, Complexity, msgp_loss};
 use msgp_core::numeric::dual;
 use msgp_core::numeric::linalg::JitterLog;
+use msgp_core::numeric::parallel::Threads;
 
 fn bench_loss(c: &mut Criterion) {
     let config = GpConfig::default();
@@ -37,7 +38,13 @@ fn bench_loss(c: &mut Criterion) {
                 let mut log = JitterLog::default();
                 black_box(
                     loss::loss_and_gradient(
-                        &params, &config, &spec, &episodes, complexity, &mut log,
+                        &params,
+                        &config,
+                        &spec,
+                        &episodes,
+                        complexity,
+                        Threads::available(),
+                        &mut log,
                     )
                     .expect("grad"),
                 )

@@ -18,11 +18,10 @@ use criterion::{BenchmarkGroup, Criterion, SamplingMode, criterion_group, criter
 use msgp_core::fit::{FitSettings, TrainingEpisode, fit_episodes};
 use msgp_core::model::Method;
 use msgp_core::numeric::dual;
+use msgp_core::numeric::parallel::Threads;
 use msgp_core::policy::{PidPolicy, PolicySpec};
 use msgp_core::policy_search::cost::SaturatingCost;
-use msgp_core::policy_search::{
-    PidMask, PolicyProblem, PolicySearchSettings, optimise_pid_scaled_with_threads,
-};
+use msgp_core::policy_search::{PidMask, PolicyProblem, PolicySearchSettings, optimise_pid_scaled};
 use msgp_sim::learn::{LearnSettings, episode_trajectory, modelled_policy, segments};
 use msgp_sim::{
     EpisodeConfig, PendulumParams, PidPdGains, PidPdPolicy, RandomExcitation, Saturation,
@@ -167,12 +166,14 @@ fn bench_policy(c: &mut Criterion) {
         group.bench_function(
             format!("search_20_candidates_2x5_steps_threads{threads}"),
             |b| {
+                let search = PolicySearchSettings {
+                    threads: Threads::new(threads).expect("threads"),
+                    ..search
+                };
                 b.iter(|| {
                     black_box(
-                        optimise_pid_scaled_with_threads(
-                            &problem, &initial, &mask, &typical, &search, threads,
-                        )
-                        .expect("search"),
+                        optimise_pid_scaled(&problem, &initial, &mask, &typical, &search)
+                            .expect("search"),
                     )
                 })
             },

@@ -26,6 +26,7 @@ use msgp_core::loss::{self, Complexity, msgp_loss};
 use msgp_core::moments::moment_match;
 use msgp_core::narx::NarxSpec;
 use msgp_core::numeric::linalg::JitterLog;
+use msgp_core::numeric::parallel::Threads;
 use msgp_core::rollout::Episode;
 use msgp_core::rollout::{Control, simulate};
 use nalgebra::DMatrix;
@@ -121,6 +122,7 @@ fn dump(args: &Args) -> AnyResult<()> {
         &p.spec,
         &p.episodes,
         p.complexity,
+        Threads::from_env()?,
         &mut glog,
     )?;
     let traj = &p.episodes[0].traj;
@@ -220,6 +222,7 @@ fn measure(
 fn time(args: &Args) -> AnyResult<()> {
     let reps = args.usize_or("reps", Some(10))?;
     let p = build(args)?;
+    let threads = Threads::from_env()?;
     let what = args
         .opts
         .get("what")
@@ -247,6 +250,7 @@ fn time(args: &Args) -> AnyResult<()> {
                     &p.spec,
                     &p.episodes,
                     p.complexity,
+                    threads,
                     &mut log,
                 )?);
                 Ok(())

@@ -7,6 +7,7 @@ use clap::Args;
 use msgp_core::data::{NoiseScale, SyntheticSystem};
 use msgp_core::fit::{FitSettings, fit};
 use msgp_core::model::Method;
+use msgp_core::numeric::parallel::Threads;
 
 /// Options of `msgp demo`.
 #[derive(Debug, Args)]
@@ -55,6 +56,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
             inducing: args.inducing,
             iterations: args.iters,
             seed: args.seed,
+            threads: Threads::from_env()?,
             ..FitSettings::default()
         };
         let started = Instant::now();

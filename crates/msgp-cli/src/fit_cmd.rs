@@ -11,6 +11,7 @@ use msgp_core::gp::MeanFunction;
 use msgp_core::gp::integrator::Integrator;
 use msgp_core::model::Method;
 use msgp_core::model_file::{FitRecord, ModelFile};
+use msgp_core::numeric::parallel::Threads;
 use serde_json::json;
 
 use crate::dataset::{
@@ -239,6 +240,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         mean: args.mean.into(),
         integrators: args.integrating.clone(),
         optimizer: args.optimizer.into(),
+        threads: Threads::from_env()?,
     }
     .settings(&trajs)?;
     let n_train: usize = trajs.iter().map(Trajectory::len).sum();

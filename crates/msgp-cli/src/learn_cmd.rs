@@ -15,6 +15,7 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 use msgp_core::model::Method;
 use msgp_core::narx::start_window::StartWindow;
+use msgp_core::numeric::parallel::Threads;
 use msgp_sim::learn::{
     IterationReport, LearnEvent, LearnOutcome, LearnSettings, learn_policy_observed,
 };
@@ -349,6 +350,7 @@ pub fn settings(
     }
     let method: Method = model.into();
     let d = LearnSettings::for_method(method);
+    let threads = Threads::from_env()?;
     let start_window = match args.start_smoothing {
         0 => StartWindow::Measured,
         samples => StartWindow::Smoothed { samples, degree: 2 },
@@ -395,6 +397,7 @@ pub fn settings(
                 (Method::Msgp, _) | (_, None) => d.fit.one_step_iterations,
                 (_, Some(n)) => n,
             },
+            threads,
             ..d.fit.clone()
         },
         warm_start: match args.warm_start {
@@ -406,6 +409,7 @@ pub fn settings(
             iterations: args.search_iters,
             candidates: args.candidates,
             trust_region: args.trust_region,
+            threads,
             ..d.search
         },
         ..d

@@ -12,6 +12,7 @@ use msgp_core::data::real::{RealSeries, data_dir};
 use msgp_core::data::{Benchmark, NoiseScale, SyntheticSystem};
 use msgp_core::fit::{FitOptimizer, FitProgress, FitSettings, fit};
 use msgp_core::model::{Method, Metrics};
+use msgp_core::numeric::parallel::Threads;
 use serde_json::json;
 
 use crate::fit_cmd::{MethodArg, OptimizerArg};
@@ -228,6 +229,7 @@ fn table1(args: &Table1Args) -> anyhow::Result<()> {
             })?,
         };
         let mut cells: Vec<Option<Cell>> = METHODS.iter().map(|_| None).collect();
+        let threads = Threads::from_env()?;
         for &method in &methods {
             done += 1;
             let settings = FitSettings {
@@ -238,6 +240,7 @@ fn table1(args: &Table1Args) -> anyhow::Result<()> {
                 iterations: args.iters.unwrap_or(FitSettings::default().iterations),
                 seed: args.seed,
                 optimizer: args.optimizer.into(),
+                threads,
                 ..FitSettings::default()
             };
             let label = format!("[{done}/{total}] {} on {}", method.name(), task.key);

@@ -14,6 +14,7 @@ use msgp_core::narx::NarxSpec;
 use msgp_core::narx::start_window::StartWindow;
 use msgp_core::numeric::dual;
 use msgp_core::numeric::linalg::JitterLog;
+use msgp_core::numeric::parallel::Threads;
 use msgp_core::policy::PolicySpec;
 use msgp_core::rollout::{Episode, Excitation};
 use nalgebra::DMatrix;
@@ -39,8 +40,16 @@ fn compare_with(
     })
     .expect("dual");
     let mut log = JitterLog::default();
-    let (lv, ga) = loss::loss_and_gradient(params, cfg, spec, episodes, complexity, &mut log)
-        .expect("adjoint");
+    let (lv, ga) = loss::loss_and_gradient(
+        params,
+        cfg,
+        spec,
+        episodes,
+        complexity,
+        Threads::ONE,
+        &mut log,
+    )
+    .expect("adjoint");
     assert!(
         (lv.total() - value).abs() <= 1e-11 * value.abs().max(1.0),
         "values {} vs {value}",
@@ -212,13 +221,13 @@ fn gradient_is_bit_identical_for_any_thread_count() {
         .collect();
     let run = |threads: usize| {
         let mut log = JitterLog::default();
-        loss::loss_and_gradient_with_threads(
+        loss::loss_and_gradient(
             &params,
             &config(),
             &spec,
             &eps,
             Complexity::PseudoDataNll,
-            threads,
+            Threads::new(threads).expect("threads"),
             &mut log,
         )
         .expect("adjoint")

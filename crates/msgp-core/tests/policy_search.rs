@@ -6,11 +6,11 @@ use msgp_core::data::Trajectory;
 use msgp_core::fit::{FitSettings, fit};
 use msgp_core::model::Method;
 use msgp_core::model::Model;
+use msgp_core::numeric::parallel::Threads;
 use msgp_core::policy::PidPolicy;
 use msgp_core::policy_search::cost::SaturatingCost;
 use msgp_core::policy_search::{
     PidMask, PolicyProblem, PolicySearchSettings, optimise_pid, optimise_pid_scaled,
-    optimise_pid_scaled_with_threads,
 };
 use nalgebra::{DMatrix, DVector};
 use rand::{RngExt, SeedableRng, rngs::StdRng};
@@ -136,11 +136,14 @@ fn threads_do_not_change_the_search_result() {
         candidate_starts: 2,
         ..PolicySearchSettings::default()
     };
-    let one =
-        optimise_pid_scaled_with_threads(&problem, &initial, &mask, &[1.0], &s, 1).expect("search");
+    let on = |threads: usize| PolicySearchSettings {
+        threads: Threads::new(threads).expect("threads"),
+        ..s
+    };
+    let one = optimise_pid_scaled(&problem, &initial, &mask, &[1.0], &on(1)).expect("search");
     for threads in [2, 3] {
-        let many = optimise_pid_scaled_with_threads(&problem, &initial, &mask, &[1.0], &s, threads)
-            .expect("search");
+        let many =
+            optimise_pid_scaled(&problem, &initial, &mask, &[1.0], &on(threads)).expect("search");
         assert_eq!(many.policy, one.policy, "threads {threads}");
         assert_eq!(
             many.expected_cost.to_bits(),

@@ -11,6 +11,7 @@ use msgp_core::fit::{FitOptimizer, FitOptions, FitReport, FitSettings, fit_obser
 use msgp_core::gp::MeanFunction;
 use msgp_core::model::{Method, Metrics, Model, pool, score};
 use msgp_core::model_file::{FitRecord, ModelFile};
+use msgp_core::numeric::parallel::Threads;
 use nalgebra::DMatrix;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
@@ -89,19 +90,25 @@ impl Msgp {
         Ok(me.fitted.clone().ok_or(Error::NotFitted)?)
     }
 
-    /// Settings for `train`: exactly `msgp fit`'s, then the user's other settings.
+    /// Settings for `train`: exactly `msgp fit`'s, then the user's other settings; threads
+    /// from `MSGP_THREADS` at the time of the call, as `msgp fit` takes them.
     fn settings(
         options: &FitOptions,
         overrides: Option<&serde_json::Value>,
         train: &[Trajectory],
     ) -> Result<FitSettings> {
+        let threads = Threads::from_env()?;
         let settings = options.settings(train)?;
         let Some(user) = overrides else {
-            return Ok(settings);
+            return Ok(FitSettings {
+                threads,
+                ..settings
+            });
         };
         let value = serde_json::to_value(&settings)
             .map_err(|e| Error::Panic(format!("cannot describe the settings: {e}")))?;
-        crate::convert::merged(&value, user, "settings")
+        let merged: FitSettings = crate::convert::merged(&value, user, "settings")?;
+        Ok(FitSettings { threads, ..merged })
     }
 
     fn from_file(file: ModelFile, model: Model, report: Option<FitReport>) -> Self {
@@ -127,6 +134,7 @@ impl Msgp {
                     .get("optimizer")
                     .and_then(|v| serde_json::from_value(v.clone()).ok())
                     .unwrap_or_default(),
+                threads: Threads::default(),
             },
             overrides: None,
             fitted: Some(Arc::new(Fitted {
@@ -280,6 +288,7 @@ impl Msgp {
             mean: MeanFunction::Zero,
             integrators: Vec::new(),
             optimizer: FitOptimizer::Adam,
+            threads: Threads::default(),
         };
         let overrides = match settings.filter(|s| !s.is_none()) {
             None => None,

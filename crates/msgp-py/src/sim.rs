@@ -3,6 +3,7 @@
 
 use msgp_core::data::{NoiseScale, SyntheticSystem};
 use msgp_core::fit::FitSettings;
+use msgp_core::numeric::parallel::Threads;
 use msgp_sim::learn::{LearnEvent, LearnSettings, episode_trajectory, learn_policy_observed};
 use msgp_sim::{
     Controller, Episode, EpisodeConfig, ExcitationConfig, PendulumParams, PidPdGains, PidPdPolicy,
@@ -279,12 +280,15 @@ pub fn learn_policy<'py>(
         }
     }
     let base: LearnSettings = with_overrides(&LearnSettings::for_method(m), settings, "settings")?;
-    let s = LearnSettings {
+    let mut s = LearnSettings {
         method: m,
         iterations,
         seed,
         ..base
     };
+    let threads = Threads::from_env().map_err(Error::Core)?;
+    s.fit.threads = threads;
+    s.search.threads = threads;
     // the loop runs without the GIL; at every event it takes it back to let Python see
     // signals, and at the end of an iteration to call `progress`
     let (learned, raised) = detached(py, move || {

@@ -14,7 +14,8 @@
 //!   seeded [`RandomExcitation`].
 //! * [`run_episode`] — seeded episodes; same seed, same bytes.
 //! * [`stability_test`] — five fixed starts, pass/fail per start.
-//! * [`log`] — CSV and MCAP (JSON messages, Foxglove-ready) run logs, written atomically.
+//! * [`log`] — CSV and MCAP (JSON messages, Foxglove-ready) run logs, written atomically
+//!   ([`atomic`], as the policy files are).
 //!
 //! Sign conventions: x along the end effector's axis; `theta` from the upward vertical,
 //! positive when the pole leans toward +x; a positive command accelerates toward +x.
@@ -30,6 +31,7 @@
 //! ```
 
 pub mod actuator;
+pub mod atomic;
 pub mod controller;
 pub mod episode;
 pub mod error;

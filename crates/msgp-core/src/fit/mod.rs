@@ -27,6 +27,7 @@ use crate::model::{Method, Model};
 use crate::narx::NarxSpec;
 use crate::narx::start_window::StartWindow;
 use crate::numeric::linalg::JitterLog;
+use crate::numeric::parallel::Threads;
 use crate::optim::Lbfgs;
 use crate::policy::PolicySpec;
 use one_step::{OneStepSettings, fit_one_step, one_step_pairs};
@@ -78,6 +79,10 @@ pub struct FitSettings {
     /// How the MSGP loss starts each training trajectory's rollout ([`StartWindow`]).
     #[serde(default)]
     pub start_window: StartWindow,
+    /// Threads of the fit's independent work (the loss gradient's episodes, the one-step fits'
+    /// outputs); the result does not depend on it. Not part of a model's training record.
+    #[serde(skip)]
+    pub threads: Threads,
 }
 
 impl Default for FitSettings {
@@ -104,6 +109,7 @@ impl Default for FitSettings {
             mean: MeanFunction::Zero,
             integrators: Vec::new(),
             start_window: StartWindow::Measured,
+            threads: Threads::default(),
         }
     }
 }
@@ -175,6 +181,9 @@ pub struct FitOptions {
     pub integrators: Vec<Integrator>,
     /// Solver of the MSGP loss.
     pub optimizer: FitOptimizer,
+    /// Threads of the fit ([`FitSettings::threads`]); front ends take it from
+    /// [`Threads::from_env`].
+    pub threads: Threads,
 }
 
 impl FitOptions {
@@ -232,6 +241,7 @@ impl FitOptions {
             mean: self.mean,
             integrators: self.integrators.clone(),
             optimizer: self.optimizer,
+            threads: self.threads,
             ..defaults
         })
     }
@@ -471,6 +481,7 @@ fn fit_episodes_from(
     let one_step = OneStepSettings {
         iterations: settings.one_step_iterations,
         pilco_penalty: settings.method == Method::PilcoNarx,
+        threads: settings.threads,
         ..OneStepSettings::default()
     };
 

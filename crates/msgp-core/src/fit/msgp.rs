@@ -25,6 +25,7 @@ use crate::loss::{Complexity, loss_and_gradient, msgp_loss};
 use crate::model::{Method, Model};
 use crate::narx::NarxSpec;
 use crate::numeric::linalg::JitterLog;
+use crate::numeric::parallel::Threads;
 use crate::optim::{Adam, Flow, Objective, Solver, minimize};
 use crate::rollout::{Episode, Excitation};
 
@@ -118,6 +119,7 @@ struct MsgpObjective<'a> {
     config: GpConfig,
     episodes: &'a [Episode],
     complexity: Complexity,
+    threads: Threads,
     log: JitterLog,
     /// The numerical failure of the latest evaluation, if it failed (the loss is then reported
     /// as NaN).
@@ -133,6 +135,7 @@ impl Objective for MsgpObjective<'_> {
             &self.spec,
             self.episodes,
             self.complexity,
+            self.threads,
             &mut self.log,
         );
         let (v, mut g) = match evaluated {
@@ -266,6 +269,7 @@ impl Stage<'_, '_> {
             config: self.config,
             episodes,
             complexity: self.settings.complexity,
+            threads: self.settings.threads,
             log: JitterLog::default(),
             failure: None,
         };

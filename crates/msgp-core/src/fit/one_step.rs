@@ -24,6 +24,7 @@ use crate::gp::{GpConfig, GpParams, MeanFunction};
 use crate::narx::NarxSpec;
 use crate::numeric::dense::DenseChol;
 use crate::numeric::linalg::JitterLog;
+use crate::numeric::parallel::Threads;
 use crate::optim::{Adam, Flow, Objective, Solver, minimize};
 
 const LN_2PI: f64 = 1.837_877_066_409_345_3;
@@ -231,6 +232,8 @@ pub struct OneStepSettings {
     pub pilco_penalty: bool,
     /// Most one-step pairs used for hyperparameters (an evenly spaced subset beyond that).
     pub max_pairs: usize,
+    /// Threads the outputs' fits run on (the result does not depend on it).
+    pub threads: Threads,
 }
 
 impl Default for OneStepSettings {
@@ -240,6 +243,7 @@ impl Default for OneStepSettings {
             learning_rate: 0.05,
             pilco_penalty: false,
             max_pairs: 1000,
+            threads: Threads::default(),
         }
     }
 }
@@ -348,6 +352,8 @@ fn arx_solve(
 
 /// Fits one-step GP-NARX hyperparameters per output and projects onto `m` pseudo-inputs.
 /// Returns the sparse model (process noise = one-step noise, observation noise at the floor).
+/// The outputs' fits run on up to [`OneStepSettings::threads`] threads; the result does not
+/// depend on it.
 pub fn fit_one_step(
     data: &OneStepData,
     m: usize,
@@ -355,23 +361,6 @@ pub fn fit_one_step(
     config: &GpConfig,
     structure: &Structure,
     seed: u64,
-    log: &mut JitterLog,
-) -> Result<GpParams<f64>> {
-    let threads = crate::numeric::parallel::thread_count();
-    fit_one_step_with_threads(data, m, settings, config, structure, seed, threads, log)
-}
-
-/// [`fit_one_step`] with the outputs on up to `threads` threads; the result does not depend
-/// on `threads`.
-#[allow(clippy::too_many_arguments)]
-fn fit_one_step_with_threads(
-    data: &OneStepData,
-    m: usize,
-    settings: &OneStepSettings,
-    config: &GpConfig,
-    structure: &Structure,
-    seed: u64,
-    threads: usize,
     log: &mut JitterLog,
 ) -> Result<GpParams<f64>> {
     let (n, d) = data.x.shape();
@@ -505,7 +494,7 @@ fn fit_one_step_with_threads(
         };
         Ok((h, ybar, log))
     };
-    let fits = crate::numeric::parallel::map_indexed(&outputs, threads, fit_output);
+    let fits = crate::numeric::parallel::map_indexed(&outputs, settings.threads.get(), fit_output);
     for (a, fit) in fits.into_iter().enumerate() {
         let (h, ybar, olog) = fit?;
         log.merge(&olog);
@@ -692,14 +681,17 @@ mod tests {
         };
         let run_on = |data: &OneStepData, threads: usize| {
             let mut log = JitterLog::default();
-            fit_one_step_with_threads(
+            let settings = OneStepSettings {
+                threads: Threads::new(threads).expect("threads"),
+                ..settings
+            };
+            fit_one_step(
                 data,
                 12,
                 &settings,
                 &GpConfig::default(),
                 &Structure::default(),
                 4,
-                threads,
                 &mut log,
             )
             .expect("fit")

@@ -2,6 +2,7 @@
 
 use super::*;
 use crate::gp::PreparedGp;
+use crate::numeric::parallel::Threads;
 use crate::rollout::{Control, rollout};
 use nalgebra::DMatrix;
 
@@ -22,6 +23,7 @@ fn options(method: Method, inducing: Option<usize>, iterations: Option<usize>) -
         mean: MeanFunction::Zero,
         integrators: Vec::new(),
         optimizer: FitOptimizer::Adam,
+        threads: Threads::default(),
     }
 }
 

@@ -15,7 +15,7 @@ use crate::moments::vjp::GpAdjoint;
 use crate::narx::NarxSpec;
 use crate::numeric::dual::Dual;
 use crate::numeric::linalg::{JitterLog, JitterPolicy, cholesky};
-use crate::numeric::parallel::{map_indexed, thread_count};
+use crate::numeric::parallel::{Threads, map_indexed};
 use crate::policy::{FeedbackPolicy, PolicySpec};
 use crate::rollout::adjoint::{AdjointPolicy, PolicyVjp, StepScore, rollout_adjoint};
 use crate::rollout::window::{StartState, initial_window};
@@ -142,37 +142,16 @@ struct EpisodeOut {
     log: JitterLog,
 }
 
-/// Value and gradient (in [`GpParams::to_flat`] layout) of the MSGP loss, by the adjoint sweep.
-/// Episodes run on [`thread_count`] threads; the result is bit-identical for any thread count.
+/// Value and gradient (in [`GpParams::to_flat`] layout) of the MSGP loss, by the adjoint sweep,
+/// with the episodes on up to `threads` threads. Every episode accumulates its own adjoints and
+/// the episodes are summed in order, so the result does not depend on `threads`.
 pub fn loss_and_gradient(
     params: &GpParams<f64>,
     config: &GpConfig,
     spec: &NarxSpec,
     episodes: &[Episode],
     complexity: Complexity,
-    log: &mut JitterLog,
-) -> Result<(LossValue<f64>, Vec<f64>)> {
-    loss_and_gradient_with_threads(
-        params,
-        config,
-        spec,
-        episodes,
-        complexity,
-        thread_count(),
-        log,
-    )
-}
-
-/// [`loss_and_gradient`] with the episodes on up to `threads` threads (1: the calling thread
-/// only). Every episode accumulates its own adjoints and the episodes are summed in order, so
-/// the result does not depend on `threads`.
-pub fn loss_and_gradient_with_threads(
-    params: &GpParams<f64>,
-    config: &GpConfig,
-    spec: &NarxSpec,
-    episodes: &[Episode],
-    complexity: Complexity,
-    threads: usize,
+    threads: Threads,
     log: &mut JitterLog,
 ) -> Result<(LossValue<f64>, Vec<f64>)> {
     let shape: GpShape = params.shape()?;
@@ -198,7 +177,7 @@ pub fn loss_and_gradient_with_threads(
             log: elog,
         })
     };
-    let outs = map_indexed(episodes, threads, run);
+    let outs = map_indexed(episodes, threads.get(), run);
     let mut adj = GpAdjoint::zeros(m, d, e);
     let mut nll = 0.0;
     let mut steps = 0;

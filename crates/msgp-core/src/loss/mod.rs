@@ -30,7 +30,7 @@ use serde::{Deserialize, Serialize};
 
 mod gradient;
 
-pub use gradient::{loss_and_gradient, loss_and_gradient_with_threads};
+pub use gradient::loss_and_gradient;
 
 use crate::error::{MsgpError, Result};
 use crate::gp::{GpConfig, GpParams, PreparedGp};

@@ -1,5 +1,7 @@
 //! Deterministic fan-out of independent work items over scoped threads.
 
+use std::num::NonZeroUsize;
+
 use crate::error::{MsgpError, Result};
 
 /// `f(k, item)` for every item, on up to `threads` scoped threads (item `k` on thread
@@ -51,18 +53,69 @@ pub(crate) fn map_indexed<T: Sync, R: Send>(
         .collect()
 }
 
-/// Environment variable with the number of threads the loss gradient runs its episodes on
-/// (default: every available core).
+/// The environment variable the front ends (`msgp`, the Python module) read the thread count
+/// from ([`Threads::from_env`]); the library itself reads no environment.
 pub const THREADS_VAR: &str = "MSGP_THREADS";
 
-/// Threads for the episodes of one loss gradient: [`THREADS_VAR`] if set to a positive integer,
-/// else the available parallelism.
-pub fn thread_count() -> usize {
-    std::env::var(THREADS_VAR)
-        .ok()
-        .and_then(|v| v.trim().parse::<usize>().ok())
-        .filter(|&n| n > 0)
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+/// How many threads the independent work items of one computation may run on: a loss
+/// gradient's episodes, the one-step fits' outputs, the policy search's candidates and starts.
+/// Results never depend on it ([`map_indexed`] keeps item order). Default: every available
+/// core.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Threads(NonZeroUsize);
+
+impl Threads {
+    /// One thread: the calling thread only.
+    pub const ONE: Threads = Threads(NonZeroUsize::MIN);
+
+    /// `n` threads; 0 is refused.
+    pub fn new(n: usize) -> Result<Self> {
+        NonZeroUsize::new(n)
+            .map(Threads)
+            .ok_or_else(|| MsgpError::InvalidSetting {
+                name: "threads",
+                reason: "need at least one thread".into(),
+            })
+    }
+
+    /// Every core the process may use.
+    pub fn available() -> Self {
+        Threads(std::thread::available_parallelism().unwrap_or(NonZeroUsize::MIN))
+    }
+
+    /// [`THREADS_VAR`] when it is set (a positive integer), else [`Threads::available`]; any
+    /// other value is refused with the variable's name.
+    pub fn from_env() -> Result<Self> {
+        match std::env::var(THREADS_VAR) {
+            Err(std::env::VarError::NotPresent) => Ok(Self::available()),
+            Ok(v) if v.trim().is_empty() => Ok(Self::available()),
+            Ok(v) => v
+                .trim()
+                .parse::<usize>()
+                .ok()
+                .and_then(NonZeroUsize::new)
+                .map(Threads)
+                .ok_or_else(|| MsgpError::InvalidSetting {
+                    name: THREADS_VAR,
+                    reason: format!("must be a positive integer, got `{v}`"),
+                }),
+            Err(e) => Err(MsgpError::InvalidSetting {
+                name: THREADS_VAR,
+                reason: e.to_string(),
+            }),
+        }
+    }
+
+    /// The count.
+    pub fn get(self) -> usize {
+        self.0.get()
+    }
+}
+
+impl Default for Threads {
+    fn default() -> Self {
+        Self::available()
+    }
 }
 
 #[cfg(test)]
@@ -93,5 +146,13 @@ mod tests {
         assert!(one[3].contains("(3, 9)"), "{}", one[3]);
         assert!(one[7].contains("seven"), "{}", one[7]);
         assert!(map_indexed(&Vec::<u64>::new(), 2, square).is_empty());
+    }
+
+    #[test]
+    fn a_thread_count_is_positive() {
+        assert!(Threads::new(0).is_err());
+        assert_eq!(Threads::new(3).map(Threads::get).ok(), Some(3));
+        assert_eq!(Threads::ONE.get(), 1);
+        assert!(Threads::available().get() >= 1);
     }
 }

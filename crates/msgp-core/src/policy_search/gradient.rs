@@ -1,19 +1,19 @@
-//! Gradients of the policy-search objective with respect to the gains: the adjoint sweep of
-//! the closed-loop rollout with the expected cost per step ([`closed_loop_cost_gradient`]; a
-//! few rollouts whatever the number of gains) and, as its reference, forward-mode duals through
-//! the whole rollout ([`policy_gradient_duals`]).
+//! The gradient of a closed-loop rollout's expected cost with respect to the policy's
+//! parameters, by the adjoint sweep with the expected saturating cost as each step's score
+//! ([`closed_loop_cost_gradient`]; a few rollouts' work whatever the number of parameters).
+//! Forward-mode duals through the whole rollout are its reference
+//! ([`super::policy_gradient_duals`]).
 
 use nalgebra::{DMatrix, DVector};
 
 use super::cost::SaturatingCost;
-use super::objective::{PidMask, PolicyProblem};
 use crate::error::{MsgpError, Result};
 use crate::gp::PreparedGp;
 use crate::moments::vjp::GpAdjoint;
 use crate::narx::NarxSpec;
-use crate::numeric::dual::{LANES, gradient_lanes, moments_gradient};
+use crate::numeric::dual::moments_gradient;
 use crate::numeric::linalg::{JitterLog, JitterPolicy};
-use crate::policy::{FeedbackPolicy, PidPolicy};
+use crate::policy::FeedbackPolicy;
 use crate::rollout::StartState;
 use crate::rollout::adjoint::{AdjointPolicy, StepScore, rollout_adjoint};
 pub use crate::rollout::adjoint::{DualPolicyMap, PolicyVjp};
@@ -112,51 +112,4 @@ pub fn closed_loop_cost_gradient(
         log,
     )?;
     Ok((out.total, out.theta))
-}
-
-/// Value and gradient of the expected cost at the packed gains `g` (entries outside `active`
-/// are 0), by the adjoint sweep of the closed-loop rollout
-/// ([`crate::policy_search::closed_loop_cost_gradient`]).
-pub(crate) fn policy_gradient(
-    problem: &PolicyProblem<'_>,
-    mask: &PidMask,
-    initial: &PidPolicy<f64>,
-    g: &[f64],
-    active: &[usize],
-) -> Result<(f64, Vec<f64>)> {
-    let (value, full) = problem.gradient(mask, initial, g)?;
-    let mut grad = vec![0.0; g.len()];
-    for &i in active {
-        grad[i] = full[i];
-    }
-    Ok((value, grad))
-}
-
-/// `policy_gradient` (the search's adjoint gradient) by duals with as many lanes as free gains (up to [`LANES`]; more gains
-/// take several chunks of `LANES`): the reference the adjoint is tested against.
-pub fn policy_gradient_duals(
-    problem: &PolicyProblem<'_>,
-    mask: &PidMask,
-    initial: &PidPolicy<f64>,
-    g: &[f64],
-    active: &[usize],
-) -> Result<(f64, Vec<f64>)> {
-    // one closure per lane count: the dual type is part of its signature
-    macro_rules! lanes {
-        ($n:expr) => {
-            gradient_lanes::<{ $n }, _>(g, active, 1, |gd| {
-                Ok(problem.evaluate(&mask.unpack(initial, gd))?.0)
-            })
-        };
-    }
-    match active.len() {
-        1 => lanes!(1),
-        2 => lanes!(2),
-        3 => lanes!(3),
-        4 => lanes!(4),
-        5 => lanes!(5),
-        6 => lanes!(6),
-        7 => lanes!(7),
-        _ => lanes!(LANES),
-    }
 }

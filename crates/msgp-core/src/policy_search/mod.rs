@@ -10,8 +10,9 @@
 
 //!
 //! Modules: [`cost`] (the saturating cost and its Gaussian moments), [`objective`] (the
-//! closed-loop expected cost, the problem, the gain mask), [`gradient`] (adjoint and dual
-//! gradients over the gains), [`search`] (the optimiser).
+//! closed-loop expected cost, the problem, the gain mask, the gradient over the gains and its
+//! dual reference), [`gradient`] (the expected-cost rollout's adjoint), [`search`] (the
+//! optimiser).
 
 pub mod cost;
 pub mod gradient;
@@ -19,9 +20,6 @@ pub mod objective;
 pub mod search;
 
 pub use cost::SaturatingCost;
-pub use gradient::{DualPolicyMap, PolicyVjp, closed_loop_cost_gradient, policy_gradient_duals};
-pub use objective::{PidMask, PolicyProblem, RolloutCost, closed_loop_cost};
-pub use search::{
-    PolicySearchResult, PolicySearchSettings, optimise_pid, optimise_pid_scaled,
-    optimise_pid_scaled_with_threads,
-};
+pub use gradient::{DualPolicyMap, PolicyVjp, closed_loop_cost_gradient};
+pub use objective::{PidMask, PolicyProblem, RolloutCost, closed_loop_cost, policy_gradient_duals};
+pub use search::{PolicySearchResult, PolicySearchSettings, optimise_pid, optimise_pid_scaled};

@@ -14,7 +14,7 @@ use crate::gp::PreparedGp;
 use crate::model::Model;
 use crate::moments::MomentMatch;
 use crate::narx::NarxSpec;
-use crate::numeric::dual::Dual;
+use crate::numeric::dual::{Dual, LANES, gradient_lanes};
 use crate::numeric::linalg::JitterLog;
 use crate::numeric::scalar::{Scalar, c};
 use crate::policy::{FeedbackPolicy, Normalized, PidPolicy};
@@ -280,5 +280,52 @@ impl PolicyProblem<'_> {
             &mut log,
         )?;
         Ok((rc.total, rc.steps.iter().map(|s| (s.mean, s.var)).collect()))
+    }
+}
+
+/// Value and gradient of the expected cost at the packed gains `g` (entries outside `active`
+/// are 0), by the adjoint sweep of the closed-loop rollout
+/// ([`crate::policy_search::closed_loop_cost_gradient`]).
+pub(crate) fn policy_gradient(
+    problem: &PolicyProblem<'_>,
+    mask: &PidMask,
+    initial: &PidPolicy<f64>,
+    g: &[f64],
+    active: &[usize],
+) -> Result<(f64, Vec<f64>)> {
+    let (value, full) = problem.gradient(mask, initial, g)?;
+    let mut grad = vec![0.0; g.len()];
+    for &i in active {
+        grad[i] = full[i];
+    }
+    Ok((value, grad))
+}
+
+/// `policy_gradient` (the search's adjoint gradient) by duals with as many lanes as free gains (up to [`LANES`]; more gains
+/// take several chunks of `LANES`): the reference the adjoint is tested against.
+pub fn policy_gradient_duals(
+    problem: &PolicyProblem<'_>,
+    mask: &PidMask,
+    initial: &PidPolicy<f64>,
+    g: &[f64],
+    active: &[usize],
+) -> Result<(f64, Vec<f64>)> {
+    // one closure per lane count: the dual type is part of its signature
+    macro_rules! lanes {
+        ($n:expr) => {
+            gradient_lanes::<{ $n }, _>(g, active, 1, |gd| {
+                Ok(problem.evaluate(&mask.unpack(initial, gd))?.0)
+            })
+        };
+    }
+    match active.len() {
+        1 => lanes!(1),
+        2 => lanes!(2),
+        3 => lanes!(3),
+        4 => lanes!(4),
+        5 => lanes!(5),
+        6 => lanes!(6),
+        7 => lanes!(7),
+        _ => lanes!(LANES),
     }
 }

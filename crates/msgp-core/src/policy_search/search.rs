@@ -5,10 +5,9 @@ use rand::{SeedableRng, rngs::StdRng};
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
-use super::gradient::policy_gradient;
-use super::objective::{PidMask, PolicyProblem};
+use super::objective::{PidMask, PolicyProblem, policy_gradient};
 use crate::error::{MsgpError, Result};
-use crate::numeric::parallel::{map_indexed, thread_count};
+use crate::numeric::parallel::{Threads, map_indexed};
 use crate::optim::{Adam, AdamState};
 use crate::policy::PidPolicy;
 
@@ -42,6 +41,10 @@ pub struct PolicySearchSettings {
     /// default) switches it off.
     #[serde(default)]
     pub trust_region: f64,
+    /// Threads of the screened candidates and the Adam starts (they are independent; the
+    /// result does not depend on it).
+    #[serde(skip)]
+    pub threads: Threads,
 }
 
 impl Default for PolicySearchSettings {
@@ -56,6 +59,7 @@ impl Default for PolicySearchSettings {
             candidate_spread: 2.0,
             candidate_starts: 2,
             trust_region: 0.0,
+            threads: Threads::default(),
         }
     }
 }
@@ -86,7 +90,8 @@ pub fn optimise_pid(
 
 /// [`optimise_pid`] with each free gain's scale `max(|g₀|, typical)`, `typical` packed like
 /// [`PidMask::pack`]: a gain that has come near zero keeps the scale of its kind, so the
-/// candidates and the Adam steps can still reach typical magnitudes again.
+/// candidates and the Adam steps can still reach typical magnitudes again. The candidates and
+/// starts run on [`PolicySearchSettings::threads`] threads.
 pub fn optimise_pid_scaled(
     problem: &PolicyProblem<'_>,
     initial: &PidPolicy<f64>,
@@ -94,20 +99,7 @@ pub fn optimise_pid_scaled(
     typical: &[f64],
     settings: &PolicySearchSettings,
 ) -> Result<PolicySearchResult> {
-    optimise_pid_scaled_with_threads(problem, initial, mask, typical, settings, thread_count())
-}
-
-/// [`optimise_pid_scaled`] on up to `threads` threads (the screened candidates and the Adam
-/// starts are independent; 1: the calling thread only). The result does not depend on
-/// `threads`.
-pub fn optimise_pid_scaled_with_threads(
-    problem: &PolicyProblem<'_>,
-    initial: &PidPolicy<f64>,
-    mask: &PidMask,
-    typical: &[f64],
-    settings: &PolicySearchSettings,
-    threads: usize,
-) -> Result<PolicySearchResult> {
+    let threads = settings.threads.get();
     if mask.is_empty() {
         return Err(MsgpError::InvalidSetting {
             name: "policy search",

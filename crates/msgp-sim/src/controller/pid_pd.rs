@@ -164,7 +164,7 @@ impl PidPdGains {
             context: path.display().to_string(),
             source,
         })?;
-        crate::log::write_atomically(path, |w| {
+        crate::atomic::write_atomically(path, |w| {
             std::io::Write::write_all(w, &json).map_err(|source| SimError::Io {
                 action: "cannot write",
                 path: path.to_owned(),

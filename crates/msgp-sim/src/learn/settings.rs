@@ -117,6 +117,7 @@ impl Default for LearnSettings {
                 candidate_spread: 2.0,
                 candidate_starts: 2,
                 trust_region: 1.0,
+                ..PolicySearchSettings::default()
             },
             cost_widths: [0.1, 0.3],
             ff_segment: Some(30),

@@ -62,7 +62,7 @@ pub fn encode(samples: &[Sample]) -> Vec<u8> {
 /// Writes samples to `path` atomically.
 pub fn write(path: &Path, samples: &[Sample]) -> Result<(), SimError> {
     let bytes = encode(samples);
-    super::write_atomically(path, |w| {
+    crate::atomic::write_atomically(path, |w| {
         w.write_all(&bytes).map_err(|source| SimError::Io {
             action: "cannot write",
             path: path.to_owned(),

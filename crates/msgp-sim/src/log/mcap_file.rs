@@ -66,7 +66,7 @@ struct LatentMsg {
 
 /// Writes `episode` to `path` atomically.
 pub fn write(path: &Path, episode: &Episode) -> Result<(), SimError> {
-    super::write_atomically(path, |w| write_to(w, episode, path))
+    crate::atomic::write_atomically(path, |w| write_to(w, episode, path))
 }
 
 /// Encodes `episode` as MCAP bytes in memory; `path` is only used in error messages.

@@ -4,13 +4,10 @@
 //! [`EpisodeInfo`] as metadata. Layouts are documented in [`csv_file`] and [`mcap_file`]
 //! and in the crate README.
 
-pub mod atomic;
 pub mod csv_file;
 pub mod mcap_file;
 
 use std::path::Path;
-
-pub use atomic::write_atomically;
 
 use crate::episode::{Episode, EpisodeInfo, Sample};
 use crate::error::SimError;
