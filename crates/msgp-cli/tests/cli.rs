@@ -785,3 +785,41 @@ fn the_simulator_takes_the_command_saturation() {
         &["--saturation applies to gains"],
     );
 }
+
+/// The thread count comes from `MSGP_THREADS`: a positive integer, else a clear error; the
+/// numbers do not depend on it.
+#[test]
+fn the_thread_count_is_checked_and_changes_no_number() {
+    let dir = Scratch::new("threads");
+    dir.write("s.csv", &system_csv(120, None));
+    let fit = |threads: &str| {
+        Command::new(BIN)
+            .args(args(
+                &["fit", "--data", "s.csv", "--json", "--out", "m.json"],
+                &FAST,
+            ))
+            .env("MSGP_THREADS", threads)
+            .current_dir(&dir.0)
+            .output()
+            .expect("run msgp")
+    };
+    for bad in ["0", "two", "-1"] {
+        let o = fit(bad);
+        assert!(!o.status.success(), "MSGP_THREADS={bad} should fail");
+        let err = stderr(&o);
+        assert!(err.contains("MSGP_THREADS") && err.contains(bad), "{err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    let (one, two) = (fit("1"), fit("2"));
+    assert!(
+        one.status.success() && two.status.success(),
+        "{}",
+        stderr(&one)
+    );
+    let rmse = |o: &Output| -> Value {
+        let v: Value = serde_json::from_str(&stdout(o)).expect("JSON");
+        v["rmse"].clone()
+    };
+    assert_eq!(rmse(&one), rmse(&two));
+    assert!(rmse(&one).is_f64());
+}

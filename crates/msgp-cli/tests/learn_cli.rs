@@ -150,7 +150,7 @@ fn learn_policy_writes_policy_table_episodes_plot_and_json() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// `--random-policies 1`: the first random episode runs drawn gains, labelled as such, and the
+/// `--experimental random-policies=1`: the first random episode runs drawn gains, labelled as such, and the
 /// summary records them with their stability verdict.
 #[test]
 fn random_policy_rollouts_are_recorded() {
@@ -158,7 +158,7 @@ fn random_policy_rollouts_are_recorded() {
     let v = learn_json(
         &dir,
         "out",
-        &["--iterations", "1", "--random-policies", "1"],
+        &["--iterations", "1", "--experimental", "random-policies=1"],
     );
     let rp = v["random_policies"].as_array().expect("random_policies");
     assert_eq!(rp.len(), 1);
@@ -244,10 +244,12 @@ fn figure4_reuses_a_run_only_when_every_setting_matches() {
     assert!(!reused(&base), "nothing to reuse yet");
     assert!(reused(&base), "the same settings reuse the finished run");
     // the same budget, seed and model, but the end effector not declared an integrator
-    assert!(!reused(&[&base[..], &["--free-position"]].concat()));
+    assert!(!reused(
+        &[&base[..], &["--experimental", "free-position=true"]].concat()
+    ));
     // … or another solver, or warm starts
     assert!(!reused(
-        &[&base[..], &["--fit-optimizer", "lbfgs"]].concat()
+        &[&base[..], &["--experimental", "fit-optimizer=lbfgs"]].concat()
     ));
     assert!(!reused(&[&base[..], &["--warm-start", "5"]].concat()));
     // a run recorded before the solver and warm-start settings existed used their defaults
@@ -301,12 +303,28 @@ fn bad_learning_options_fail_with_a_message() {
             "--cost-widths needs two positive widths",
         ),
         (
-            vec!["learn-policy", "--sim", "pendulum", "--trust-region=-1"],
-            "--trust-region",
+            vec![
+                "learn-policy",
+                "--sim",
+                "pendulum",
+                "--experimental",
+                "trust-region=-1",
+            ],
+            "--experimental trust-region must be finite",
         ),
         (
             vec!["learn-policy", "--sim", "pendulum", "--policy-horizon", "0"],
             "--policy-horizon",
+        ),
+        (
+            vec![
+                "learn-policy",
+                "--sim",
+                "pendulum",
+                "--experimental",
+                "wobble=1",
+            ],
+            "unknown experiment `wobble` (known: start-smoothing, fb-segment",
         ),
         (
             vec!["learn-policy", "--sim", "pendulum", "--pole-length=-1"],
@@ -317,10 +335,10 @@ fn bad_learning_options_fail_with_a_message() {
                 "learn-policy",
                 "--sim",
                 "pendulum",
-                "--start-smoothing",
-                "2",
+                "--experimental",
+                "start-smoothing=2",
             ],
-            "--start-smoothing 2",
+            "--experimental start-smoothing=2",
         ),
         (
             vec![
@@ -329,10 +347,10 @@ fn bad_learning_options_fail_with_a_message() {
                 "pendulum",
                 "--random-rollouts",
                 "2",
-                "--random-policies",
-                "3",
+                "--experimental",
+                "random-policies=3",
             ],
-            "--random-policies (3) cannot exceed --random-rollouts (2)",
+            "--experimental random-policies (3) cannot exceed --random-rollouts (2)",
         ),
     ] {
         let o = run(&dir, &args);

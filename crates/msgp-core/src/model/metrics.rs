@@ -2,6 +2,8 @@
 //! fraction of measurements inside the ±2σ band, in original units; pooled over several
 //! simulations by step count.
 
+use std::ops::Range;
+
 use serde::{Deserialize, Serialize};
 
 use super::Simulation;
@@ -21,10 +23,27 @@ pub struct Metrics {
     pub steps: usize,
 }
 
-/// RMSE, mean NLL and 2σ coverage of a simulation against measured outputs.
+/// RMSE, mean NLL and 2σ coverage of a simulation against measured outputs (all outputs
+/// pooled).
 pub fn score(sim: &Simulation, traj: &Trajectory) -> Result<Metrics> {
-    let (n, dy) = sim.mean.shape();
-    if n == 0 || sim.start + n > traj.len() {
+    score_columns(sim, traj, 0..sim.mean.ncols())
+}
+
+/// [`score`] of output `j` alone (what a plot of that output shows).
+pub fn score_output(sim: &Simulation, traj: &Trajectory, j: usize) -> Result<Metrics> {
+    if j >= sim.mean.ncols() {
+        return Err(MsgpError::Shape(format!(
+            "output {j} of a simulation of {} outputs",
+            sim.mean.ncols()
+        )));
+    }
+    score_columns(sim, traj, j..j + 1)
+}
+
+fn score_columns(sim: &Simulation, traj: &Trajectory, cols: Range<usize>) -> Result<Metrics> {
+    let n = sim.mean.nrows();
+    let dy = cols.len();
+    if n == 0 || sim.start + n > traj.len() || cols.end > traj.y.ncols() {
         return Err(MsgpError::Data(
             "simulation does not fit the measured trajectory".into(),
         ));
@@ -33,7 +52,7 @@ pub fn score(sim: &Simulation, traj: &Trajectory) -> Result<Metrics> {
     let mut nll = 0.0;
     let mut inside = 0usize;
     for i in 0..n {
-        for j in 0..dy {
+        for j in cols.clone() {
             let y = traj.y[(sim.start + i, j)];
             let (m, v) = (sim.mean[(i, j)], sim.var[(i, j)].max(f64::MIN_POSITIVE));
             let r = y - m;

@@ -15,7 +15,7 @@ use crate::rollout::{Control, simulate};
 
 mod metrics;
 
-pub use metrics::{Metrics, pool, score};
+pub use metrics::{Metrics, pool, score, score_output};
 
 /// How the model was trained.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]

@@ -11,7 +11,7 @@ use anyhow::{Context, anyhow};
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
-use crate::dataset::Simulated;
+use msgp_core::model::{Simulated, score_output};
 
 /// Panels beyond this many are left out (the first trajectories are drawn).
 const MAX_PANELS: usize = 6;
@@ -120,10 +120,10 @@ fn draw_panel(
             .as_slice(),
     );
     let pad = 0.05 * (y1 - y0).max(1e-12);
-    let (rmse, coverage) = output_metrics(&measured, &mean, &sd);
+    let scores = score_output(&s.sim, &s.part.traj, j)?;
     let caption = format!(
-        "{} (RMSE {rmse:.4}, 2σ coverage {coverage:.2})",
-        panel.title
+        "{} (RMSE {:.4}, 2σ coverage {:.2})",
+        panel.title, scores.rmse, scores.coverage_2sigma
     );
     let e = |e: DrawingAreaErrorKind<_>| anyhow!("{e}");
     let mut chart = ChartBuilder::on(area)
@@ -186,20 +186,6 @@ fn bounds(v: &[f64]) -> (f64, f64) {
         return (lo - 0.5, hi + 0.5);
     }
     (lo, hi)
-}
-
-/// RMSE and 2σ coverage of one output.
-fn output_metrics(measured: &[f64], mean: &[f64], sd: &[f64]) -> (f64, f64) {
-    let n = measured.len().max(1) as f64;
-    let mut se = 0.0;
-    let mut inside = 0usize;
-    for ((y, m), d) in measured.iter().zip(mean).zip(sd) {
-        se += (y - m) * (y - m);
-        if (y - m).abs() <= 2.0 * d {
-            inside += 1;
-        }
-    }
-    ((se / n).sqrt(), inside as f64 / n)
 }
 
 /// A tick label: up to 6 significant decimals, trailing zeros dropped, no `-0`.

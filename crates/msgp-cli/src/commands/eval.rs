@@ -1,60 +1,18 @@
 //! `msgp eval` and `msgp simulate`: free simulation of data files with a saved model.
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use clap::Args;
 use msgp_core::model::Model;
 use msgp_core::model_file::{ModelFile, write_atomically};
 use serde_json::json;
 
-use crate::dataset::{
-    DataArgs, Dataset, Part, Selection, Simulated, check_lengths, pool, simulate_all,
-};
-use crate::output::{out, out_json};
-use crate::plot::plot;
-use crate::report::{metrics_json, metrics_line, trajectories};
-
-/// Options of `msgp eval`.
-#[derive(Debug, Args)]
-pub struct EvalArgs {
-    /// Model file written by `msgp fit`.
-    #[arg(long, value_name = "MODEL.json")]
-    model: PathBuf,
-    #[command(flatten)]
-    data: DataArgs,
-    /// Simulate each trajectory from sample N on (the first max(l_y, l_u) samples from N seed
-    /// the simulation).
-    #[arg(long, value_name = "N", default_value_t = 0)]
-    from: usize,
-    /// Write a PNG of the free simulation.
-    #[arg(long, value_name = "OUT.png")]
-    plot: Option<PathBuf>,
-    /// Print one JSON object instead of text.
-    #[arg(long)]
-    json: bool,
-}
-
-/// Options of `msgp simulate`.
-#[derive(Debug, Args)]
-pub struct SimulateArgs {
-    /// Model file written by `msgp fit`.
-    #[arg(long, value_name = "MODEL.json")]
-    model: PathBuf,
-    #[command(flatten)]
-    data: DataArgs,
-    /// Simulate each trajectory from sample N on.
-    #[arg(long, value_name = "N", default_value_t = 0)]
-    from: usize,
-    /// Output CSV: `t, <output>_mean, <output>_std, <output>` per simulated step (and an
-    /// `episode` column first when there are several trajectories).
-    #[arg(long, value_name = "PRED.csv")]
-    out: PathBuf,
-    /// Print a JSON summary instead of text.
-    #[arg(long)]
-    json: bool,
-}
+use crate::args::{DataArgs, EvalArgs, SimulateArgs};
+use crate::render::output::{out, out_json};
+use crate::render::plot::plot;
+use crate::render::report::{metrics_json, metrics_line, trajectories};
+use msgp_core::data::dataset::{Dataset, Part, Selection, check_lengths};
+use msgp_core::model::{Simulated, pool};
 
 /// The model, its file and the data sliced from `from`.
 struct Loaded {
@@ -121,7 +79,7 @@ fn load(model_path: &std::path::Path, args: &DataArgs, from: usize) -> anyhow::R
 /// Runs `msgp eval`.
 pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
     let l = load(&args.model, &args.data, args.from)?;
-    let sims = simulate_all(&l.model, &l.parts)?;
+    let sims = l.model.simulate_parts(&l.parts)?;
     let metrics = pool(
         &sims.iter().map(|s| s.metrics).collect::<Vec<_>>(),
         l.model.spec.dy,
@@ -206,7 +164,7 @@ fn prediction_csv(outputs: &[String], sims: &[Simulated]) -> String {
 /// Runs `msgp simulate`.
 pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let l = load(&args.model, &args.data, args.from)?;
-    let sims = simulate_all(&l.model, &l.parts)?;
+    let sims = l.model.simulate_parts(&l.parts)?;
     let csv = prediction_csv(&l.data.outputs, &sims);
     write_atomically(&args.out, csv.as_bytes())
         .with_context(|| format!("cannot write predictions to {}", args.out.display()))?;

@@ -2,44 +2,14 @@
 //! and with one-step GP-NARX models, several seeds each; per run the iteration and interaction
 //! time of the first policy that passes the stability test, and the cost curves.
 
-use std::path::PathBuf;
-
 use anyhow::Context;
-use clap::Args;
-use msgp_core::fit::FitOptimizer;
 use msgp_sim::PendulumParams;
 use msgp_sim::learn::{IterationReport, LearnSettings};
 
-use crate::cost_plot::plot_cost_bands;
-use crate::learn_cmd::{
-    BudgetArgs, ModelArg, learn, model_name, settings, summary_json, write_outputs,
-};
-use crate::reproduce::{machine, today};
-
-/// Options of `msgp reproduce figure4`.
-#[derive(Debug, Args)]
-pub struct Figure4Args {
-    /// Markdown file whose `figure4` section is (re)written.
-    #[arg(long, value_name = "RESULTS.md", default_value = "RESULTS.md")]
-    pub out: PathBuf,
-    /// Folder for every run's artefacts and the cost-curve plot.
-    #[arg(long, value_name = "DIR", default_value = "results/figure4")]
-    pub dir: PathBuf,
-    /// Seeds 0..N per model.
-    #[arg(long, default_value_t = 5)]
-    pub seeds: u64,
-    /// Policy iterations per run.
-    #[arg(long, default_value_t = LearnSettings::default().iterations)]
-    pub iterations: usize,
-    /// Models to run (comma-separated).
-    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [ModelArg::Msgp, ModelArg::GpNarx, ModelArg::LinearKf])]
-    pub models: Vec<ModelArg>,
-    /// No progress lines on stderr.
-    #[arg(long)]
-    pub quiet: bool,
-    #[command(flatten)]
-    pub budget: BudgetArgs,
-}
+use crate::args::{Figure4Args, ModelArg};
+use crate::commands::learn::{learn, model_name, settings, summary_json, write_outputs};
+use crate::render::cost_plot::plot_cost_bands;
+use crate::render::results_file::{machine, today};
 
 /// One finished run.
 struct Run {
@@ -143,9 +113,10 @@ pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
         .map(|r| r.seconds)
         .filter(|s| s.is_finite())
         .sum();
-    let markdown = render(args, &runs, total, &plot);
-    crate::results_file::update_section(&args.out, "figure4", &markdown)?;
-    crate::output::out(&markdown)
+    let learned = settings(ModelArg::Msgp, 0, args.iterations, &args.budget)?;
+    let markdown = render(args, &learned, &runs, total, &plot);
+    crate::render::results_file::update_section(&args.out, "figure4", &markdown)?;
+    crate::render::output::out(&markdown)
 }
 
 /// This process's arguments after the binary, quoted for a POSIX shell where needed: the
@@ -168,13 +139,21 @@ fn invocation() -> String {
         .join(" ")
 }
 
-fn render(args: &Figure4Args, runs: &[Run], seconds: f64, plot: &std::path::Path) -> String {
+/// The markdown section; `learned` holds the loop's settings (of an MSGP run: what the budget
+/// and the experiment switches resolved to).
+fn render(
+    args: &Figure4Args,
+    learned: &LearnSettings,
+    runs: &[Run],
+    seconds: f64,
+    plot: &std::path::Path,
+) -> String {
     let d = &args.budget;
     let models: Vec<&str> = args.models.iter().map(|&m| model_name(m)).collect();
     let mut s = String::from("# PILCO on the simulated pendulum (the paper's Figure 4)\n\n");
     s.push_str(&format!(
         "Learning to balance the pole on the robot's end effector (`msgp-sim`, default plant: noise, one-step delay, 30 ms lag) from scratch: {} rollouts, then per iteration fit the model on all data, optimise the PID + PD gains on it, run them for one {} s episode. After every iteration the simulator's stability test (5 starts × 3 noise draws, 10 s each; not interaction, not training data) judges the gains. Interaction seconds count every episode so far, random rollouts included. Models: {}; seeds 0–{}; {} iterations per run.\n\n",
-        match d.random_policies {
+        match learned.random_policies {
             0 => format!("{} random-excitation", d.random_rollouts),
             k => format!(
                 "{} random-excitation and {k} random-policy (gains drawn uniformly in [0, 2 × typical])",
@@ -190,7 +169,7 @@ fn render(args: &Figure4Args, runs: &[Run], seconds: f64, plot: &std::path::Path
         "- Command: `cargo run --release --locked --bin msgp -- {}`\n",
         invocation()
     ));
-    let solver = FitOptimizer::from(d.fit_optimizer).name();
+    let solver = learned.fit.optimizer.name();
     let warm = match d.warm_start {
         None | Some(0) => String::new(),
         Some(n) => format!(", from the second iteration on warm-started for {n} iterations"),

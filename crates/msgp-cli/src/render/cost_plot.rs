@@ -8,7 +8,7 @@ use anyhow::{Context, anyhow};
 use msgp_sim::learn::IterationReport;
 use plotters::prelude::*;
 
-use crate::plot::{font, legend};
+use crate::render::plot::{font, legend};
 
 const WIDTH: u32 = 1000;
 const HEIGHT: u32 = 560;

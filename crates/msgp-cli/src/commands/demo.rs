@@ -2,29 +2,12 @@
 
 use std::time::Instant;
 
+use crate::args::DemoArgs;
 use anyhow::Context;
-use clap::Args;
 use msgp_core::data::{NoiseScale, SyntheticSystem};
 use msgp_core::fit::{FitSettings, fit};
 use msgp_core::model::Method;
 use msgp_core::numeric::parallel::Threads;
-
-/// Options of `msgp demo`.
-#[derive(Debug, Args)]
-pub struct DemoArgs {
-    /// Synthetic system of the paper's Table 2 (1–5).
-    #[arg(long, default_value_t = 4)]
-    system: u8,
-    /// Seed for data generation and initialisation.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// Adam iterations for MSGP.
-    #[arg(long, default_value_t = 400)]
-    iters: usize,
-    /// Number of pseudo-inputs.
-    #[arg(long, default_value_t = 100)]
-    inducing: usize,
-}
 
 /// Runs the demo.
 pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
@@ -47,7 +30,9 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         (0.5711, 0.3287),
         (0.0164, 0.0143),
     ][usize::from(args.system - 1)];
-    crate::output::out("method    test RMSE   NLL/step  2σ coverage  train time  (paper RMSE)")?;
+    crate::render::output::out(
+        "method    test RMSE   NLL/step  2σ coverage  train time  (paper RMSE)",
+    )?;
     for (method, paper_rmse) in [(Method::GpNarx, paper.0), (Method::Msgp, paper.1)] {
         let settings = FitSettings {
             method,
@@ -78,7 +63,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         })
         .with_context(|| format!("fitting {}", method.name()))?;
         let metrics = model.evaluate(&bench.test)?;
-        crate::output::out(&format!(
+        crate::render::output::out(&format!(
             "{:<9} {:>9.4}  {:>9.3}  {:>11.3}  {:>8.1} s  ({paper_rmse:.4})",
             method.name(),
             metrics.rmse,

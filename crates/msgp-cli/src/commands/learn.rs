@@ -12,7 +12,6 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use clap::{Args, ValueEnum};
 use msgp_core::model::Method;
 use msgp_core::narx::start_window::StartWindow;
 use msgp_core::numeric::parallel::Threads;
@@ -22,148 +21,10 @@ use msgp_sim::learn::{
 use msgp_sim::{PendulumParams, write_run};
 use serde_json::{Value, json};
 
-use crate::cost_plot::{CostCurve, plot_costs};
-use crate::fit_cmd::{MeanArg, OptimizerArg};
-use crate::output::{out, out_json};
-use crate::progress::FitBar;
-use crate::sim_cmd::PlantArgs;
-
-/// Simulated systems the loop can learn on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum SimArg {
-    /// The inverted pendulum on the robot's end effector (crate msgp-sim).
-    Pendulum,
-}
-
-/// Dynamics model of the loop.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum ModelArg {
-    /// Multi-step GP trained on the trajectory likelihood (the paper's method).
-    Msgp,
-    /// One-step GP-NARX trained on the marginal likelihood (standard PILCO).
-    GpNarx,
-    /// The linear-Gaussian window model (no GP) by the exact Kalman-filter likelihood; the end
-    /// effector declared kinematic, fits warm-started, gains optimised over 10 s (balanced the
-    /// default pendulum in 5 of 5 seeds, RESULTS.md).
-    LinearKf,
-}
-
-impl From<ModelArg> for Method {
-    fn from(m: ModelArg) -> Self {
-        match m {
-            ModelArg::Msgp => Method::Msgp,
-            ModelArg::GpNarx => Method::GpNarx,
-            ModelArg::LinearKf => Method::LinearKf,
-        }
-    }
-}
-
-/// Sizes of the loop: data, model, policy search.
-#[derive(Debug, Args)]
-#[command(next_help_heading = "Budget")]
-pub struct BudgetArgs {
-    /// Random episodes before the first policy (random excitation, or random policies: see
-    /// --random-policies).
-    #[arg(long, default_value_t = LearnSettings::default().random_rollouts)]
-    pub random_rollouts: usize,
-    /// How many of the random rollouts run a random policy (PID + PD gains drawn uniformly
-    /// between 0 and twice their typical magnitudes) instead of the random excitation; each
-    /// drawn gain set also gets the stability test, reported beside the iterations.
-    #[arg(long, value_name = "K", default_value_t = LearnSettings::default().random_policies)]
-    pub random_policies: usize,
-    /// Length of every interaction episode [s].
-    #[arg(long, default_value_t = LearnSettings::default().episode_seconds)]
-    pub episode_seconds: f64,
-    /// Solver iterations of each model fit [default: 300 for msgp; the one-step fit's 300 Adam
-    /// iterations for gp-narx; at most 300 L-BFGS iterations from each of two starts for
-    /// linear-kf].
-    #[arg(long, value_name = "N")]
-    pub fit_iters: Option<usize>,
-    /// Solver of each MSGP model fit.
-    #[arg(long, value_enum, default_value_t = OptimizerArg::Adam)]
-    pub fit_optimizer: OptimizerArg,
-    /// From the second iteration on, continue the previous MSGP or linear-kf model for N solver
-    /// iterations (same normaliser and pseudo-inputs) instead of fitting from scratch; 0: always
-    /// from scratch [default: 0 for msgp and gp-narx, 300 for linear-kf].
-    #[arg(long, value_name = "N")]
-    pub warm_start: Option<usize>,
-    /// MSGP: start each training trajectory's predicted rollout from a quadratic fitted to its
-    /// first N samples (the window's covariance is what that estimate really has), instead of
-    /// from its measured window; 0: the measured window (docs/design.md).
-    #[arg(long, value_name = "N", default_value_t = match LearnSettings::default().fit.start_window {
-        StartWindow::Smoothed { samples, .. } => samples,
-        StartWindow::Measured => 0,
-    })]
-    pub start_smoothing: usize,
-    /// MSGP: feedback episodes enter the model loss as overlapping segments of N samples (each
-    /// under the gains that ran it) instead of whole; 0 (the default): whole.
-    #[arg(long, value_name = "N", default_value_t = LearnSettings::default().fb_segment.unwrap_or(0))]
-    pub fb_segment: usize,
-    /// Pseudo-inputs of the model.
-    #[arg(long, value_name = "M", default_value_t = LearnSettings::default().fit.inducing)]
-    pub inducing: usize,
-    /// Adam steps of each policy optimisation start.
-    #[arg(long, value_name = "N", default_value_t = LearnSettings::default().search.iterations)]
-    pub search_iters: usize,
-    /// Random gain candidates screened on the model before each policy optimisation.
-    #[arg(long, value_name = "N", default_value_t = LearnSettings::default().search.candidates)]
-    pub candidates: usize,
-    /// Prior mean of the GP model, for both models (zero: the paper's GP; linear: an ARX map
-    /// under the GP, started by instrumental variables; see docs/design.md).
-    #[arg(long, value_enum, default_value_t = MeanArg::Linear)]
-    pub mean: MeanArg,
-    /// Do not declare the end-effector position a double integrator of the commanded
-    /// acceleration (declared by default with the linear mean: its own lags then enter only its
-    /// `2 x_t − x_{t−1}` row, never the GP; see docs/design.md).
-    #[arg(long)]
-    pub free_position: bool,
-    /// Horizon of the predicted rollouts the gains are optimised on [s] [default: 5 for msgp
-    /// and gp-narx, 10 for linear-kf (the stability test's length)].
-    #[arg(long, value_name = "S")]
-    pub policy_horizon: Option<f64>,
-    /// Highest frequency of the random excitation [Hz].
-    #[arg(long, value_name = "HZ", default_value_t = LearnSettings::default().excitation.max_hz)]
-    pub excitation_max_hz: f64,
-    /// Trust region of each policy search, in typical gain magnitudes: no gain moves further
-    /// than this from the previous iteration's (0: off).
-    #[arg(long, value_name = "R", default_value_t = LearnSettings::default().search.trust_region)]
-    pub trust_region: f64,
-    /// Widths of the saturating cost on the pole angle [rad] and the end-effector position [m]:
-    /// `c = 1 − exp(−½ ((θ/w_θ)² + (x/w_x)²))` per step.
-    #[arg(long, value_name = "W_THETA,W_X", value_delimiter = ',',
-          default_values_t = LearnSettings::default().cost_widths)]
-    pub cost_widths: Vec<f64>,
-}
-
-/// Options of `msgp learn-policy`.
-#[derive(Debug, Args)]
-pub struct LearnArgs {
-    /// The simulated system.
-    #[arg(long, value_enum)]
-    pub sim: SimArg,
-    /// Dynamics model.
-    #[arg(long, value_enum, default_value_t = ModelArg::Msgp)]
-    pub model: ModelArg,
-    /// Policy-learning iterations after the random rollouts.
-    #[arg(long, default_value_t = LearnSettings::default().iterations)]
-    pub iterations: usize,
-    #[command(flatten)]
-    pub budget: BudgetArgs,
-    /// Seed of every random choice (episodes, excitation, fits, restarts).
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Output folder [default: learn-<model>-seed<S>].
-    #[arg(long, value_name = "DIR")]
-    pub out: Option<PathBuf>,
-    /// Print one JSON object instead of text.
-    #[arg(long)]
-    pub json: bool,
-    /// No progress lines on stderr.
-    #[arg(long)]
-    pub quiet: bool,
-    #[command(flatten)]
-    pub plant: PlantArgs,
-}
+use crate::args::{BudgetArgs, Experiment, LearnArgs, MeanArg, ModelArg, SimArg};
+use crate::render::cost_plot::{CostCurve, plot_costs};
+use crate::render::output::{out, out_json};
+use crate::render::progress::FitBar;
 
 /// The model's name in file names and tables.
 pub fn model_name(m: ModelArg) -> &'static str {
@@ -321,12 +182,6 @@ pub fn settings(
     {
         anyhow::bail!("--policy-horizon must be in (0, 600] seconds, got {h}");
     }
-    if !(args.trust_region.is_finite() && args.trust_region >= 0.0) {
-        anyhow::bail!(
-            "--trust-region must be finite and at least 0, got {}",
-            args.trust_region
-        );
-    }
     let cost_widths: [f64; 2] = match args.cost_widths.as_slice() {
         [w_theta, w_x] if [w_theta, w_x].iter().all(|w| w.is_finite() && **w > 0.0) => {
             [*w_theta, *w_x]
@@ -338,39 +193,62 @@ pub fn settings(
     if args.random_rollouts == 0 {
         anyhow::bail!("--random-rollouts must be at least 1 (the first model needs data)");
     }
-    if args.random_policies > args.random_rollouts {
-        anyhow::bail!(
-            "--random-policies ({}) cannot exceed --random-rollouts ({})",
-            args.random_policies,
-            args.random_rollouts
-        );
-    }
     if args.inducing == 0 {
         anyhow::bail!("--inducing must be at least 1");
     }
     let method: Method = model.into();
     let d = LearnSettings::for_method(method);
     let threads = Threads::from_env()?;
-    let start_window = match args.start_smoothing {
+    // the experiment switches, each at the loop's default unless set
+    let mut start_smoothing = match d.fit.start_window {
+        StartWindow::Smoothed { samples, .. } => samples,
+        StartWindow::Measured => 0,
+    };
+    let mut fb_segment = d.fb_segment.unwrap_or(0);
+    let mut free_position = false;
+    let mut excitation = d.excitation;
+    let mut random_policies = d.random_policies;
+    let mut trust_region = d.search.trust_region;
+    let mut optimizer = d.fit.optimizer;
+    for e in &args.experimental {
+        match *e {
+            Experiment::StartSmoothing(n) => start_smoothing = n,
+            Experiment::FbSegment(n) => fb_segment = n,
+            Experiment::FreePosition(b) => free_position = b,
+            Experiment::ExcitationMaxHz(hz) => excitation.max_hz = hz,
+            Experiment::RandomPolicies(k) => random_policies = k,
+            Experiment::TrustRegion(r) => trust_region = r,
+            Experiment::FitOptimizer(o) => optimizer = o.into(),
+        }
+    }
+    if !(trust_region.is_finite() && trust_region >= 0.0) {
+        anyhow::bail!(
+            "--experimental trust-region must be finite and at least 0, got {trust_region}"
+        );
+    }
+    if random_policies > args.random_rollouts {
+        anyhow::bail!(
+            "--experimental random-policies ({random_policies}) cannot exceed \
+             --random-rollouts ({})",
+            args.random_rollouts
+        );
+    }
+    let start_window = match start_smoothing {
         0 => StartWindow::Measured,
         samples => StartWindow::Smoothed { samples, degree: 2 },
     };
     start_window
         .validate(d.fit.ly.max(d.fit.lu))
-        .with_context(|| format!("--start-smoothing {}", args.start_smoothing))?;
-    let excitation = msgp_sim::ExcitationConfig {
-        max_hz: args.excitation_max_hz,
-        ..d.excitation
-    };
+        .with_context(|| format!("--experimental start-smoothing={start_smoothing}"))?;
     excitation
         .validate()
-        .with_context(|| format!("--excitation-max-hz {}", args.excitation_max_hz))?;
+        .with_context(|| format!("--experimental excitation-max-hz={}", excitation.max_hz))?;
     Ok(LearnSettings {
         method,
         iterations,
         random_rollouts: args.random_rollouts,
-        random_policies: args.random_policies,
-        fb_segment: (args.fb_segment > 0).then_some(args.fb_segment),
+        random_policies,
+        fb_segment: (fb_segment > 0).then_some(fb_segment),
         episode_seconds: args.episode_seconds,
         policy_horizon_seconds: args.policy_horizon.unwrap_or(d.policy_horizon_seconds),
         excitation,
@@ -380,7 +258,7 @@ pub fn settings(
             inducing: args.inducing,
             mean: args.mean.into(),
             // a linear-kf model has the linear mean whatever --mean says
-            integrators: match (method, args.mean, args.free_position) {
+            integrators: match (method, args.mean, free_position) {
                 (_, _, true) => Vec::new(),
                 (Method::LinearKf, _, false) | (_, MeanArg::Linear, false) => {
                     d.fit.integrators.clone()
@@ -391,7 +269,7 @@ pub fn settings(
                 (Method::Msgp | Method::LinearKf, Some(n)) => n,
                 _ => d.fit.iterations,
             },
-            optimizer: args.fit_optimizer.into(),
+            optimizer,
             start_window,
             one_step_iterations: match (method, args.fit_iters) {
                 (Method::Msgp, _) | (_, None) => d.fit.one_step_iterations,
@@ -408,7 +286,7 @@ pub fn settings(
         search: msgp_core::policy_search::PolicySearchSettings {
             iterations: args.search_iters,
             candidates: args.candidates,
-            trust_region: args.trust_region,
+            trust_region,
             threads,
             ..d.search
         },

@@ -3,11 +3,10 @@
 //! paper's numbers, with our NLL and 2σ coverage.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use clap::{Args, Subcommand};
 use msgp_core::data::real::{RealSeries, data_dir};
 use msgp_core::data::{Benchmark, NoiseScale, SyntheticSystem};
 use msgp_core::fit::{FitOptimizer, FitProgress, FitSettings, fit};
@@ -15,57 +14,10 @@ use msgp_core::model::{Method, Metrics};
 use msgp_core::numeric::parallel::Threads;
 use serde_json::json;
 
-use crate::fit_cmd::{MethodArg, OptimizerArg};
-use crate::output::{out, out_json};
-use crate::progress::FitBar;
-
-/// Subcommands of `msgp reproduce`.
-#[derive(Debug, Subcommand)]
-pub enum ReproduceCommand {
-    /// Table 1 of the paper: GP-NARX, PILCO's GP-NARX and MSGP on the ten benchmarks.
-    Table1(Table1Args),
-    /// Figure 4 of the paper: PILCO on the pendulum with MSGP and GP-NARX models, several
-    /// seeds; iterations and interaction time to the first stable policy.
-    Figure4(Box<crate::figure4::Figure4Args>),
-}
-
-/// Options of `msgp reproduce table1`.
-#[derive(Debug, Args)]
-pub struct Table1Args {
-    /// Markdown file to write.
-    #[arg(long, value_name = "RESULTS.md", default_value = "RESULTS.md")]
-    out: PathBuf,
-    /// Folder with the real series (actuator.csv, …) [default: $MSGP_DATA_DIR, else
-    /// ../shared/data/real].
-    #[arg(long, value_name = "DIR")]
-    data_dir: Option<PathBuf>,
-    /// Only these benchmarks (comma-separated): synthetic1 … synthetic5, actuator, ballbeam,
-    /// drives, furnace, dryer.
-    #[arg(long, value_name = "NAME,...", value_delimiter = ',')]
-    only: Vec<String>,
-    /// Only these methods (comma-separated).
-    #[arg(long, value_enum, value_name = "METHOD,...", value_delimiter = ',')]
-    methods: Vec<MethodArg>,
-    /// Solver iterations on the MSGP loss [default: the fit default, 400].
-    #[arg(long, value_name = "N")]
-    iters: Option<usize>,
-    /// Solver of the MSGP loss; `lbfgs` writes its own section of the results file, next to
-    /// the paper's Adam.
-    #[arg(long, value_enum, default_value_t = OptimizerArg::Adam)]
-    optimizer: OptimizerArg,
-    /// Number of pseudo-inputs.
-    #[arg(long, value_name = "M", default_value_t = 100)]
-    inducing: usize,
-    /// Seed of data generation (synthetic systems) and of the fits.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// Print the rows as one JSON object.
-    #[arg(long)]
-    json: bool,
-    /// No progress output on stderr.
-    #[arg(long)]
-    quiet: bool,
-}
+use crate::args::{OptimizerArg, Table1Args};
+use crate::render::output::{out, out_json};
+use crate::render::progress::FitBar;
+use crate::render::results_file::{machine, today};
 
 /// One benchmark of Table 1 and the paper's RMSE for (GP-NARX, PILCO, MSGP).
 struct Task {
@@ -167,15 +119,8 @@ struct Cell {
     best_iteration: usize,
 }
 
-/// Runs `msgp reproduce …`.
-pub fn run(cmd: &ReproduceCommand) -> anyhow::Result<()> {
-    match cmd {
-        ReproduceCommand::Table1(args) => table1(args),
-        ReproduceCommand::Figure4(args) => crate::figure4::run(args),
-    }
-}
-
-fn table1(args: &Table1Args) -> anyhow::Result<()> {
+/// Runs `msgp reproduce table1`.
+pub fn run(args: &Table1Args) -> anyhow::Result<()> {
     let started = Instant::now();
     let all = tasks();
     for name in &args.only {
@@ -283,7 +228,7 @@ fn table1(args: &Table1Args) -> anyhow::Result<()> {
         OptimizerArg::Adam => "table1",
         OptimizerArg::Lbfgs => "table1-lbfgs",
     };
-    crate::results_file::update_section(&args.out, section, &markdown)?;
+    crate::render::results_file::update_section(&args.out, section, &markdown)?;
     if args.json {
         let list: Vec<_> = rows
             .iter()
@@ -448,54 +393,9 @@ fn render(
     s
 }
 
-/// "2 CPUs (AMD EPYC …)" from the OS, best effort.
-pub(crate) fn machine() -> String {
-    let cpus = std::thread::available_parallelism().map_or(0, |n| n.get());
-    let model = std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|t| {
-            t.lines()
-                .find(|l| l.starts_with("model name"))
-                .and_then(|l| l.split_once(':'))
-                .map(|(_, v)| v.trim().to_string())
-        })
-        .unwrap_or_else(|| "unknown CPU".to_string());
-    format!("{cpus} CPUs ({model})")
-}
-
-/// Today's date `YYYY-MM-DD` (UTC) from the system clock.
-pub(crate) fn today() -> String {
-    let secs = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs());
-    let (y, m, d) = civil_from_days((secs / 86_400) as i64);
-    format!("{y:04}-{m:02}-{d:02}")
-}
-
-/// Days since 1970-01-01 → (year, month, day), proleptic Gregorian (H. Hinnant's algorithm).
-fn civil_from_days(z: i64) -> (i64, u32, u32) {
-    let z = z + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let y = yoe + era * 400;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
-    (if m <= 2 { y + 1 } else { y }, m, d)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn dates() {
-        assert_eq!(civil_from_days(0), (1970, 1, 1));
-        assert_eq!(civil_from_days(19_723), (2024, 1, 1));
-        assert_eq!(civil_from_days(11_016), (2000, 2, 29));
-    }
 
     #[test]
     fn ten_tasks_with_paper_numbers() {

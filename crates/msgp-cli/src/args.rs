@@ -1,0 +1,797 @@
+//! Every command-line type of `msgp`: the commands, their options and the value parsers (one
+//! file, as ripgrep and uv keep theirs). The commands themselves live in [`crate::commands`].
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use msgp_core::fit::FitOptimizer;
+use msgp_core::gp::MeanFunction;
+use msgp_core::gp::integrator::Integrator;
+use msgp_core::model::Method;
+use msgp_sim::Saturation;
+use msgp_sim::learn::LearnSettings;
+
+/// Gaussian-process dynamics models optimised for long-term predictions (MSGP).
+#[derive(Debug, Parser)]
+#[command(name = "msgp", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Fit a model on CSV or MCAP data, save it, and score it on the held-out part.
+    Fit(Box<FitArgs>),
+    /// Free simulation of data files with a saved model: RMSE, NLL and 2σ coverage.
+    Eval(Box<EvalArgs>),
+    /// Free simulation with a saved model, written as CSV (mean, std, measured per step).
+    Simulate(Box<SimulateArgs>),
+    /// Learn a controller with PILCO on a simulated system (MSGP, GP-NARX or linear-kf models).
+    LearnPolicy(Box<LearnArgs>),
+    /// Reproduce the paper's results.
+    #[command(subcommand)]
+    Reproduce(ReproduceCommand),
+    /// Generate the paper's synthetic system 4, fit GP-NARX and MSGP, print test RMSE.
+    Demo(DemoArgs),
+    /// Simulate the pole on the robot end effector (rapier), run stability tests.
+    #[command(subcommand)]
+    Sim(Box<SimCommand>),
+}
+
+/// Options that select the data (shared by `fit`, `eval` and `simulate`).
+#[derive(Debug, Args)]
+pub struct DataArgs {
+    /// Data file: CSV with a header line, or MCAP (`.mcap`). Repeat for several trajectories.
+    #[arg(long = "data", value_name = "FILE", required = true)]
+    pub data: Vec<PathBuf>,
+    /// Input columns, comma-separated (MCAP: TOPIC:FIELD, or FIELD with --topic).
+    #[arg(long, value_name = "COL,...", value_delimiter = ',')]
+    pub input: Vec<String>,
+    /// Output columns, comma-separated (MCAP: TOPIC:FIELD, or FIELD with --topic).
+    #[arg(long, value_name = "COL,...", value_delimiter = ',')]
+    pub output: Vec<String>,
+    /// MCAP: topic of bare field names in --input/--output.
+    #[arg(long, value_name = "TOPIC")]
+    pub topic: Option<String>,
+}
+
+/// Default training fraction of each trajectory.
+pub const DEFAULT_TRAIN_FRAC: f64 = 0.5;
+
+/// Training method on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MethodArg {
+    /// Multi-step GP: trajectory likelihood (the paper's method).
+    Msgp,
+    /// One-step GP-NARX, marginal likelihood.
+    GpNarx,
+    /// One-step GP-NARX with PILCO's hyperparameter penalties.
+    PilcoNarx,
+    /// Linear-Gaussian window model (no GP) by the exact Kalman-filter likelihood.
+    LinearKf,
+}
+
+impl From<MethodArg> for Method {
+    fn from(m: MethodArg) -> Self {
+        match m {
+            MethodArg::Msgp => Method::Msgp,
+            MethodArg::GpNarx => Method::GpNarx,
+            MethodArg::PilcoNarx => Method::PilcoNarx,
+            MethodArg::LinearKf => Method::LinearKf,
+        }
+    }
+}
+
+/// Prior mean of the GP on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MeanArg {
+    /// No prior mean (the paper's model).
+    Zero,
+    /// A trained linear (ARX) map of the window; the GP models what it leaves over.
+    Linear,
+}
+
+impl From<MeanArg> for MeanFunction {
+    fn from(m: MeanArg) -> Self {
+        match m {
+            MeanArg::Zero => MeanFunction::Zero,
+            MeanArg::Linear => MeanFunction::Linear,
+        }
+    }
+}
+
+/// Solver of the MSGP loss on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum OptimizerArg {
+    /// Adam (the paper's choice).
+    Adam,
+    /// L-BFGS with a backtracking line search: several times faster to the same loss; stops by
+    /// itself when converged.
+    Lbfgs,
+}
+
+impl From<OptimizerArg> for FitOptimizer {
+    fn from(o: OptimizerArg) -> Self {
+        match o {
+            OptimizerArg::Adam => FitOptimizer::Adam,
+            OptimizerArg::Lbfgs => FitOptimizer::Lbfgs,
+        }
+    }
+}
+
+/// NARX history lengths `l_y,l_u`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct HistoryArg {
+    /// Past outputs.
+    pub ly: usize,
+    /// Past inputs.
+    pub lu: usize,
+}
+
+/// Parses `LY,LU`.
+pub fn parse_history(s: &str) -> Result<HistoryArg, String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let [ly, lu] = parts.as_slice() else {
+        return Err(format!("expected LY,LU (e.g. 2,2), got `{s}`"));
+    };
+    let ly: usize = ly.parse().map_err(|_| format!("bad l_y `{ly}`"))?;
+    let lu: usize = lu.parse().map_err(|_| format!("bad l_u `{lu}`"))?;
+    if ly == 0 {
+        return Err("l_y must be at least 1".into());
+    }
+    Ok(HistoryArg { ly, lu })
+}
+
+/// Parses `OUTPUT:ORDER[:linear]`.
+pub fn parse_integrator(s: &str) -> Result<Integrator, String> {
+    let expected = || format!("expected OUTPUT:ORDER or OUTPUT:ORDER:linear (e.g. 0:2), got `{s}`");
+    let parts: Vec<&str> = s.split(':').collect();
+    let (output, order, linear) = match parts.as_slice() {
+        [output, order] => (*output, *order, false),
+        [output, order, kind] if kind.trim() == "linear" => (*output, *order, true),
+        _ => return Err(expected()),
+    };
+    let number = |text: &str, what: &str| -> Result<usize, String> {
+        text.trim()
+            .parse()
+            .map_err(|_| format!("bad {what} `{text}`"))
+    };
+    let (output, order) = (number(output, "output column")?, number(order, "order")?);
+    Ok(Integrator {
+        output,
+        order,
+        linear,
+    })
+}
+
+/// Options of `msgp fit`.
+#[derive(Debug, Args)]
+pub struct FitArgs {
+    #[command(flatten)]
+    pub data: DataArgs,
+    /// Training samples at the start of each trajectory; the rest is the test part.
+    #[arg(long, value_name = "N", conflicts_with = "train_frac")]
+    pub train: Option<usize>,
+    /// Fraction of each trajectory used for training, in (0, 1] [default: 0.5].
+    #[arg(long, value_name = "F")]
+    pub train_frac: Option<f64>,
+    /// NARX history: past outputs and past inputs in the GP input.
+    #[arg(long, value_name = "LY,LU", value_parser = parse_history, default_value = "2,2")]
+    pub history: HistoryArg,
+    /// Number of pseudo-inputs [default: min(100, training windows / 2)].
+    #[arg(long, value_name = "M")]
+    pub inducing: Option<usize>,
+    /// Training method.
+    #[arg(long, value_enum, default_value_t = MethodArg::Msgp)]
+    pub method: MethodArg,
+    /// Solver iterations: on the trajectory likelihood for msgp [default: 400]; Adam
+    /// iterations on the one-step marginal likelihood for gp-narx and pilco-narx [default: 300].
+    #[arg(long, value_name = "N")]
+    pub iters: Option<usize>,
+    /// Solver of the MSGP loss.
+    #[arg(long, value_enum, default_value_t = OptimizerArg::Adam)]
+    pub optimizer: OptimizerArg,
+    /// Prior mean of the GP.
+    #[arg(long, value_enum, default_value_t = MeanArg::Zero)]
+    pub mean: MeanArg,
+    /// Declare output column OUTPUT (0-based) a pure ORDER-fold integrator (e.g. `0:2` for a
+    /// position under a commanded acceleration): its own lags get the fixed coefficients of
+    /// `(1 − z⁻¹)^ORDER` and enter nothing else. `OUTPUT:ORDER:linear` also drops its GP (its
+    /// ORDER-th difference is linear in the window). Needs `--mean linear`; repeat for more
+    /// outputs.
+    #[arg(long, value_name = "OUTPUT:ORDER[:linear]", value_parser = parse_integrator)]
+    pub integrating: Vec<Integrator>,
+    /// Seed of every random choice.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Where to write the model [default: <first data file's stem>.model.json in the current
+    /// folder].
+    #[arg(long, value_name = "MODEL.json")]
+    pub out: Option<PathBuf>,
+    /// Write a PNG of the free simulation of the test part.
+    #[arg(long, value_name = "FIT.png")]
+    pub plot: Option<PathBuf>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// No progress output on stderr.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Options of `msgp eval`.
+#[derive(Debug, Args)]
+pub struct EvalArgs {
+    /// Model file written by `msgp fit`.
+    #[arg(long, value_name = "MODEL.json")]
+    pub model: PathBuf,
+    #[command(flatten)]
+    pub data: DataArgs,
+    /// Simulate each trajectory from sample N on (the first max(l_y, l_u) samples from N seed
+    /// the simulation).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub from: usize,
+    /// Write a PNG of the free simulation.
+    #[arg(long, value_name = "OUT.png")]
+    pub plot: Option<PathBuf>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Options of `msgp simulate`.
+#[derive(Debug, Args)]
+pub struct SimulateArgs {
+    /// Model file written by `msgp fit`.
+    #[arg(long, value_name = "MODEL.json")]
+    pub model: PathBuf,
+    #[command(flatten)]
+    pub data: DataArgs,
+    /// Simulate each trajectory from sample N on.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub from: usize,
+    /// Output CSV: `t, <output>_mean, <output>_std, <output>` per simulated step (and an
+    /// `episode` column first when there are several trajectories).
+    #[arg(long, value_name = "PRED.csv")]
+    pub out: PathBuf,
+    /// Print a JSON summary instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Simulated systems the loop can learn on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SimArg {
+    /// The inverted pendulum on the robot's end effector (crate msgp-sim).
+    Pendulum,
+}
+
+/// Dynamics model of the loop.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ModelArg {
+    /// Multi-step GP trained on the trajectory likelihood (the paper's method).
+    Msgp,
+    /// One-step GP-NARX trained on the marginal likelihood (standard PILCO).
+    GpNarx,
+    /// The linear-Gaussian window model (no GP) by the exact Kalman-filter likelihood; the end
+    /// effector declared kinematic, fits warm-started, gains optimised over 10 s (balanced the
+    /// default pendulum in 5 of 5 seeds, RESULTS.md).
+    LinearKf,
+}
+
+impl From<ModelArg> for Method {
+    fn from(m: ModelArg) -> Self {
+        match m {
+            ModelArg::Msgp => Method::Msgp,
+            ModelArg::GpNarx => Method::GpNarx,
+            ModelArg::LinearKf => Method::LinearKf,
+        }
+    }
+}
+
+/// Sizes of the loop: data, model, policy search.
+#[derive(Debug, Args)]
+#[command(next_help_heading = "Budget")]
+pub struct BudgetArgs {
+    /// Random episodes before the first policy (random excitation, or random policies: see
+    /// `--experimental random-policies=K`).
+    #[arg(long, default_value_t = LearnSettings::default().random_rollouts)]
+    pub random_rollouts: usize,
+    /// Length of every interaction episode [s].
+    #[arg(long, default_value_t = LearnSettings::default().episode_seconds)]
+    pub episode_seconds: f64,
+    /// Solver iterations of each model fit [default: 300 for msgp; the one-step fit's 300 Adam
+    /// iterations for gp-narx; at most 300 L-BFGS iterations from each of two starts for
+    /// linear-kf].
+    #[arg(long, value_name = "N")]
+    pub fit_iters: Option<usize>,
+    /// From the second iteration on, continue the previous MSGP or linear-kf model for N solver
+    /// iterations (same normaliser and pseudo-inputs) instead of fitting from scratch; 0: always
+    /// from scratch [default: 0 for msgp and gp-narx, 300 for linear-kf].
+    #[arg(long, value_name = "N")]
+    pub warm_start: Option<usize>,
+    /// Pseudo-inputs of the model.
+    #[arg(long, value_name = "M", default_value_t = LearnSettings::default().fit.inducing)]
+    pub inducing: usize,
+    /// Adam steps of each policy optimisation start.
+    #[arg(long, value_name = "N", default_value_t = LearnSettings::default().search.iterations)]
+    pub search_iters: usize,
+    /// Random gain candidates screened on the model before each policy optimisation.
+    #[arg(long, value_name = "N", default_value_t = LearnSettings::default().search.candidates)]
+    pub candidates: usize,
+    /// Prior mean of the GP model, for both models (zero: the paper's GP; linear: an ARX map
+    /// under the GP, started by instrumental variables; see docs/design.md).
+    #[arg(long, value_enum, default_value_t = MeanArg::Linear)]
+    pub mean: MeanArg,
+    /// Horizon of the predicted rollouts the gains are optimised on [s] [default: 5 for msgp
+    /// and gp-narx, 10 for linear-kf (the stability test's length)].
+    #[arg(long, value_name = "S")]
+    pub policy_horizon: Option<f64>,
+    /// Widths of the saturating cost on the pole angle [rad] and the end-effector position [m]:
+    /// `c = 1 − exp(−½ ((θ/w_θ)² + (x/w_x)²))` per step.
+    #[arg(long, value_name = "W_THETA,W_X", value_delimiter = ',',
+          default_values_t = LearnSettings::default().cost_widths)]
+    pub cost_widths: Vec<f64>,
+    /// An experiment switch of the loop, KEY=VALUE (repeatable): settings that the experiments
+    /// of docs/design.md varied, not options the loop needs. Keys: start-smoothing=N (MSGP:
+    /// start each training rollout from a quadratic fitted to its first N samples; 0: the
+    /// measured window), fb-segment=N (MSGP: feedback episodes enter the loss as overlapping
+    /// segments of N samples; 0: whole), free-position=true (do not declare the end effector a
+    /// double integrator of the command), excitation-max-hz=HZ (highest frequency of the random
+    /// excitation, 10), random-policies=K (K of the random rollouts run random PID + PD gains,
+    /// each also stability-tested), trust-region=R (no gain moves further than R typical
+    /// magnitudes per search, 1; 0: off), fit-optimizer=adam|lbfgs (solver of each MSGP fit).
+    #[arg(long = "experimental", value_name = "KEY=VALUE", value_parser = parse_experiment)]
+    pub experimental: Vec<Experiment>,
+}
+
+/// One experiment switch of the learning loop (`--experimental KEY=VALUE`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Experiment {
+    /// `start-smoothing=N`
+    StartSmoothing(usize),
+    /// `fb-segment=N`
+    FbSegment(usize),
+    /// `free-position=true|false`
+    FreePosition(bool),
+    /// `excitation-max-hz=HZ`
+    ExcitationMaxHz(f64),
+    /// `random-policies=K`
+    RandomPolicies(usize),
+    /// `trust-region=R`
+    TrustRegion(f64),
+    /// `fit-optimizer=adam|lbfgs`
+    FitOptimizer(OptimizerArg),
+}
+
+/// The keys [`parse_experiment`] knows.
+pub const EXPERIMENT_KEYS: [&str; 7] = [
+    "start-smoothing",
+    "fb-segment",
+    "free-position",
+    "excitation-max-hz",
+    "random-policies",
+    "trust-region",
+    "fit-optimizer",
+];
+
+/// `KEY=VALUE` as an [`Experiment`]; the value's syntax is checked here, its range where the
+/// loop's settings are made.
+pub fn parse_experiment(s: &str) -> Result<Experiment, String> {
+    let (key, value) = s
+        .split_once('=')
+        .ok_or_else(|| format!("expected KEY=VALUE, got `{s}`"))?;
+    let (key, value) = (key.trim(), value.trim());
+    let count = || {
+        value
+            .parse::<usize>()
+            .map_err(|_| format!("{key} needs a count, got `{value}`"))
+    };
+    let number = || {
+        value
+            .parse::<f64>()
+            .map_err(|_| format!("{key} needs a number, got `{value}`"))
+    };
+    Ok(match key {
+        "start-smoothing" => Experiment::StartSmoothing(count()?),
+        "fb-segment" => Experiment::FbSegment(count()?),
+        "free-position" => Experiment::FreePosition(
+            value
+                .parse::<bool>()
+                .map_err(|_| format!("{key} is true or false, got `{value}`"))?,
+        ),
+        "excitation-max-hz" => Experiment::ExcitationMaxHz(number()?),
+        "random-policies" => Experiment::RandomPolicies(count()?),
+        "trust-region" => Experiment::TrustRegion(number()?),
+        "fit-optimizer" => Experiment::FitOptimizer(
+            OptimizerArg::from_str(value, true)
+                .map_err(|_| format!("{key} is adam or lbfgs, got `{value}`"))?,
+        ),
+        other => {
+            return Err(format!(
+                "unknown experiment `{other}` (known: {})",
+                EXPERIMENT_KEYS.join(", ")
+            ));
+        }
+    })
+}
+
+/// Options of `msgp learn-policy`.
+#[derive(Debug, Args)]
+pub struct LearnArgs {
+    /// The simulated system.
+    #[arg(long, value_enum)]
+    pub sim: SimArg,
+    /// Dynamics model.
+    #[arg(long, value_enum, default_value_t = ModelArg::Msgp)]
+    pub model: ModelArg,
+    /// Policy-learning iterations after the random rollouts.
+    #[arg(long, default_value_t = LearnSettings::default().iterations)]
+    pub iterations: usize,
+    #[command(flatten)]
+    pub budget: BudgetArgs,
+    /// Seed of every random choice (episodes, excitation, fits, restarts).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Output folder [default: learn-<model>-seed<S>].
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// No progress lines on stderr.
+    #[arg(long)]
+    pub quiet: bool,
+    #[command(flatten)]
+    pub plant: PlantArgs,
+}
+
+/// Subcommands of `msgp reproduce`.
+#[derive(Debug, Subcommand)]
+pub enum ReproduceCommand {
+    /// Table 1 of the paper: GP-NARX, PILCO's GP-NARX and MSGP on the ten benchmarks.
+    Table1(Table1Args),
+    /// Figure 4 of the paper: PILCO on the pendulum with MSGP and GP-NARX models, several
+    /// seeds; iterations and interaction time to the first stable policy.
+    Figure4(Box<Figure4Args>),
+}
+
+/// Options of `msgp reproduce table1`.
+#[derive(Debug, Args)]
+pub struct Table1Args {
+    /// Markdown file to write.
+    #[arg(long, value_name = "RESULTS.md", default_value = "RESULTS.md")]
+    pub out: PathBuf,
+    /// Folder with the real series (actuator.csv, …) [default: $MSGP_DATA_DIR, else
+    /// ../shared/data/real].
+    #[arg(long, value_name = "DIR")]
+    pub data_dir: Option<PathBuf>,
+    /// Only these benchmarks (comma-separated): synthetic1 … synthetic5, actuator, ballbeam,
+    /// drives, furnace, dryer.
+    #[arg(long, value_name = "NAME,...", value_delimiter = ',')]
+    pub only: Vec<String>,
+    /// Only these methods (comma-separated).
+    #[arg(long, value_enum, value_name = "METHOD,...", value_delimiter = ',')]
+    pub methods: Vec<MethodArg>,
+    /// Solver iterations on the MSGP loss [default: the fit default, 400].
+    #[arg(long, value_name = "N")]
+    pub iters: Option<usize>,
+    /// Solver of the MSGP loss; `lbfgs` writes its own section of the results file, next to
+    /// the paper's Adam.
+    #[arg(long, value_enum, default_value_t = OptimizerArg::Adam)]
+    pub optimizer: OptimizerArg,
+    /// Number of pseudo-inputs.
+    #[arg(long, value_name = "M", default_value_t = 100)]
+    pub inducing: usize,
+    /// Seed of data generation (synthetic systems) and of the fits.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Print the rows as one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// No progress output on stderr.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Options of `msgp reproduce figure4`.
+#[derive(Debug, Args)]
+pub struct Figure4Args {
+    /// Markdown file whose `figure4` section is (re)written.
+    #[arg(long, value_name = "RESULTS.md", default_value = "RESULTS.md")]
+    pub out: PathBuf,
+    /// Folder for every run's artefacts and the cost-curve plot.
+    #[arg(long, value_name = "DIR", default_value = "results/figure4")]
+    pub dir: PathBuf,
+    /// Seeds 0..N per model.
+    #[arg(long, default_value_t = 5)]
+    pub seeds: u64,
+    /// Policy iterations per run.
+    #[arg(long, default_value_t = LearnSettings::default().iterations)]
+    pub iterations: usize,
+    /// Models to run (comma-separated).
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [ModelArg::Msgp, ModelArg::GpNarx, ModelArg::LinearKf])]
+    pub models: Vec<ModelArg>,
+    /// No progress lines on stderr.
+    #[arg(long)]
+    pub quiet: bool,
+    #[command(flatten)]
+    pub budget: BudgetArgs,
+}
+
+/// Options of `msgp demo`.
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// Synthetic system of the paper's Table 2 (1–5).
+    #[arg(long, default_value_t = 4)]
+    pub system: u8,
+    /// Seed for data generation and initialisation.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Adam iterations for MSGP.
+    #[arg(long, default_value_t = 400)]
+    pub iters: usize,
+    /// Number of pseudo-inputs.
+    #[arg(long, default_value_t = 100)]
+    pub inducing: usize,
+}
+
+/// Subcommands of `msgp sim`.
+#[derive(Debug, Subcommand)]
+pub enum SimCommand {
+    /// Simulate one episode of the pole on the robot end effector and write a CSV or MCAP log.
+    Pendulum(PendulumArgs),
+    /// Stability test of PID + PD gains: 5 starts (±0.03, ±0.015, 0 rad), 3 noise draws each,
+    /// 10 s each; pass iff every episode keeps |θ| < 0.1 rad and |x| < 0.3 m throughout and RMS θ
+    /// over the last 5 s < 0.03 rad.
+    Stability(StabilityArgs),
+}
+
+/// Options of `msgp sim pendulum`.
+#[derive(Debug, Args)]
+pub struct PendulumArgs {
+    #[command(flatten)]
+    pub controller: ControllerArgs,
+    /// Episode length in seconds (the episode stops early if |θ| > stop-theta or |x| > stop-x).
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+    pub seconds: f64,
+    /// Seed of the initial angle, the measurement noise and the random excitation.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Fixed initial pole angle [rad] instead of a draw from N(0, theta0-std²).
+    #[arg(long, allow_negative_numbers = true)]
+    pub theta0: Option<f64>,
+    /// RMS of the random excitation [m/s²] (with --random).
+    #[arg(long, default_value_t = 1.0)]
+    pub excitation_rms: f64,
+    #[command(flatten)]
+    pub saturation: SaturationArgs,
+    /// Output run log; the extension selects the format: .csv or .mcap.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub plant: PlantArgs,
+}
+
+/// Options of `msgp sim stability`.
+#[derive(Debug, Args)]
+pub struct StabilityArgs {
+    #[command(flatten)]
+    pub gains: GainArgs,
+    #[command(flatten)]
+    pub saturation: SaturationArgs,
+    /// Seed of the measurement noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub plant: PlantArgs,
+}
+
+/// Exactly one controller for an episode.
+#[derive(Debug, Args)]
+#[group(required = true, multiple = false)]
+pub struct ControllerArgs {
+    /// PID + PD policy file (JSON: kp_x, ki_x, kd_x, kp_theta, kd_theta).
+    #[arg(long, value_name = "POLICY.json")]
+    pub policy: Option<PathBuf>,
+    /// PID + PD gains "kp_x,ki_x,kd_x,kp_theta,kd_theta" (use --gains=-1,... for a leading minus).
+    #[arg(long, value_name = "KP,KI,KD,KPθ,KDθ", value_parser = parse_gains, allow_hyphen_values = true)]
+    pub gains: Option<[f64; 5]>,
+    /// Built-in gains.
+    #[arg(long, value_enum)]
+    pub preset: Option<Preset>,
+    /// Smooth random excitation (seeded sum of sines, 0.1–2 Hz) instead of a policy.
+    #[arg(long)]
+    pub random: bool,
+}
+
+/// Exactly one set of gains for the stability test.
+#[derive(Debug, Args)]
+#[group(required = true, multiple = false)]
+pub struct GainArgs {
+    /// PID + PD policy file (JSON: kp_x, ki_x, kd_x, kp_theta, kd_theta).
+    #[arg(long, value_name = "POLICY.json")]
+    pub policy: Option<PathBuf>,
+    /// PID + PD gains "kp_x,ki_x,kd_x,kp_theta,kd_theta" (use --gains=-1,... for a leading minus).
+    #[arg(long, value_name = "KP,KI,KD,KPθ,KDθ", value_parser = parse_gains, allow_hyphen_values = true)]
+    pub gains: Option<[f64; 5]>,
+    /// Built-in gains.
+    #[arg(long, value_enum)]
+    pub preset: Option<Preset>,
+}
+
+/// How the gains' command is limited to `±action-limit`.
+#[derive(Debug, Args)]
+pub struct SaturationArgs {
+    /// Command saturation: `clip` (the default of --gains and --preset) or `sine` (PILCO's
+    /// smooth saturation, which `msgp learn-policy` uses). With --policy it overrides the file's.
+    #[arg(long, value_enum)]
+    pub saturation: Option<SaturationKind>,
+}
+
+/// [`Saturation`] as a command-line value.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub enum SaturationKind {
+    /// Hard clipping.
+    Clip,
+    /// PILCO's sine saturation.
+    Sine,
+}
+
+impl From<SaturationKind> for Saturation {
+    fn from(kind: SaturationKind) -> Self {
+        match kind {
+            SaturationKind::Clip => Saturation::Clip,
+            SaturationKind::Sine => Saturation::Sine,
+        }
+    }
+}
+
+/// Built-in gain sets.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub enum Preset {
+    /// Apollo LQR gains [−34.55, −7.03, −1.98, −3.73, −0.3] on [θ, θ̇, x, ẋ, ∫x], mapped.
+    ApolloLqr,
+    /// Apollo LQR with the position loop halved; balances the default noisy plant.
+    HandTuned,
+    /// All gains zero (the pole falls).
+    Zero,
+}
+
+/// Plant parameter overrides (defaults: `msgp_sim::PendulumParams::default()`).
+#[derive(Debug, Args)]
+#[command(next_help_heading = "Plant")]
+pub struct PlantArgs {
+    /// JSON file with plant parameters (missing fields keep their defaults).
+    #[arg(long, value_name = "PARAMS.json")]
+    pub params: Option<PathBuf>,
+    /// Pole length [m] (default 1.067).
+    #[arg(long)]
+    pub pole_length: Option<f64>,
+    /// Pole mass [kg] (default 0.2903).
+    #[arg(long)]
+    pub pole_mass: Option<f64>,
+    /// Distance pivot → centre of mass [m] (default 0.637).
+    #[arg(long)]
+    pub pole_com: Option<f64>,
+    /// Pole inertia about its centre of mass [kg·m²] (default m·L²/12).
+    #[arg(long)]
+    pub pole_inertia: Option<f64>,
+    /// Viscous hinge damping [N·m·s] (default 0.0116).
+    #[arg(long)]
+    pub hinge_damping: Option<f64>,
+    /// Gravity [m/s²] (default 9.81; negative hangs the pole).
+    #[arg(long, allow_negative_numbers = true)]
+    pub gravity: Option<f64>,
+    /// Command limit [m/s²] (default 3).
+    #[arg(long)]
+    pub action_limit: Option<f64>,
+    /// Control rate [Hz] (default 50).
+    #[arg(long)]
+    pub control_hz: Option<f64>,
+    /// Physics rate [Hz], an integer multiple of the control rate (default 1000).
+    #[arg(long)]
+    pub physics_hz: Option<f64>,
+    /// Command delay in control steps (default 1).
+    #[arg(long)]
+    pub delay_steps: Option<u32>,
+    /// First-order lag time constant [s] (default 0.03; 0 = none).
+    #[arg(long)]
+    pub lag: Option<f64>,
+    /// Angle measurement noise σ [rad] (default 5e-3).
+    #[arg(long)]
+    pub sigma_theta: Option<f64>,
+    /// Position measurement noise σ [m] (default 2e-3).
+    #[arg(long)]
+    pub sigma_x: Option<f64>,
+    /// Switch off measurement noise (overrides --sigma-theta/--sigma-x).
+    #[arg(long)]
+    pub noiseless: bool,
+    /// σ of the random initial angle [rad] (default 0.02).
+    #[arg(long)]
+    pub theta0_std: Option<f64>,
+    /// Early stop when |θ| exceeds this [rad] (default 0.5).
+    #[arg(long)]
+    pub stop_theta: Option<f64>,
+    /// Early stop when |x| exceeds this [m] (default 0.5).
+    #[arg(long)]
+    pub stop_x: Option<f64>,
+}
+
+/// Parses "kp_x,ki_x,kd_x,kp_theta,kd_theta".
+pub fn parse_gains(s: &str) -> Result<[f64; 5], String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != 5 {
+        return Err(format!(
+            "expected 5 comma-separated gains kp_x,ki_x,kd_x,kp_theta,kd_theta, got {}",
+            parts.len()
+        ));
+    }
+    let mut gains = [0.0; 5];
+    for (g, part) in gains.iter_mut().zip(&parts) {
+        *g = part
+            .parse::<f64>()
+            .map_err(|e| format!("bad gain `{part}`: {e}"))?;
+        if !g.is_finite() {
+            return Err(format!("gain `{part}` is not finite"));
+        }
+    }
+    Ok(gains)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn history_parses() {
+        assert_eq!(parse_history("2,3"), Ok(HistoryArg { ly: 2, lu: 3 }));
+        assert_eq!(parse_history(" 1 , 0 "), Ok(HistoryArg { ly: 1, lu: 0 }));
+        assert!(parse_history("0,2").is_err());
+        assert!(parse_history("2").is_err());
+        assert!(parse_history("a,b").is_err());
+    }
+
+    #[test]
+    fn experiments_parse() {
+        assert_eq!(
+            parse_experiment("fb-segment=50"),
+            Ok(Experiment::FbSegment(50))
+        );
+        assert_eq!(
+            parse_experiment(" trust-region = 2.5 "),
+            Ok(Experiment::TrustRegion(2.5))
+        );
+        assert_eq!(
+            parse_experiment("fit-optimizer=lbfgs"),
+            Ok(Experiment::FitOptimizer(OptimizerArg::Lbfgs))
+        );
+        assert_eq!(
+            parse_experiment("free-position=true"),
+            Ok(Experiment::FreePosition(true))
+        );
+        for bad in ["fb-segment", "fb-segment=x", "free-position=1", "wobble=3"] {
+            assert!(parse_experiment(bad).is_err(), "{bad}");
+        }
+        let unknown = parse_experiment("wobble=3").expect_err("unknown key");
+        assert!(unknown.contains("start-smoothing"), "{unknown}");
+    }
+
+    #[test]
+    fn gains_parse() {
+        assert_eq!(
+            parse_gains("1,2, 3,-4,5e-1").expect("valid"),
+            [1.0, 2.0, 3.0, -4.0, 0.5]
+        );
+        assert!(parse_gains("1,2,3,4").is_err());
+        assert!(parse_gains("1,2,3,4,x").is_err());
+        assert!(parse_gains("1,2,3,4,inf").is_err());
+    }
+}

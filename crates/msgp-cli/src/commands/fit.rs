@@ -1,0 +1,194 @@
+//! `msgp fit`: fit a model on the first part of each trajectory, save it, and score its free
+//! simulation of the held-out rest.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use msgp_core::data::Trajectory;
+use msgp_core::fit::{FitOptimizer, FitOptions, FitProgress, fit};
+use msgp_core::model::Method;
+use msgp_core::model_file::{FitRecord, ModelFile};
+use msgp_core::numeric::parallel::Threads;
+use serde_json::json;
+
+use crate::args::{DEFAULT_TRAIN_FRAC, FitArgs, HistoryArg};
+use crate::render::output::{out, out_json};
+use crate::render::plot::plot;
+use crate::render::progress::FitBar;
+use crate::render::report::{metrics_json, metrics_line, trajectories};
+use msgp_core::data::dataset::{Dataset, Split, check_lengths, split};
+use msgp_core::model::pool;
+
+/// `<stem>.model.json` in the current folder.
+fn default_model_path(data: &Path) -> PathBuf {
+    let stem = data
+        .file_stem()
+        .map_or_else(|| "model".into(), |s| s.to_string_lossy().into_owned());
+    PathBuf::from(format!("{stem}.model.json"))
+}
+
+/// The data files, comma-separated.
+fn files(paths: &[PathBuf]) -> String {
+    paths
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Runs `msgp fit`.
+pub fn run(args: &FitArgs) -> anyhow::Result<()> {
+    let data = Dataset::load(&args.data.data, &args.data.selection())?;
+    let how = match (args.train, args.train_frac) {
+        (Some(n), _) => Split::Count(n),
+        (None, Some(f)) if f > 0.0 && f <= 1.0 => Split::Fraction(f),
+        (None, Some(f)) => bail!("--train-frac must be in (0, 1], got {f}"),
+        (None, None) => Split::Fraction(DEFAULT_TRAIN_FRAC),
+    };
+    let (train, test) = split(&data.parts, how);
+    if train.is_empty() {
+        bail!("no training samples: raise --train or --train-frac");
+    }
+    let HistoryArg { ly, lu } = args.history;
+    let warmup = ly.max(lu);
+    check_lengths(&train, warmup, "training")?;
+    check_lengths(&test, warmup, "test")?;
+    let method = Method::from(args.method);
+    let trajs: Vec<Trajectory> = train.iter().map(|p| p.traj.clone()).collect();
+    // the same settings as the Python `msgp.Msgp` for the same options
+    let settings = FitOptions {
+        method,
+        ly,
+        lu,
+        inducing: args.inducing,
+        iterations: args.iters,
+        seed: args.seed,
+        mean: args.mean.into(),
+        integrators: args.integrating.clone(),
+        optimizer: args.optimizer.into(),
+        threads: Threads::from_env()?,
+    }
+    .settings(&trajs)?;
+    let n_train: usize = trajs.iter().map(Trajectory::len).sum();
+    let label = format!(
+        "{} on {}",
+        method.name(),
+        args.data.data[0]
+            .file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+    );
+    let mut bar = FitBar::new(&label, args.quiet || args.json);
+    let (model, report) = match fit(&trajs, &settings, &mut |p: &FitProgress| bar.update(p)) {
+        Ok(r) => r,
+        Err(e) => {
+            bar.abandon();
+            return Err(e).context(format!(
+                "fitting {} on {} ({n_train} training samples, history l_y={ly}, l_u={lu})",
+                method.name(),
+                files(&args.data.data)
+            ));
+        }
+    };
+    // what the model has (a linear-kf model has one idle pseudo-input and no GP)
+    let inducing = model.params.pseudo_inputs.nrows();
+    bar.finish(&format!("trained in {:.1} s", report.train_seconds));
+    let file = ModelFile::from_fit(
+        &model,
+        &FitRecord {
+            inputs: &data.inputs,
+            outputs: &data.outputs,
+            settings: &settings,
+            report: &report,
+            train: &trajs,
+        },
+    )?;
+    let model_path = args
+        .out
+        .clone()
+        .unwrap_or_else(|| default_model_path(&args.data.data[0]));
+    file.write(&model_path)
+        .with_context(|| format!("cannot write the model to {}", model_path.display()))?;
+    // score with the model as saved, so `msgp eval` reproduces these numbers exactly
+    let saved = file.to_model()?;
+    let sims = saved.simulate_parts(&test)?;
+    let metrics = pool(
+        &sims.iter().map(|s| s.metrics).collect::<Vec<_>>(),
+        data.outputs.len(),
+    );
+    if let Some(p) = &args.plot {
+        if sims.is_empty() {
+            bail!("--plot needs a test part (lower --train or --train-frac)");
+        }
+        plot(
+            p,
+            &format!("{} free simulation", method.name()),
+            &data.outputs,
+            &sims,
+        )?;
+    }
+    let n_test: usize = test.iter().map(|p| p.traj.len()).sum();
+    if args.json {
+        let mut v = json!({
+            "command": "fit",
+            "method": method.name(),
+            "n_train": n_train,
+            "n_test": n_test,
+            "trajectories": data.parts.len(),
+            "inputs": data.inputs,
+            "outputs": data.outputs,
+            "history": [ly, lu],
+            "inducing": inducing,
+            "seed": args.seed,
+            "train_seconds": report.train_seconds,
+            "iterations_run": report.iterations_run,
+            "best_iteration": report.best_iteration,
+            "model": model_path.display().to_string(),
+            "plot": args.plot.as_ref().map(|p| p.display().to_string()),
+            "data_hash": file.training.data_hash,
+        });
+        metrics_json(&mut v, metrics.as_ref());
+        return out_json(&v);
+    }
+    let gp = match method {
+        Method::LinearKf => "no GP (linear-Gaussian, Kalman-filter likelihood)".to_string(),
+        _ => format!("{inducing} pseudo-inputs"),
+    };
+    let mut text = format!(
+        "{}: {}, {n_train} training and {n_test} test samples; inputs {}; outputs {}\n\
+         history l_y={ly}, l_u={lu}; {gp}; seed {}\n\
+         training time {:.1} s",
+        method.name(),
+        trajectories(data.parts.len()),
+        data.inputs.join(", "),
+        data.outputs.join(", "),
+        args.seed,
+        report.train_seconds,
+    );
+    if method == Method::Msgp {
+        let solver = FitOptimizer::from(args.optimizer).name();
+        text.push_str(&format!(
+            " ({} {solver} iterations, kept iteration {})",
+            report.iterations_run, report.best_iteration
+        ));
+    }
+    text.push('\n');
+    text.push_str(&metrics_line("test free simulation", metrics.as_ref()));
+    text.push_str(&format!("\nmodel written to {}", model_path.display()));
+    if let Some(p) = &args.plot {
+        text.push_str(&format!("\nplot written to {}", p.display()));
+    }
+    out(&text)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_model_path_uses_the_stem() {
+        assert_eq!(
+            default_model_path(Path::new("/x/dryer.csv")),
+            PathBuf::from("dryer.model.json")
+        );
+    }
+}

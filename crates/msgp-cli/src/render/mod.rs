@@ -1,0 +1,10 @@
+//! What `msgp` shows: text and JSON lines on stdout ([`output`], [`report`]), markdown results
+//! files ([`results_file`]), PNG plots of simulations and cost curves ([`plot`], [`cost_plot`])
+//! and progress bars on stderr ([`progress`]).
+
+pub mod cost_plot;
+pub mod output;
+pub mod plot;
+pub mod progress;
+pub mod report;
+pub mod results_file;
