@@ -243,6 +243,24 @@ pub fn settings(
     excitation
         .validate()
         .with_context(|| format!("--experimental excitation-max-hz={}", excitation.max_hz))?;
+    let fit = msgp_core::fit::FitSettings {
+        inducing: args.inducing,
+        mean: args.mean.into(),
+        // a linear-kf model has the linear mean whatever --mean says
+        integrators: match (method, args.mean, free_position) {
+            (_, _, true) => Vec::new(),
+            (Method::LinearKf, _, false) | (_, MeanArg::Linear, false) => d.fit.integrators.clone(),
+            _ => Vec::new(),
+        },
+        optimizer,
+        start_window,
+        threads,
+        ..d.fit.clone()
+    };
+    let fit = match args.fit_iters {
+        Some(n) => fit.with_solver_iterations(method, n),
+        None => fit,
+    };
     Ok(LearnSettings {
         method,
         iterations,
@@ -254,30 +272,7 @@ pub fn settings(
         excitation,
         cost_widths,
         seed,
-        fit: msgp_core::fit::FitSettings {
-            inducing: args.inducing,
-            mean: args.mean.into(),
-            // a linear-kf model has the linear mean whatever --mean says
-            integrators: match (method, args.mean, free_position) {
-                (_, _, true) => Vec::new(),
-                (Method::LinearKf, _, false) | (_, MeanArg::Linear, false) => {
-                    d.fit.integrators.clone()
-                }
-                _ => Vec::new(),
-            },
-            iterations: match (method, args.fit_iters) {
-                (Method::Msgp | Method::LinearKf, Some(n)) => n,
-                _ => d.fit.iterations,
-            },
-            optimizer,
-            start_window,
-            one_step_iterations: match (method, args.fit_iters) {
-                (Method::Msgp, _) | (_, None) => d.fit.one_step_iterations,
-                (_, Some(n)) => n,
-            },
-            threads,
-            ..d.fit.clone()
-        },
+        fit,
         warm_start: match args.warm_start {
             None => d.warm_start,
             Some(0) => None,

@@ -147,14 +147,18 @@ fn csv_names(table: &Table, sel: &Selection<'_>) -> Result<(Vec<String>, Vec<Str
     default_columns(&candidates, sel.inputs, sel.outputs).map_err(|e| in_file(&table.path, e))
 }
 
-/// `e` said of the file `path` (a message that does not name it yet).
+/// `e` said of the file `path`, unless it names a file already.
 fn in_file(path: &Path, e: MsgpError) -> MsgpError {
     match e {
+        e @ (MsgpError::File { .. } | MsgpError::FileAt { .. }) => e,
         MsgpError::Data(message) => MsgpError::File {
             path: path.to_path_buf(),
             message,
         },
-        other => other,
+        other => MsgpError::File {
+            path: path.to_path_buf(),
+            message: other.to_string(),
+        },
     }
 }
 
@@ -238,7 +242,7 @@ fn mcap_table(
     let signals: Vec<Signal> = inputs
         .iter()
         .chain(&outputs)
-        .map(|s| Signal::parse(s, sel.topic))
+        .map(|s| Signal::parse(s, sel.topic).map_err(|e| in_file(path, e)))
         .collect::<Result<_>>()?;
     let base = signals[inputs.len()].topic.clone();
     let table = log.table(&signals, &base)?;

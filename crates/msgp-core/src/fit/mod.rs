@@ -187,9 +187,64 @@ pub struct FitOptions {
 }
 
 impl FitOptions {
-    /// The full settings for fitting `train`, every other field at its default. Checks that
-    /// there is training data and that every trajectory is longer than the history.
+    /// The full settings for fitting `train`, every other field at its default, checked against
+    /// the data ([`FitSettings::validate`]).
     pub fn settings(&self, train: &[Trajectory]) -> Result<FitSettings> {
+        if self.inducing == Some(0) {
+            return Err(MsgpError::InvalidSetting {
+                name: "inducing",
+                reason: "need at least one pseudo-input".into(),
+            });
+        }
+        let warmup = self.ly.max(self.lu);
+        let windows: usize = train.iter().map(|t| t.len().saturating_sub(warmup)).sum();
+        let inducing = self
+            .inducing
+            .unwrap_or_else(|| DEFAULT_MAX_INDUCING.min((windows / 2).max(1)));
+        let settings = FitSettings {
+            method: self.method,
+            ly: self.ly,
+            lu: self.lu,
+            inducing,
+            seed: self.seed,
+            mean: self.mean,
+            integrators: self.integrators.clone(),
+            optimizer: self.optimizer,
+            threads: self.threads,
+            ..FitSettings::default()
+        };
+        let settings = match self.iterations {
+            Some(n) => settings.with_solver_iterations(self.method, n),
+            None => settings,
+        };
+        settings.validate(&train.iter().collect::<Vec<_>>())?;
+        Ok(settings)
+    }
+}
+
+impl FitSettings {
+    /// `n` iterations of a `method` fit's own solver: on the trajectory likelihood for MSGP
+    /// ([`FitSettings::iterations`]; its one-step start keeps its own), on the filter likelihood
+    /// for linear-kf (the same field), on the one-step marginal likelihood for the baselines
+    /// ([`FitSettings::one_step_iterations`]). (`method` is explicit because the learning loop
+    /// keeps one `FitSettings` and sets the method per fit.)
+    pub fn with_solver_iterations(self, method: Method, n: usize) -> Self {
+        match method {
+            Method::Msgp | Method::LinearKf => Self {
+                iterations: n,
+                ..self
+            },
+            Method::GpNarx | Method::PilcoNarx => Self {
+                one_step_iterations: n,
+                ..self
+            },
+        }
+    }
+
+    /// The NARX spec of `train` under these settings, with every setting checked against the
+    /// data once, here: the history, the integrators against the history and the prior mean,
+    /// the start window, every trajectory's length and values, the pseudo-input count.
+    pub fn validate(&self, train: &[&Trajectory]) -> Result<NarxSpec> {
         let first = train
             .first()
             .ok_or_else(|| MsgpError::Data("no training trajectories".into()))?;
@@ -201,6 +256,7 @@ impl FitOptions {
         };
         spec.validate()?;
         integrator::validate(&self.integrators, &spec, model_mean(self.method, self.mean))?;
+        self.start_window.validate(spec.warmup())?;
         let warmup = spec.warmup();
         for (k, t) in train.iter().enumerate() {
             if t.len() <= warmup {
@@ -212,38 +268,16 @@ impl FitOptions {
                     self.lu
                 )));
             }
+            t.check(&spec)
+                .map_err(|e| MsgpError::Data(format!("training trajectory {k}: {e}")))?;
         }
-        if self.inducing == Some(0) {
+        if self.inducing == 0 {
             return Err(MsgpError::InvalidSetting {
                 name: "inducing",
                 reason: "need at least one pseudo-input".into(),
             });
         }
-        let windows: usize = train.iter().map(|t| t.len() - warmup).sum();
-        let inducing = self
-            .inducing
-            .unwrap_or_else(|| DEFAULT_MAX_INDUCING.min((windows / 2).max(1)));
-        let defaults = FitSettings::default();
-        Ok(FitSettings {
-            method: self.method,
-            ly: self.ly,
-            lu: self.lu,
-            inducing,
-            iterations: match (self.method, self.iterations) {
-                (Method::Msgp | Method::LinearKf, Some(n)) => n,
-                _ => defaults.iterations,
-            },
-            one_step_iterations: match (self.method, self.iterations) {
-                (Method::Msgp, _) | (_, None) => defaults.one_step_iterations,
-                (_, Some(n)) => n,
-            },
-            seed: self.seed,
-            mean: self.mean,
-            integrators: self.integrators.clone(),
-            optimizer: self.optimizer,
-            threads: self.threads,
-            ..defaults
-        })
+        Ok(spec)
     }
 }
 
@@ -433,33 +467,8 @@ fn fit_episodes_from(
     progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
 ) -> Result<(Model, FitReport)> {
     let start = Instant::now();
-    let train: Vec<Trajectory> = episodes.iter().map(|e| e.traj.clone()).collect();
-    let first = train
-        .first()
-        .ok_or_else(|| MsgpError::Data("no training trajectories".into()))?;
-    let spec = NarxSpec {
-        ly: settings.ly,
-        lu: settings.lu,
-        dy: first.y.ncols(),
-        du: first.u.ncols(),
-    };
-    spec.validate()?;
-    integrator::validate(
-        &settings.integrators,
-        &spec,
-        model_mean(settings.method, settings.mean),
-    )?;
-    settings.start_window.validate(spec.warmup())?;
-    for (k, t) in train.iter().enumerate() {
-        t.check(&spec)
-            .map_err(|e| MsgpError::Data(format!("training trajectory {k}: {e}")))?;
-    }
-    if settings.inducing == 0 {
-        return Err(MsgpError::InvalidSetting {
-            name: "inducing",
-            reason: "need at least one pseudo-input".into(),
-        });
-    }
+    let refs: Vec<&Trajectory> = episodes.iter().map(|e| &e.traj).collect();
+    let spec = settings.validate(&refs)?;
     if let Some(p) = previous
         && (p.spec.dy, p.spec.du) != (spec.dy, spec.du)
     {
@@ -471,12 +480,11 @@ fn fit_episodes_from(
             ),
         });
     }
-    let refs: Vec<&Trajectory> = train.iter().collect();
     let normalizer = match previous {
         Some(p) => p.normalizer.clone(),
         None => Normalizer::fit(&refs)?,
     };
-    let norm: Vec<Trajectory> = train.iter().map(|t| normalizer.apply(t)).collect();
+    let norm: Vec<Trajectory> = refs.iter().map(|t| normalizer.apply(t)).collect();
     let mut report = FitReport::default();
     let one_step = OneStepSettings {
         iterations: settings.one_step_iterations,
@@ -493,7 +501,7 @@ fn fit_episodes_from(
             y_mean: vec![0.0; spec.dy],
             ..normalizer
         };
-        let norm: Vec<Trajectory> = train.iter().map(|t| scaled.apply(t)).collect();
+        let norm: Vec<Trajectory> = refs.iter().map(|t| scaled.apply(t)).collect();
         let warm = previous.map(|p| linear_kf::KalmanParams {
             a: p.params.linear_mean.clone(),
             log_process_noise: p.params.log_process_noise.clone(),

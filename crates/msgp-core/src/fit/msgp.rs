@@ -232,37 +232,27 @@ impl Stage<'_, '_> {
         stage: u8,
     ) -> Result<(GpParams<f64>, usize)> {
         let shape = init.shape()?;
-        let mut active = vec![true; shape.len()];
+        // which parameters move: the frozen groups (and `A` without a linear mean) stay
+        let mut free = GpParams::filled(shape, true);
         let no_mean = (self.config.mean == MeanFunction::Zero).then_some(ParamGroup::LinearMean);
         for g in self.settings.frozen.iter().chain(no_mean.iter()) {
-            for i in shape.group_range(*g) {
-                active[i] = false;
-            }
+            free.fill_group(*g, false);
         }
-        // what integrating outputs fix (`linear_mean` and `log_lengthscales` flatten by rows)
+        // … and what integrating outputs fix: their rows of `A` on their own lags, the
+        // length-scales of ignored inputs, the GP of outputs without one
         let structure = Structure::new(&self.settings.integrators, &self.spec);
-        let mean_start = shape.group_range(ParamGroup::LinearMean).start;
         for c in &structure.fixed {
-            active[mean_start + c.row * shape.d + c.col] = false;
+            free.linear_mean[(c.row, c.col)] = false;
         }
-        let ls_start = shape.group_range(ParamGroup::Lengthscales).start;
-        for row in 0..shape.e {
-            for &col in &structure.ignored {
-                active[ls_start + row * shape.d + col] = false;
-            }
+        for &col in &structure.ignored {
+            free.log_lengthscales.column_mut(col).fill(false);
         }
-        // outputs without a GP (`pseudo_targets` flattens by pseudo-input, then output)
-        let targets_start = shape.group_range(ParamGroup::PseudoTargets).start;
-        let sf_start = shape.group_range(ParamGroup::SignalVar).start;
         for &a in &structure.without_gp {
-            for i in 0..shape.m {
-                active[targets_start + i * shape.e + a] = false;
-            }
-            for k in 0..shape.d {
-                active[ls_start + a * shape.d + k] = false;
-            }
-            active[sf_start + a] = false;
+            free.pseudo_targets.column_mut(a).fill(false);
+            free.log_lengthscales.row_mut(a).fill(false);
+            free.log_signal_var[a] = false;
         }
+        let active = free.to_flat();
         let mut objective = MsgpObjective {
             shape,
             spec: self.spec,

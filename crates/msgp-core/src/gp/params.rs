@@ -9,11 +9,12 @@ use serde::{Deserialize, Serialize};
 use crate::error::{MsgpError, Result};
 use crate::narx::start_window::StartWindow;
 use crate::numeric::linalg::JitterPolicy;
-use crate::numeric::scalar::Scalar;
 
-/// Every differentiable parameter of the model (the paper's `θ`).
+/// Every differentiable parameter of the model (the paper's `θ`), or anything shaped like it:
+/// `GpParams<f64>` also holds a gradient, `GpParams<bool>` which parameters an optimiser may
+/// move; [`to_flat`](Self::to_flat) is the one flat layout the optimisers see.
 #[derive(Clone, Debug, PartialEq)]
-pub struct GpParams<T: Scalar> {
+pub struct GpParams<T: nalgebra::Scalar> {
     /// `X̄`: m × D pseudo-inputs.
     pub pseudo_inputs: DMatrix<T>,
     /// `ȳ`: m × E pseudo-targets (column `a` for output `a`).
@@ -154,7 +155,7 @@ impl GpShape {
     }
 }
 
-impl<T: Scalar> GpParams<T> {
+impl<T: nalgebra::Scalar + Copy> GpParams<T> {
     /// The shape, checked for consistency.
     pub fn shape(&self) -> Result<GpShape> {
         let m = self.pseudo_inputs.nrows();
@@ -230,8 +231,35 @@ impl<T: Scalar> GpParams<T> {
         })
     }
 
+    /// Every entry of `shape` set to `value` (e.g. a mask with every parameter free).
+    pub fn filled(shape: GpShape, value: T) -> Self {
+        let GpShape { m, d, e } = shape;
+        Self {
+            pseudo_inputs: DMatrix::from_element(m, d, value),
+            pseudo_targets: DMatrix::from_element(m, e, value),
+            log_lengthscales: DMatrix::from_element(e, d, value),
+            log_signal_var: DVector::from_element(e, value),
+            log_process_noise: DVector::from_element(e, value),
+            log_obs_noise: DVector::from_element(e, value),
+            linear_mean: DMatrix::from_element(e, d, value),
+        }
+    }
+
+    /// Sets every entry of `group` to `value`.
+    pub fn fill_group(&mut self, group: ParamGroup, value: T) {
+        match group {
+            ParamGroup::PseudoInputs => self.pseudo_inputs.fill(value),
+            ParamGroup::PseudoTargets => self.pseudo_targets.fill(value),
+            ParamGroup::Lengthscales => self.log_lengthscales.fill(value),
+            ParamGroup::SignalVar => self.log_signal_var.fill(value),
+            ParamGroup::ProcessNoise => self.log_process_noise.fill(value),
+            ParamGroup::ObsNoise => self.log_obs_noise.fill(value),
+            ParamGroup::LinearMean => self.linear_mean.fill(value),
+        }
+    }
+
     /// Converts the scalar type (e.g. f64 → dual with zero derivative).
-    pub fn map<U: Scalar>(&self, f: impl Fn(T) -> U + Copy) -> GpParams<U> {
+    pub fn map<U: nalgebra::Scalar + Copy>(&self, f: impl Fn(T) -> U + Copy) -> GpParams<U> {
         GpParams {
             pseudo_inputs: self.pseudo_inputs.map(f),
             pseudo_targets: self.pseudo_targets.map(f),
@@ -241,5 +269,32 @@ impl<T: Scalar> GpParams<T> {
             log_obs_noise: self.log_obs_noise.map(f),
             linear_mean: self.linear_mean.map(f),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_typed_mask_flattens_onto_its_groups() {
+        let shape = GpShape { m: 3, d: 2, e: 2 };
+        for group in ParamGroup::ALL {
+            let mut mask = GpParams::filled(shape, false);
+            mask.fill_group(group, true);
+            let flat = mask.to_flat();
+            assert_eq!(flat.len(), shape.len());
+            let range = shape.group_range(group);
+            for (i, free) in flat.iter().enumerate() {
+                assert_eq!(*free, range.contains(&i), "{group:?} entry {i}");
+            }
+        }
+        // matrices flatten by rows: A[(1, 0)] sits at the start of A's second row
+        let mut mask = GpParams::filled(shape, false);
+        mask.linear_mean[(1, 0)] = true;
+        let at = shape.group_range(ParamGroup::LinearMean).start + shape.d;
+        assert_eq!(mask.to_flat().iter().position(|&b| b), Some(at));
+        let back = GpParams::from_flat(shape, &mask.to_flat()).expect("same shape");
+        assert_eq!(back, mask);
     }
 }
