@@ -25,6 +25,8 @@
 //! - [`model_file`]: the versioned model file (a model and its training record);
 //! - [`policy_search`]: PILCO's inner loop: expected saturating cost, its gradient, the search.
 
+#![warn(missing_docs)]
+
 pub mod data;
 pub mod error;
 pub mod fit;

@@ -227,40 +227,38 @@ fn mcap_names(log: &McapLog, sel: &Selection<'_>) -> Result<(Vec<String>, Vec<St
     })
 }
 
-#[cfg(feature = "mcap")]
+/// The selected signals of an MCAP log as a table; resolves the names on the first call.
 fn mcap_table(
     path: &Path,
     bytes: &[u8],
     sel: &Selection<'_>,
     names: &mut Option<(Vec<String>, Vec<String>)>,
 ) -> Result<Table> {
-    let log = McapLog::parse(bytes, path)?;
-    let (inputs, outputs) = match names {
-        Some(n) => n.clone(),
-        None => mcap_names(&log, sel)?,
-    };
-    let signals: Vec<Signal> = inputs
-        .iter()
-        .chain(&outputs)
-        .map(|s| Signal::parse(s, sel.topic).map_err(|e| in_file(path, e)))
-        .collect::<Result<_>>()?;
-    let base = signals[inputs.len()].topic.clone();
-    let table = log.table(&signals, &base)?;
-    *names = Some((inputs, outputs));
-    Ok(table)
-}
-
-#[cfg(not(feature = "mcap"))]
-fn mcap_table(
-    path: &Path,
-    _bytes: &[u8],
-    _sel: &Selection<'_>,
-    _names: &mut Option<(Vec<String>, Vec<String>)>,
-) -> Result<Table> {
-    Err(MsgpError::File {
-        path: path.to_path_buf(),
-        message: "this build of msgp-core reads no MCAP (its `mcap` feature is off)".into(),
-    })
+    #[cfg(feature = "mcap")]
+    {
+        let log = McapLog::parse(bytes, path)?;
+        let (inputs, outputs) = match names {
+            Some(n) => n.clone(),
+            None => mcap_names(&log, sel)?,
+        };
+        let signals: Vec<Signal> = inputs
+            .iter()
+            .chain(&outputs)
+            .map(|s| Signal::parse(s, sel.topic).map_err(|e| in_file(path, e)))
+            .collect::<Result<_>>()?;
+        let base = signals[inputs.len()].topic.clone();
+        let table = log.table(&signals, &base)?;
+        *names = Some((inputs, outputs));
+        Ok(table)
+    }
+    #[cfg(not(feature = "mcap"))]
+    {
+        let _ = (bytes, sel, names);
+        Err(MsgpError::File {
+            path: path.to_path_buf(),
+            message: "this build of msgp-core reads no MCAP (its `mcap` feature is off)".into(),
+        })
+    }
 }
 
 /// Reads one file into a table with the selected columns; resolves the names on the first call.

@@ -340,7 +340,7 @@ pub struct KalmanReport {
 ///    damped basin that the likelihood does not leave (the pendulum's pole).
 ///
 /// Both start with the sensor noise of [`third_difference_noise`] and a process noise
-/// [`START_PROCESS_RATIO`] times smaller. With `previous` (a *warm start*: the parameters of a
+/// `START_PROCESS_RATIO` times smaller. With `previous` (a *warm start*: the parameters of a
 /// fit to fewer of the same episodes, in the same units) the fit starts there alone.
 pub fn fit_linear_kf(
     norm: &[Trajectory],

@@ -1,4 +1,4 @@
-//! Fitting a model to trajectories: MSGP ([`msgp`]: the trajectory likelihood), the one-step
+//! Fitting a model to trajectories: MSGP (`msgp`: the trajectory likelihood), the one-step
 //! baselines GP-NARX and PILCO GP-NARX ([`one_step`]: the marginal likelihood of one-step
 //! pairs) and linear-kf ([`linear_kf`]: the window model without a GP, by the exact
 //! Kalman-filter likelihood).

@@ -28,7 +28,7 @@ pub struct OutputGp<T: Scalar> {
     /// Cholesky factor of `K̃`.
     pub chol: Cholesky<T>,
     /// For f64: the weights `ββᵀ − K̃⁻¹` of the f64 kernel's variance reduction, laid out for
-    /// its lower-triangle pass over `Q` (`mm_f64::sym_weights`); empty for dual numbers.
+    /// its lower-triangle pass over `Q` (`numeric::simd::sym_weights`); empty for dual numbers.
     pub q_weights: Vec<T>,
 }
 

@@ -14,10 +14,10 @@ use crate::gp::{GpConfig, GpParams, GpShape, PreparedGp};
 use crate::moments::vjp::GpAdjoint;
 use crate::narx::NarxSpec;
 use crate::numeric::dual::Dual;
-use crate::numeric::linalg::{JitterLog, JitterPolicy, cholesky};
+use crate::numeric::linalg::{JitterLog, cholesky};
 use crate::numeric::parallel::{Threads, map_indexed};
 use crate::policy::{FeedbackPolicy, PolicySpec};
-use crate::rollout::adjoint::{AdjointPolicy, PolicyVjp, StepScore, rollout_adjoint};
+use crate::rollout::adjoint::{AdjointPolicy, PolicyVjp, Predicted, StepScore, rollout_adjoint};
 use crate::rollout::window::{StartState, initial_window};
 use crate::rollout::{Episode, Excitation};
 
@@ -25,28 +25,15 @@ use crate::rollout::{Episode, Excitation};
 struct MeasuredNll<'a>(&'a Trajectory);
 
 impl StepScore for MeasuredNll<'_> {
-    fn value(
-        &self,
-        t: usize,
-        mean: &DVector<f64>,
-        cov: &DMatrix<f64>,
-        jitter: &JitterPolicy,
-        log: &mut JitterLog,
-    ) -> Result<f64> {
-        let yrow: Vec<f64> = (0..mean.len()).map(|j| self.0.y[(t, j)]).collect();
-        gaussian_nll(&yrow, mean, cov, jitter, log)
+    fn value(&self, y: &Predicted<'_>, log: &mut JitterLog) -> Result<f64> {
+        let row: Vec<f64> = (0..y.mean.len()).map(|j| self.0.y[(y.t, j)]).collect();
+        gaussian_nll(&row, y.mean, y.cov, y.jitter, log)
     }
 
-    fn vjp(
-        &self,
-        t: usize,
-        mean: &DVector<f64>,
-        cov: &DMatrix<f64>,
-        jitter: &JitterPolicy,
-    ) -> Result<(DVector<f64>, DMatrix<f64>)> {
+    fn vjp(&self, y: &Predicted<'_>) -> Result<(DVector<f64>, DMatrix<f64>)> {
         // NLL = ½[rᵀV⁻¹r + log|V|]
-        let resid = DVector::from_fn(mean.len(), |j, _| self.0.y[(t, j)] - mean[j]);
-        let vch = cholesky(cov, jitter, "predictive covariance")?;
+        let resid = DVector::from_fn(y.mean.len(), |j, _| self.0.y[(y.t, j)] - y.mean[j]);
+        let vch = cholesky(y.cov, y.jitter, "predictive covariance")?;
         let vinv = vch.inverse();
         let alpha = &vinv * &resid;
         let cov_bar = (&vinv - &alpha * alpha.transpose()) * 0.5;

@@ -1,5 +1,5 @@
 //! The generic moment matching, for every [`Scalar`]: the reference the f64 kernel
-//! ([`super::fast`]) is tested against, and what forward-mode duals run.
+//! (`super::fast`) is tested against, and what forward-mode duals run.
 
 use nalgebra::{DMatrix, DVector};
 

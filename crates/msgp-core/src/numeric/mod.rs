@@ -1,4 +1,4 @@
-//! The numerical floor every model layer stands on: the [`Scalar`](scalar::Scalar) the generic
+//! The numerical floor every model layer stands on: the [`Scalar`] the generic
 //! code runs on (f64 or forward-mode duals), robust Cholesky factorisations with a recorded
 //! jitter policy ([`linalg`], and [`dense`] for the large one-step matrices), the dual-number
 //! gradient machinery ([`dual`]), the f64 SIMD building blocks of the fast kernels (`simd`,

@@ -59,7 +59,7 @@ pub const THREADS_VAR: &str = "MSGP_THREADS";
 
 /// How many threads the independent work items of one computation may run on: a loss
 /// gradient's episodes, the one-step fits' outputs, the policy search's candidates and starts.
-/// Results never depend on it ([`map_indexed`] keeps item order). Default: every available
+/// Results never depend on it (work items are reduced in their order). Default: every available
 /// core.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Threads(NonZeroUsize);

@@ -15,7 +15,7 @@ use crate::numeric::dual::moments_gradient;
 use crate::numeric::linalg::{JitterLog, JitterPolicy};
 use crate::policy::FeedbackPolicy;
 use crate::rollout::StartState;
-use crate::rollout::adjoint::{AdjointPolicy, StepScore, rollout_adjoint};
+use crate::rollout::adjoint::{AdjointPolicy, Predicted, StepScore, rollout_adjoint};
 pub use crate::rollout::adjoint::{DualPolicyMap, PolicyVjp};
 
 /// The policy search's step score: the expected saturating cost `E[c(y_t)]` of the predicted
@@ -23,25 +23,12 @@ pub use crate::rollout::adjoint::{DualPolicyMap, PolicyVjp};
 struct ExpectedCost<'a>(&'a SaturatingCost);
 
 impl StepScore for ExpectedCost<'_> {
-    fn value(
-        &self,
-        _t: usize,
-        mean: &DVector<f64>,
-        cov: &DMatrix<f64>,
-        jitter: &JitterPolicy,
-        log: &mut JitterLog,
-    ) -> Result<f64> {
-        Ok(self.0.moments(mean, cov, jitter, log)?.mean)
+    fn value(&self, y: &Predicted<'_>, log: &mut JitterLog) -> Result<f64> {
+        Ok(self.0.moments(y.mean, y.cov, y.jitter, log)?.mean)
     }
 
-    fn vjp(
-        &self,
-        _t: usize,
-        mean: &DVector<f64>,
-        cov: &DMatrix<f64>,
-        jitter: &JitterPolicy,
-    ) -> Result<(DVector<f64>, DMatrix<f64>)> {
-        cost_vjp(self.0, mean, cov, jitter)
+    fn vjp(&self, y: &Predicted<'_>) -> Result<(DVector<f64>, DMatrix<f64>)> {
+        cost_vjp(self.0, y.mean, y.cov, y.jitter)
     }
 }
 

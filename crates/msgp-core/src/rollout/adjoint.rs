@@ -24,27 +24,26 @@ use crate::numeric::dual::{Dual, gradient, weighted_sum};
 use crate::numeric::linalg::{JitterLog, JitterPolicy, symmetrize};
 use crate::policy::{FeedbackPolicy, PolicyMoments};
 
-/// What an adjoint rollout scores each predicted observation `y_t ~ N(mean, cov)` by, and that
-/// score's adjoint: where a new per-step loss plugs into the sweep.
+/// One step's predicted observation `y_t ~ N(mean, cov)`, as a [`StepScore`] sees it.
+pub(crate) struct Predicted<'a> {
+    /// The time step.
+    pub t: usize,
+    /// `E[y_t]`.
+    pub mean: &'a DVector<f64>,
+    /// `Cov[y_t]` (noise included).
+    pub cov: &'a DMatrix<f64>,
+    /// The jitter policy of any factorisation of `cov`.
+    pub jitter: &'a JitterPolicy,
+}
+
+/// What an adjoint rollout scores each predicted observation by, and that score's adjoint:
+/// where a new per-step loss plugs into the sweep.
 pub(crate) trait StepScore {
-    /// The score of step `t`'s prediction.
-    fn value(
-        &self,
-        t: usize,
-        mean: &DVector<f64>,
-        cov: &DMatrix<f64>,
-        jitter: &JitterPolicy,
-        log: &mut JitterLog,
-    ) -> Result<f64>;
+    /// The score of one step's prediction.
+    fn value(&self, y: &Predicted<'_>, log: &mut JitterLog) -> Result<f64>;
 
     /// The gradient of [`value`](Self::value) with respect to `mean` and (symmetric) `cov`.
-    fn vjp(
-        &self,
-        t: usize,
-        mean: &DVector<f64>,
-        cov: &DMatrix<f64>,
-        jitter: &JitterPolicy,
-    ) -> Result<(DVector<f64>, DMatrix<f64>)>;
+    fn vjp(&self, y: &Predicted<'_>) -> Result<(DVector<f64>, DMatrix<f64>)>;
 }
 
 /// What the forward rollout records per step.
@@ -77,7 +76,7 @@ pub type DualPolicyMap<'a> =
     dyn Fn(&[Dual], &DVector<Dual>, &DMatrix<Dual>) -> Result<PolicyMoments<Dual>> + Sync + 'a;
 
 /// A policy's vector–Jacobian product in closed form, `(q_m, q_c, ō_mean, ō_cov, C̄) ↦ (q̄_m,
-/// q̄_c, θ̄)`: what [`policy_vjp`] computes by duals through a [`DualPolicyMap`].
+/// q̄_c, θ̄)`: what `policy_vjp` computes by duals through a [`DualPolicyMap`].
 pub type PolicyVjp<'a> = dyn Fn(
         &DVector<f64>,
         &DMatrix<f64>,
@@ -218,7 +217,13 @@ pub(crate) fn rollout_adjoint(
             (fmean, fcov, v) = (mom.mean, mom.cov, mom.v);
         }
         let (xcov, ycov) = noisy_covariances(gp, &fcov);
-        total += score.value(t, &fmean, &ycov, &gp.jitter, &mut nll_log)?;
+        let predicted = Predicted {
+            t,
+            mean: &fmean,
+            cov: &ycov,
+            jitter: &gp.jitter,
+        };
+        total += score.value(&predicted, &mut nll_log)?;
         if !total.is_finite() {
             return Err(MsgpError::NonFinite(format!("rollout loss at step {t}")));
         }
@@ -333,7 +338,12 @@ pub(crate) fn rollout_adjoint(
             vbar += rec.sigma.columns(0, d).transpose() * &zxbar;
             xcovbar += acovbar.view((x, x), (dy, dy));
         }
-        let (gm, gc) = score.vjp(t0 + s, &rec.mean, &rec.ycov, &gp.jitter)?;
+        let (gm, gc) = score.vjp(&Predicted {
+            t: t0 + s,
+            mean: &rec.mean,
+            cov: &rec.ycov,
+            jitter: &gp.jitter,
+        })?;
         mbar += gm;
         ycovbar += gc;
         xcovbar += &ycovbar;
