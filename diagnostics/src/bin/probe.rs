@@ -1,18 +1,24 @@
 //! Model probe for the policy-search loop: fits the loop's model to its four random rollouts plus
 //! `F` episodes of perturbed hand-tuned gains, then compares the model's predicted cost over 5 s
-//! for three gain sets with the plant's (mean of 5 episodes each). A model that policy search can
+//! for seven gain sets with the plant's (mean of 5 episodes each). A model that policy search can
 //! use ranks them as the plant does: hand-tuned ≪ no position loop ≈ `kd_x = −1`.
 //!
-//! `cargo run --release -p msgp-sim --example probe -- [start_samples] [F] [seed]`
-//! (`start_samples` 0, the default: the measured start window, else [`StartWindow::Smoothed`]
-//! over that many samples; `F` default 4). `PROBE_FB="kp_x,ki_x,kd_x,kp_θ,kd_θ;…"` replaces the
-//! perturbed hand-tuned episodes by episodes of the given gains (what a loop iteration has
-//! seen). Prints the fitted linear mean, noise levels and length-scales, the training loss and
-//! the predictions.
+//! `cargo run --release -p msgp-diagnostics --bin probe -- [start_samples] [F] [seed]
+//! [fb="kp_x,ki_x,kd_x,kp_θ,kd_θ;…"] [fb_seg=N] [threads=N]`
+//!
+//! `start_samples` 0, the default: the measured start window, else [`StartWindow::Smoothed`]
+//! over that many samples; `F` default 4; `seed` default 0. `fb` replaces the perturbed
+//! hand-tuned episodes by episodes of the given gains (what a loop iteration has seen; `F` is
+//! then unused). `fb_seg=N` enters the feedback episodes as `N`-sample segments instead of
+//! whole. `threads` the fit's threads (default every core; results do not depend on it).
+//! Prints the fitted linear mean, noise levels and length-scales, the training loss and the
+//! predictions.
 use msgp_core::fit::{TrainingEpisode, fit_episodes};
 use msgp_core::narx::start_window::StartWindow;
+use msgp_core::numeric::parallel::Threads;
 use msgp_core::policy::PolicySpec;
-use msgp_core::policy_search::cost::SaturatingCost;
+use msgp_core::policy_search::SaturatingCost;
+use msgp_diagnostics::{Switches, numbers, usage_error};
 use msgp_sim::learn::{
     LearnSettings, episode_cost, episode_trajectory, modelled_policy, pendulum_problem, segments,
 };
@@ -22,15 +28,57 @@ use msgp_sim::{
 };
 use nalgebra::DVector;
 
+const USAGE: &str = "probe [start_samples] [F] [seed] [fb=\"kp_x,ki_x,kd_x,kp_θ,kd_θ;…\"] \
+    [fb_seg=N] [threads=N]";
+
+struct Options {
+    start_samples: usize,
+    feedback: usize,
+    seed: u64,
+    /// The `fb` switch: the feedback episodes' gains, five each.
+    fb: Option<Vec<[f64; 5]>>,
+    fb_seg: Option<usize>,
+    threads: Threads,
+}
+
+fn options() -> Result<Options, String> {
+    let sw = Switches::from_args(3, &["fb", "fb_seg", "threads"])?;
+    let fb = match sw.get::<String>("fb")? {
+        None => None,
+        Some(list) => Some(
+            list.split(';')
+                .filter(|s| !s.trim().is_empty())
+                .map(|item| {
+                    <[f64; 5]>::try_from(numbers(item)?)
+                        .map_err(|_| format!("fb entry {item:?}: five gains"))
+                })
+                .collect::<Result<_, _>>()?,
+        ),
+    };
+    Ok(Options {
+        start_samples: sw.arg(0, "start_samples")?.unwrap_or(0),
+        feedback: sw.arg(1, "F")?.unwrap_or(4),
+        seed: sw.arg(2, "seed")?.unwrap_or(0),
+        fb,
+        fb_seg: sw.get("fb_seg")?,
+        threads: sw.threads()?,
+    })
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().collect();
-    let start_samples: usize = args.get(1).map_or(Ok(0), |s| s.parse())?;
-    let feedback: usize = args.get(2).map_or(Ok(4), |s| s.parse())?;
-    let seed: u64 = args.get(3).map_or(Ok(0), |s| s.parse())?;
+    let Options {
+        start_samples,
+        feedback,
+        seed,
+        fb,
+        fb_seg,
+        threads,
+    } = options().unwrap_or_else(|e| usage_error(USAGE, &e));
     let params = PendulumParams::default();
     let settings = LearnSettings::default();
     let mut fit = settings.fit.clone();
     fit.seed = seed + 1;
+    fit.threads = threads;
     fit.start_window = match start_samples {
         0 => StartWindow::Measured,
         samples => StartWindow::Smoothed { samples, degree: 2 },
@@ -56,18 +104,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         saturation: Saturation::Sine,
         ..PidPdGains::hand_tuned()
     };
-    // feedback episodes: `PROBE_FB="kp_x,ki_x,kd_x,kp_θ,kd_θ;…"` (gains as the loop found
-    // them), else `F` perturbations of the hand-tuned gains
+    // feedback episodes: `fb="kp_x,ki_x,kd_x,kp_θ,kd_θ;…"` (gains as the loop found them), else
+    // `F` perturbations of the hand-tuned gains
     let mut fb_gains: Vec<PidPdGains> = Vec::new();
-    if let Ok(list) = std::env::var("PROBE_FB") {
-        for item in list.split(';').filter(|s| !s.trim().is_empty()) {
-            let v: Vec<f64> = item
-                .split(',')
-                .map(|x| x.trim().parse::<f64>())
-                .collect::<Result<_, _>>()?;
-            if v.len() != 5 {
-                return Err(format!("PROBE_FB entry {item:?}: five gains").into());
-            }
+    if let Some(list) = fb {
+        for v in list {
             fb_gains.push(PidPdGains {
                 kp_x: v[0],
                 ki_x: v[1],
@@ -98,9 +139,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             },
         )?;
         let traj = episode_trajectory(&ep)?;
-        let parts = match std::env::var("PROBE_FB_SEG") {
-            Ok(len) => segments(&traj, len.parse()?, 8)?,
-            Err(_) => vec![traj],
+        let parts = match fb_seg {
+            Some(len) => segments(&traj, len, 8)?,
+            None => vec![traj],
         };
         for traj in parts {
             training.push(TrainingEpisode {
@@ -194,7 +235,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             },
         ),
         (
-            // the 5 s cost's minimiser on the plant itself (examples/true_cost.rs, seed 1)
+            // the 5 s cost's minimiser on the plant itself (the true_cost diagnostic, seed 1)
             "plant's 5 s optimum",
             PidPdGains {
                 kp_x: 1.47,

@@ -7,31 +7,42 @@
 //! iterate the fit returns), and the jumps of the loss by more than 0.3 nats per step from one
 //! iteration to the next. A diagnostic for BENCHMARKS.md (issue 7's policy-iteration target).
 //!
-//! `cargo run --release -p msgp-sim --example loop_fit_convergence -- [k ...]` (default: 0 4 8)
+//! `cargo run --release -p msgp-diagnostics --bin loop_fit_convergence -- [k ...] [threads=N]`
+//! (`k` default: 0 4 8; `threads` the fit's threads, default every core: the timings depend on
+//! it, the losses do not)
 use std::time::Instant;
 
 use msgp_core::fit::{FitSettings, TrainingEpisode, fit_episodes};
+use msgp_core::numeric::parallel::Threads;
 use msgp_core::policy::PolicySpec;
+use msgp_diagnostics::{Switches, usage_error};
 use msgp_sim::learn::{LearnSettings, episode_trajectory, modelled_policy, segments};
 use msgp_sim::{
     EpisodeConfig, PendulumParams, PidPdGains, PidPdPolicy, RandomExcitation, Saturation,
     run_episode,
 };
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut ks = Vec::new();
-    for a in std::env::args().skip(1) {
-        match a.parse::<usize>() {
-            Ok(k) => ks.push(k),
-            Err(_) => {
-                eprintln!("each argument is a number of feedback episodes, got {a:?}");
-                std::process::exit(2);
-            }
-        }
-    }
+const USAGE: &str = "loop_fit_convergence [k ...] [threads=N]";
+
+/// The numbers of feedback episodes and the threads.
+fn options() -> Result<(Vec<usize>, Threads), String> {
+    let sw = Switches::from_args(usize::MAX, &["threads"])?;
+    let mut ks = sw
+        .positional()
+        .iter()
+        .map(|a| {
+            a.parse::<usize>()
+                .map_err(|_| format!("each argument is a number of feedback episodes, got {a:?}"))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     if ks.is_empty() {
         ks = vec![0, 4, 8];
     }
+    Ok((ks, sw.threads()?))
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let (ks, threads) = options().unwrap_or_else(|e| usage_error(USAGE, &e));
     let params = PendulumParams::default();
     let settings = LearnSettings::default();
     let mut random = Vec::new();
@@ -53,6 +64,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let policy = PolicySpec::Pid(modelled_policy(&gains, &params)?);
     let fit = FitSettings {
         seed: settings.seed,
+        threads,
         ..settings.fit.clone()
     };
     println!(

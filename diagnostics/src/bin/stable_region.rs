@@ -3,26 +3,29 @@
 //! runs the stability test (seed 0) on each and prints the ones that pass. A diagnostic for
 //! docs/design.md: the default `hi` is the box the loop's first policy search can reach.
 //!
-//! `cargo run --release -p msgp-sim --example stable_region -- [samples] [hi_kp_x,hi_ki_x,hi_kd_x,hi_kp_theta,hi_kd_theta]`
+//! `cargo run --release -p msgp-diagnostics --bin stable_region -- [samples]
+//! [hi_kp_x,hi_ki_x,hi_kd_x,hi_kp_theta,hi_kd_theta]` (default: 200 samples in
+//! `[0, 2 × typical]` = `2,0.6,2,20,4`; no switches)
+use msgp_diagnostics::{Switches, numbers, usage_error};
 use msgp_sim::learn::random_gains;
 use msgp_sim::{PendulumParams, StabilityCriteria, stability_test};
 
-fn main() -> Result<(), msgp_sim::SimError> {
-    let args: Vec<String> = std::env::args().collect();
-    let n: u64 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(200);
-    let hi: [f64; 5] = match args.get(2) {
+const USAGE: &str = "stable_region [samples] [hi_kp_x,hi_ki_x,hi_kd_x,hi_kp_theta,hi_kd_theta]";
+
+/// The number of draws and the box's upper corner.
+fn options() -> Result<(u64, [f64; 5]), String> {
+    let sw = Switches::from_args(2, &[])?;
+    let n = sw.arg(0, "samples")?.unwrap_or(200);
+    let hi = match sw.positional().get(1) {
         None => [2.0, 0.6, 2.0, 20.0, 4.0],
-        Some(s) => {
-            let v: Vec<f64> = s.split(',').filter_map(|v| v.trim().parse().ok()).collect();
-            match <[f64; 5]>::try_from(v) {
-                Ok(hi) => hi,
-                Err(_) => {
-                    eprintln!("the box needs five numbers separated by commas, got {s:?}");
-                    std::process::exit(2);
-                }
-            }
-        }
+        Some(s) => <[f64; 5]>::try_from(numbers(s)?)
+            .map_err(|_| format!("the box needs five numbers separated by commas, got {s:?}"))?,
     };
+    Ok((n, hi))
+}
+
+fn main() -> Result<(), msgp_sim::SimError> {
+    let (n, hi) = options().unwrap_or_else(|e| usage_error(USAGE, &e));
     let scale = hi.map(|h| h / 2.0);
     let params = PendulumParams::default();
     let mut stable = 0;

@@ -4,8 +4,10 @@
 //! A diagnostic for docs/design.md: if the true cost's minimiser fails the test, no model can
 //! make the loop pass it except by luck.
 //!
-//! `cargo run --release -p msgp-sim --example true_cost -- [horizon_s] [w_theta,w_x] [seed]`
-use msgp_core::policy_search::cost::SaturatingCost;
+//! `cargo run --release -p msgp-diagnostics --bin true_cost -- [horizon_s] [w_theta,w_x] [seed]`
+//! (default: 5 s, widths `0.1,0.3`, seed 0; no switches)
+use msgp_core::policy_search::SaturatingCost;
+use msgp_diagnostics::{Switches, numbers, usage_error};
 use msgp_sim::learn::episode_cost;
 use msgp_sim::{
     EpisodeConfig, PendulumParams, PidPdGains, PidPdPolicy, Saturation, StabilityCriteria,
@@ -51,14 +53,21 @@ fn gains(v: &[f64]) -> PidPdGains {
     }
 }
 
+const USAGE: &str = "true_cost [horizon_s] [w_theta,w_x] [seed]";
+
+/// The horizon, the cost widths and the search's seed.
+fn options() -> Result<(f64, Vec<f64>, u64), String> {
+    let sw = Switches::from_args(3, &[])?;
+    let horizon = sw.arg(0, "horizon_s")?.unwrap_or(5.0);
+    let widths = match sw.positional().get(1) {
+        None => vec![0.1, 0.3],
+        Some(s) => numbers(s)?,
+    };
+    Ok((horizon, widths, sw.arg(2, "seed")?.unwrap_or(0)))
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().collect();
-    let horizon: f64 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(5.0);
-    let widths: Vec<f64> = args
-        .get(2)
-        .map(|s| s.split(',').filter_map(|v| v.parse().ok()).collect())
-        .unwrap_or_else(|| vec![0.1, 0.3]);
-    let seed: u64 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(0);
+    let (horizon, widths, seed) = options().unwrap_or_else(|e| usage_error(USAGE, &e));
     let params = PendulumParams::default();
     let cost = SaturatingCost::with_widths(DVector::zeros(2), &widths)?;
     let episodes = 6;

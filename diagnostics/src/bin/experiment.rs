@@ -1,0 +1,168 @@
+//! Fits one benchmark with one method and prints test metrics; used for the design experiments
+//! recorded in docs/design.md.
+//!
+//! `cargo run --release -p msgp-diagnostics --bin experiment -- [system] [method] [iters] [seed]
+//! [complexity] [noise] [lr=F] [lbfgs=true] [every=N] [patience=N] [valfrac=F] [floor=F]
+//! [inducing=N] [freeze_x=true] [onestep=N] [dump=true] [threads=N]`
+//!
+//! Positional: `system` `sys1`…`sys5` or a real series (`actuator`, `ballbeam`, `drives`,
+//! `furnace`, `dryer`; read from `MSGP_DATA_DIR`), default `sys4`; `method` `msgp` (default),
+//! `gp-narx` or `pilco-narx`; `iters` default 400; `seed` default 0; `complexity` `pseudo`
+//! (default), `none`, `neg` or `pos`; `noise` (synthetic systems) `var` (default) or `std`.
+//!
+//! Switches (each left at the `FitSettings` default unless given): `lr` the learning rate,
+//! `lbfgs=true` the L-BFGS solver, `every` the validation interval, `patience`, `valfrac` the
+//! validation fraction, `floor` the noise floor, `inducing` the pseudo-inputs, `freeze_x=true`
+//! freeze the pseudo-inputs, `onestep` the one-step iterations, `dump=true` print the settings
+//! (JSON, stderr), `threads` the fit's threads (default every core; results do not depend on it).
+
+use std::path::Path;
+
+use msgp_core::data::real::{RealSeries, data_dir};
+use msgp_core::data::{NoiseScale, SyntheticSystem};
+use msgp_core::fit::{FitSettings, fit};
+use msgp_core::loss::Complexity;
+use msgp_core::model::Method;
+use msgp_diagnostics::{Switches, usage_error};
+
+const USAGE: &str = "experiment [sys1..sys5|actuator|ballbeam|drives|furnace|dryer] \
+    [msgp|gp-narx|pilco-narx] [iters] [seed] [pseudo|none|neg|pos] [var|std] [lr=F] [lbfgs=true] \
+    [every=N] [patience=N] [valfrac=F] [floor=F] [inducing=N] [freeze_x=true] [onestep=N] \
+    [dump=true] [threads=N]";
+
+const SWITCHES: &[&str] = &[
+    "lr", "lbfgs", "every", "patience", "valfrac", "floor", "inducing", "freeze_x", "onestep",
+    "dump", "threads",
+];
+
+enum Bench {
+    Synthetic(SyntheticSystem),
+    Real(RealSeries),
+}
+
+struct Options {
+    name: String,
+    bench: Bench,
+    scale: NoiseScale,
+    /// Everything but the history lengths, which the benchmark sets.
+    settings: FitSettings,
+    dump: bool,
+}
+
+/// The arguments: `FitSettings` defaults, the positional arguments, then the switches.
+fn options() -> Result<Options, String> {
+    let sw = Switches::from_args(6, SWITCHES)?;
+    let name = sw.arg::<String>(0, "system")?.unwrap_or("sys4".into());
+    let bench = if let Some(k) = name.strip_prefix("sys") {
+        let k = k.parse().map_err(|e| format!("system `{name}`: {e}"))?;
+        Bench::Synthetic(SyntheticSystem::new(k).map_err(|e| e.to_string())?)
+    } else {
+        Bench::Real(
+            RealSeries::ALL
+                .into_iter()
+                .find(|s| s.name() == name)
+                .ok_or_else(|| format!("unknown series `{name}`"))?,
+        )
+    };
+    let method = match sw.arg::<String>(1, "method")?.as_deref() {
+        None | Some("msgp") => Method::Msgp,
+        Some("gp-narx") => Method::GpNarx,
+        Some("pilco-narx") => Method::PilcoNarx,
+        Some(other) => return Err(format!("unknown method `{other}`")),
+    };
+    let complexity = match sw.arg::<String>(4, "complexity")?.as_deref() {
+        None | Some("pseudo") => Complexity::PseudoDataNll,
+        Some("none") => Complexity::None,
+        Some("neg") => Complexity::NegHalfLogDet,
+        Some("pos") => Complexity::HalfLogDet,
+        Some(other) => return Err(format!("unknown complexity `{other}`")),
+    };
+    let scale = match sw.arg::<String>(5, "noise")?.as_deref() {
+        None | Some("var") => NoiseScale::Variance,
+        Some("std") => NoiseScale::StdDev,
+        Some(other) => return Err(format!("unknown noise reading `{other}`")),
+    };
+    let mut settings = FitSettings {
+        method,
+        iterations: sw.arg(2, "iters")?.unwrap_or(400),
+        seed: sw.arg(3, "seed")?.unwrap_or(0),
+        complexity,
+        threads: sw.threads()?,
+        ..FitSettings::default()
+    };
+    if let Some(v) = sw.get("lr")? {
+        settings.learning_rate = v;
+    }
+    if sw.get("lbfgs")? == Some(true) {
+        settings.optimizer = msgp_core::fit::FitOptimizer::Lbfgs;
+    }
+    if let Some(v) = sw.get("every")? {
+        settings.eval_every = v;
+    }
+    if let Some(v) = sw.get("patience")? {
+        settings.patience = v;
+    }
+    if let Some(v) = sw.get("valfrac")? {
+        settings.validation_fraction = v;
+    }
+    if let Some(v) = sw.get("floor")? {
+        settings.noise_floor = v;
+    }
+    if let Some(v) = sw.get("inducing")? {
+        settings.inducing = v;
+    }
+    if sw.get("freeze_x")? == Some(true) {
+        settings
+            .frozen
+            .push(msgp_core::gp::ParamGroup::PseudoInputs);
+    }
+    if let Some(v) = sw.get("onestep")? {
+        settings.one_step_iterations = v;
+    }
+    Ok(Options {
+        name,
+        bench,
+        scale,
+        settings,
+        dump: sw.get("dump")? == Some(true),
+    })
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let o = options().unwrap_or_else(|e| usage_error(USAGE, &e));
+    let seed = o.settings.seed;
+    let bench = match &o.bench {
+        Bench::Synthetic(s) => s.generate(seed, o.scale)?,
+        Bench::Real(s) => s.load(&data_dir(Path::new(".")))?,
+    };
+    let settings = FitSettings {
+        ly: bench.ly,
+        lu: bench.lu,
+        ..o.settings
+    };
+    if o.dump {
+        eprintln!("{}", serde_json::to_string(&settings)?);
+    }
+    let (model, report) = fit(std::slice::from_ref(&bench.train), &settings, &mut |p| {
+        if let (Some(v), true) = (p.validation, p.iteration % 50 == 0) {
+            eprintln!(
+                "it {:4} loss {:.4} val {:.4} ({:.1}s)",
+                p.iteration, p.loss, v, p.elapsed
+            );
+        }
+    })?;
+    let m = model.evaluate(&bench.test)?;
+    println!(
+        "{} {} rmse {:.4} nll {:.3} cov {:.3} best_it {} of {} time {:.1}s jitter {:?}",
+        o.name,
+        settings.method.name(),
+        m.rmse,
+        m.nll,
+        m.coverage_2sigma,
+        report.best_iteration,
+        report.iterations_run,
+        report.train_seconds,
+        report.jitter
+    );
+    Ok(())
+}
