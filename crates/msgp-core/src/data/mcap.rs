@@ -243,9 +243,8 @@ impl McapLog {
         Ok(&self.topics[self.topic_index(topic)?])
     }
 
-    /// Messages of topic `k` as parsed JSON, in log-time order, with their log times.
-    fn decoded(&self, k: usize) -> Result<Vec<(u64, Value)>> {
-        let info = &self.topics[k];
+    /// Refuses a channel whose messages are not JSON.
+    fn require_json(&self, info: &TopicInfo) -> Result<()> {
         if info.encoding != "json" {
             return Err(file_err(
                 &self.path,
@@ -255,6 +254,13 @@ impl McapLog {
                 ),
             ));
         }
+        Ok(())
+    }
+
+    /// Messages of topic `k` as parsed JSON, in log-time order, with their log times.
+    fn decoded(&self, k: usize) -> Result<Vec<(u64, Value)>> {
+        let info = &self.topics[k];
+        self.require_json(info)?;
         self.messages
             .iter()
             .filter(|m| m.topic == k)
@@ -286,15 +292,7 @@ impl McapLog {
             .iter()
             .find(|m| m.topic == k)
             .ok_or_else(|| file_err(&self.path, format!("topic {} has no messages", topic)))?;
-        if info.encoding != "json" {
-            return Err(file_err(
-                &self.path,
-                format!(
-                    "topic {} uses message encoding `{}`; only `json` messages are supported",
-                    info.topic, info.encoding
-                ),
-            ));
-        }
+        self.require_json(info)?;
         let v: Value = serde_json::from_slice(&first.data).map_err(|e| {
             file_err(
                 &self.path,

@@ -113,6 +113,13 @@ impl Hyper {
             log_noise: v[d + 1],
         }
     }
+    /// `1/ℓ_d²`.
+    fn inv_l2(&self) -> Vec<f64> {
+        self.log_lengthscales
+            .iter()
+            .map(|l| (-2.0 * l).exp())
+            .collect()
+    }
 }
 
 /// Negative log marginal likelihood (eq. 5) of one output, optionally with PILCO's penalties.
@@ -152,11 +159,7 @@ impl Objective for Marginal {
     fn value_and_gradient(&mut self, p: &[f64]) -> Result<(f64, Vec<f64>)> {
         let (n, d) = self.xc.shape();
         let h = Hyper::from_vec(p);
-        let inv_l2: Vec<f64> = h
-            .log_lengthscales
-            .iter()
-            .map(|l| (-2.0 * l).exp())
-            .collect();
+        let inv_l2 = h.inv_l2();
         let sf2 = h.log_signal_var.exp();
         let sn2 = self.config.noise_floor + h.log_noise.exp();
         let kf = kernel_matrix(&self.xc, &self.xc, &inv_l2, sf2);
@@ -469,11 +472,7 @@ pub fn fit_one_step(
         log.merge(&objective.log);
 
         // project onto the pseudo-inputs (DTC mean)
-        let inv_l2: Vec<f64> = h
-            .log_lengthscales
-            .iter()
-            .map(|l| (-2.0 * l).exp())
-            .collect();
+        let inv_l2 = h.inv_l2();
         let sf2 = h.log_signal_var.exp();
         let sn2 = config.noise_floor + h.log_noise.exp();
         let yfull = DVector::from_fn(n, |i, _| targets[(i, a)]);

@@ -122,15 +122,24 @@ fn pull_scaled(
     }
 }
 
-struct Backward<'a> {
-    gp: &'a PreparedGp<f64>,
-    sigma: &'a DMatrix<f64>,
-    c: &'a MmState,
-    mbar_in: &'a DVector<f64>,
-    sbar: &'a DMatrix<f64>,
-    vbar: &'a DMatrix<f64>,
-    adj: &'a mut GpAdjoint,
-    w: &'a mut BackWork,
+/// One backward moment-matching step: the adjoints of its (mean, cov, V) to pull back to
+/// (μ, Σ) and the GP quantities; [`Backward::pull`] returns (μ̄, Σ̄) and adds to `adj`.
+pub(crate) struct Backward<'a> {
+    pub gp: &'a PreparedGp<f64>,
+    pub sigma: &'a DMatrix<f64>,
+    pub c: &'a MmState,
+    pub mbar_in: &'a DVector<f64>,
+    pub sbar: &'a DMatrix<f64>,
+    pub vbar: &'a DMatrix<f64>,
+    pub adj: &'a mut GpAdjoint,
+    pub w: &'a mut BackWork,
+}
+
+impl Backward<'_> {
+    /// Runs the pass in the CPU's widest instruction set.
+    pub fn pull(self) -> (DVector<f64>, DMatrix<f64>) {
+        dispatch(self)
+    }
 }
 
 impl Kernel for Backward<'_> {
@@ -139,30 +148,6 @@ impl Kernel for Backward<'_> {
     fn run<const F: bool>(self) -> Self::Output {
         mm_backward_impl::<F>(self)
     }
-}
-
-/// Pulls adjoints of (mean, cov, V) back to (μ, Σ) and the GP quantities.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn mm_backward(
-    gp: &PreparedGp<f64>,
-    sigma: &DMatrix<f64>,
-    c: &MmState,
-    mbar_in: &DVector<f64>,
-    sbar: &DMatrix<f64>,
-    vbar: &DMatrix<f64>,
-    adj: &mut GpAdjoint,
-    w: &mut BackWork,
-) -> (DVector<f64>, DMatrix<f64>) {
-    dispatch(Backward {
-        gp,
-        sigma,
-        c,
-        mbar_in,
-        sbar,
-        vbar,
-        adj,
-        w,
-    })
 }
 
 #[inline(always)]

@@ -18,7 +18,7 @@ use crate::gp::PreparedGp;
 use crate::moments::Moments;
 use crate::moments::fast::MmState;
 use crate::moments::mean::{add_linear_mean, linear_mean_backward};
-use crate::moments::vjp::{BackWork, GpAdjoint, mm_backward};
+use crate::moments::vjp::{BackWork, Backward, GpAdjoint};
 use crate::narx::NarxSpec;
 use crate::numeric::dual::{Dual, gradient, weighted_sum};
 use crate::numeric::linalg::{JitterLog, JitterPolicy, symmetrize};
@@ -361,9 +361,17 @@ pub(crate) fn rollout_adjoint(
             add_block(&mut sigmabar, (0, 0), &lb.sigma);
             vbar = lb.v;
         }
-        let (mub, sigb) = mm_backward(
-            gp, &wsig, &rec.cache, &mbar, &xcovbar, &vbar, adj, &mut work,
-        );
+        let (mub, sigb) = Backward {
+            gp,
+            sigma: &wsig,
+            c: &rec.cache,
+            mbar_in: &mbar,
+            sbar: &xcovbar,
+            vbar: &vbar,
+            adj,
+            w: &mut work,
+        }
+        .pull();
         for k in 0..d {
             mubar[k] += mub[k];
         }
