@@ -4,12 +4,14 @@
 //!   as the `msgp` command line, so both give the same numbers;
 //! - [`sim`]: the synthetic systems, the pendulum simulator, its stability test and the
 //!   policy-learning loop;
+//! - [`data`]: data files loaded as `msgp fit` loads them;
 //! - [`convert`]: numpy arrays ↔ matrices, Python containers ↔ JSON settings;
 //! - [`error`]: the exception hierarchy; no panic reaches Python.
 //!
 //! Every long computation releases the GIL.
 
 pub mod convert;
+pub mod data;
 pub mod error;
 pub mod model;
 pub mod sim;
@@ -27,6 +29,7 @@ fn _msgp(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("ModelFileError", py.get_type::<error::ModelFileError>())?;
     m.add("NotFittedError", py.get_type::<error::NotFittedError>())?;
     m.add_class::<model::Msgp>()?;
+    m.add_function(wrap_pyfunction!(data::load, m)?)?;
     m.add_function(wrap_pyfunction!(sim::synthetic_system, m)?)?;
     m.add_function(wrap_pyfunction!(sim::defaults, m)?)?;
     m.add_function(wrap_pyfunction!(sim::run_episode, m)?)?;

@@ -114,6 +114,17 @@ class Msgp:
     @property
     def reference(self) -> Optional[Dict[str, Array]]: ...
 
+def load(
+    files: Union[PathLike, Sequence[PathLike]],
+    *,
+    inputs: Optional[Sequence[str]] = None,
+    outputs: Optional[Sequence[str]] = None,
+    topic: Optional[str] = None,
+) -> Dict[str, Any]:
+    """CSV data files read as `msgp fit --data` reads them: {"inputs", "outputs", "parts"},
+    each part {"source", "episode", "t", "u", "y"} (u, y: T × d arrays). Bad data raise
+    InvalidInputError naming the file, line and column."""
+
 def synthetic_system(k: int, seed: int = 0, noise: str = "std") -> Dict[str, Any]:
     """Synthetic system k (1–5) of the paper's Table 2: u_train, y_train, u_test, y_test
     (1-D arrays) and history (l_y, l_u)."""
