@@ -18,7 +18,7 @@ use crate::numeric::linalg::{JitterLog, cholesky};
 use crate::numeric::parallel::{Threads, map_indexed};
 use crate::policy::{FeedbackPolicy, PolicySpec};
 use crate::rollout::adjoint::{AdjointPolicy, PolicyVjp, Predicted, StepScore, rollout_adjoint};
-use crate::rollout::window::{StartState, initial_window};
+use crate::rollout::window::initial_window;
 use crate::rollout::{Episode, Excitation};
 
 /// The MSGP loss's step score: `−log N(y_t; mean, cov)` of the measured output.
@@ -52,7 +52,6 @@ fn episode_adjoint(
     adj: &mut GpAdjoint,
     log: &mut JitterLog,
 ) -> Result<(f64, usize)> {
-    let d = spec.input_dim();
     let pol: Option<Box<dyn FeedbackPolicy<f64>>> = policy.map(|p| p.lift::<f64>());
     // the episode's policy is fixed (no parameters): lifted to duals once
     let pol_dual: Option<Box<dyn FeedbackPolicy<Dual>>> = policy.map(|p| p.lift::<Dual>());
@@ -81,22 +80,9 @@ fn episode_adjoint(
         }
         _ => None,
     };
-    let ds = pol.as_ref().map_or(0, |p| p.state_dim());
     let first = initial_window(gp, spec, traj, gp.start)?;
     let t0 = first.t0;
-    let (wmu, wsigma) = (&first.mean, &first.cov);
-    let mut mu = DVector::<f64>::zeros(d + ds);
-    let mut sigma = DMatrix::<f64>::zeros(d + ds, d + ds);
-    mu.rows_mut(0, d).copy_from(wmu);
-    sigma.view_mut((0, 0), (d, d)).copy_from(wsigma);
-    if let Some(p) = &pol {
-        let p0 = p.initial_state(&traj.y, &traj.u, t0);
-        mu.rows_mut(d, ds).copy_from(&p0);
-    }
-    let start = StartState {
-        mean: mu,
-        cov: sigma,
-    };
+    let start = first.state(pol.as_deref(), traj)?;
     let out = rollout_adjoint(
         gp,
         spec,

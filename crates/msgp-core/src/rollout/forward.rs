@@ -126,32 +126,11 @@ pub(crate) fn rollout_started<T: MomentMatch>(
         )));
     }
 
-    let ds = match control {
-        Control::FeedForward => 0,
-        Control::Feedback(p) => p.state_dim(),
+    let policy = match control {
+        Control::FeedForward => None,
+        Control::Feedback(p) => Some(*p),
     };
-    let n = d + ds;
-    let (wmu, wsigma) = (first.mean, first.cov);
-    let mut mu = DVector::<T>::zeros(n);
-    let mut sigma = DMatrix::<T>::zeros(n, n);
-    mu.rows_mut(0, d).copy_from(&wmu);
-    sigma.view_mut((0, 0), (d, d)).copy_from(&wsigma);
-    if let Control::Feedback(p) = control {
-        let p0 = p.initial_state(&traj.y, &traj.u, t0);
-        if p0.len() != ds {
-            return Err(MsgpError::Shape(format!(
-                "policy initial state has {} entries, its state dimension is {ds}",
-                p0.len()
-            )));
-        }
-        for k in 0..ds {
-            mu[d + k] = c(p0[k]);
-        }
-    }
-    let start = StartState {
-        mean: mu,
-        cov: sigma,
-    };
+    let start = first.state(policy, traj)?;
     rollout_from(
         gp,
         spec,

@@ -11,7 +11,7 @@ use crate::narx::NarxSpec;
 use crate::narx::start_window::StartWindow;
 use crate::numeric::linalg::symmetrize;
 use crate::numeric::scalar::{Scalar, c};
-use crate::policy::PolicyMoments;
+use crate::policy::{FeedbackPolicy, PolicyMoments};
 
 /// The Gaussian state a rollout starts from: the window `x̃_{t0−1}` followed by the policy's
 /// state (closed loop), in normalised units.
@@ -35,6 +35,36 @@ pub(crate) struct TrajectoryStart<T: Scalar> {
     /// The output lags' covariance per unit `σ_{y,j}²`, the same for every output `j`
     /// (l_y × l_y): the identity for the measured window, `H Hᵀ` for a smoothed one.
     pub pattern: DMatrix<f64>,
+}
+
+impl<T: Scalar> TrajectoryStart<T> {
+    /// The rollout's start state: this window, then (closed loop) the policy's state from the
+    /// measured samples before `t0`.
+    pub(crate) fn state(
+        &self,
+        policy: Option<&dyn FeedbackPolicy<T>>,
+        traj: &Trajectory,
+    ) -> Result<StartState<T>> {
+        let d = self.mean.len();
+        let ds = policy.map_or(0, |p| p.state_dim());
+        let mut mean = DVector::<T>::zeros(d + ds);
+        let mut cov = DMatrix::<T>::zeros(d + ds, d + ds);
+        mean.rows_mut(0, d).copy_from(&self.mean);
+        cov.view_mut((0, 0), (d, d)).copy_from(&self.cov);
+        if let Some(p) = policy {
+            let p0 = p.initial_state(&traj.y, &traj.u, self.t0);
+            if p0.len() != ds {
+                return Err(MsgpError::Shape(format!(
+                    "policy initial state has {} entries, its state dimension is {ds}",
+                    p0.len()
+                )));
+            }
+            for k in 0..ds {
+                mean[d + k] = c(p0[k]);
+            }
+        }
+        Ok(StartState { mean, cov })
+    }
 }
 
 /// The window at time `t0 − 1`: latent outputs from the measured samples `N(y, σ_y²)`
