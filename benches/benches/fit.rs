@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use criterion::{Criterion, SamplingMode, criterion_group, criterion_main};
 use msgp_core::data::real::{RealSeries, data_dir};
-use msgp_core::fit::{FitOptimizer, FitSettings, fit};
+use msgp_core::fit::{FitOptimizer, FitSettings, MsgpSettings, fit};
 
 fn bench_fit(c: &mut Criterion) {
     let dir = data_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join(".."));
@@ -34,7 +34,11 @@ fn bench_fit(c: &mut Criterion) {
         let settings = FitSettings {
             ly: bench.ly,
             lu: bench.lu,
-            optimizer,
+            method: MsgpSettings {
+                optimizer,
+                ..MsgpSettings::default()
+            }
+            .into(),
             ..FitSettings::default()
         };
         group.bench_function(name, |b| {

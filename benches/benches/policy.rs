@@ -15,7 +15,7 @@ use std::time::Duration;
 
 use criterion::measurement::WallTime;
 use criterion::{BenchmarkGroup, Criterion, SamplingMode, criterion_group, criterion_main};
-use msgp_core::fit::{FitSettings, TrainingEpisode, fit_episodes};
+use msgp_core::fit::{TrainingEpisode, fit_episodes};
 use msgp_core::model::Method;
 use msgp_core::numeric::dual;
 use msgp_core::numeric::parallel::Threads;
@@ -102,10 +102,7 @@ fn bench_policy(c: &mut Criterion) {
     let params = PendulumParams::default();
     let settings = LearnSettings::default();
     let episodes = training(&params, &settings, 1);
-    let fit = FitSettings {
-        method: Method::GpNarx,
-        ..settings.fit.clone()
-    };
+    let fit = LearnSettings::for_method(Method::GpNarx).fit;
     let (model, _) = fit_episodes(&episodes, &fit, &mut |_| {}).expect("fit");
     let cost = SaturatingCost::with_widths(DVector::from_element(2, 0.0), &settings.cost_widths)
         .expect("cost");
@@ -184,10 +181,7 @@ fn bench_policy(c: &mut Criterion) {
     // the linear-kf loop's problem: its model (no GP) and its 10 s (500-step) horizon, where the
     // policy's per-step vector–Jacobian product is most of the adjoint sweep
     let kf_settings = LearnSettings::for_method(Method::LinearKf);
-    let kf_fit = FitSettings {
-        method: Method::LinearKf,
-        ..kf_settings.fit.clone()
-    };
+    let kf_fit = kf_settings.fit.clone();
     let (kf_model, _) = fit_episodes(&episodes, &kf_fit, &mut |_| {}).expect("linear-kf fit");
     let kf_problem = PolicyProblem {
         model: &kf_model,
@@ -202,38 +196,30 @@ fn bench_policy(c: &mut Criterion) {
     group.finish();
 
     let mut group = flat_group(c, "fit_pendulum_m50", 10);
-    let msgp = FitSettings {
-        iterations: 20,
-        one_step_iterations: 20,
-        ..settings.fit.clone()
+    let msgp_with = |iterations, one_step_iterations| {
+        let mut s = settings.fit.clone();
+        let m = s.msgp_mut().expect("the loop's default model is MSGP");
+        m.iterations = iterations;
+        m.one_step_iterations = one_step_iterations;
+        s
     };
+    let msgp = msgp_with(20, 20);
     group.bench_function("msgp_20_one_step_plus_20_adam_iterations", |b| {
         b.iter(|| black_box(fit_episodes(&episodes, &msgp, &mut |_| {}).expect("fit")))
     });
     // the loop's later fits: four feedback episodes (about 900 one-step pairs, two outputs),
     // where the one-step start and the closed-loop episodes dominate
     let later = training(&params, &settings, 4);
-    let one_step = FitSettings {
-        iterations: 0,
-        one_step_iterations: 20,
-        ..settings.fit.clone()
-    };
+    let one_step = msgp_with(0, 20);
     group.bench_function("msgp_one_step_20_iterations_4_feedback_episodes", |b| {
         b.iter(|| black_box(fit_episodes(&later, &one_step, &mut |_| {}).expect("fit")))
     });
-    let adam = FitSettings {
-        iterations: 10,
-        one_step_iterations: 0,
-        ..settings.fit.clone()
-    };
+    let adam = msgp_with(10, 0);
     group.bench_function("msgp_10_adam_iterations_4_feedback_episodes", |b| {
         b.iter(|| black_box(fit_episodes(&later, &adam, &mut |_| {}).expect("fit")))
     });
     // the linear-kf model the loop fits with `--model linear-kf`, to convergence (two starts)
-    let kf = FitSettings {
-        method: Method::LinearKf,
-        ..LearnSettings::for_method(Method::LinearKf).fit
-    };
+    let kf = LearnSettings::for_method(Method::LinearKf).fit;
     group.bench_function("linear_kf_full_fit", |b| {
         b.iter(|| black_box(fit_episodes(&episodes, &kf, &mut |_| {}).expect("fit")))
     });

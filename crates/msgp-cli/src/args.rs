@@ -312,7 +312,7 @@ pub struct BudgetArgs {
     #[arg(long, value_name = "N")]
     pub warm_start: Option<usize>,
     /// Pseudo-inputs of the model.
-    #[arg(long, value_name = "M", default_value_t = LearnSettings::default().fit.inducing)]
+    #[arg(long, value_name = "M", default_value_t = msgp_sim::learn::LEARN_INDUCING)]
     pub inducing: usize,
     /// Adam steps of each policy optimisation start.
     #[arg(long, value_name = "N", default_value_t = LearnSettings::default().search.iterations)]
@@ -363,6 +363,21 @@ pub enum Experiment {
     TrustRegion(f64),
     /// `fit-optimizer=adam|lbfgs`
     FitOptimizer(OptimizerArg),
+}
+
+impl Experiment {
+    /// The switch's key, as written on the command line.
+    pub fn key(&self) -> &'static str {
+        EXPERIMENT_KEYS[match self {
+            Experiment::StartSmoothing(_) => 0,
+            Experiment::FbSegment(_) => 1,
+            Experiment::FreePosition(_) => 2,
+            Experiment::ExcitationMaxHz(_) => 3,
+            Experiment::RandomPolicies(_) => 4,
+            Experiment::TrustRegion(_) => 5,
+            Experiment::FitOptimizer(_) => 6,
+        }]
+    }
 }
 
 /// The keys [`parse_experiment`] knows.

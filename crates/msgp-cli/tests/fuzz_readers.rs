@@ -13,7 +13,7 @@ use msgp_core::data::Trajectory;
 use msgp_core::data::mcap::{McapLog, Signal};
 use msgp_core::data::table::Table;
 use msgp_core::data::{NoiseScale, SyntheticSystem};
-use msgp_core::fit::{FitSettings, fit};
+use msgp_core::fit::{FitSettings, MethodSettings, OneStepFitSettings, fit};
 use msgp_core::model_file::{FitRecord, ModelFile};
 use proptest::prelude::*;
 use serde_json::Value;
@@ -105,11 +105,13 @@ fn fit_small_model() -> (Value, Trajectory) {
         .expect("data");
     let train = bench.train.slice(0, 60);
     let settings = FitSettings {
-        method: msgp_core::model::Method::GpNarx,
         ly: 2,
         lu: 1,
-        inducing: 6,
-        one_step_iterations: 10,
+        method: MethodSettings::GpNarx(OneStepFitSettings {
+            inducing: 6,
+            iterations: 10,
+            ..OneStepFitSettings::default()
+        }),
         ..FitSettings::default()
     };
     let (model, report) = fit(std::slice::from_ref(&train), &settings, &mut |_| {}).expect("fit");

@@ -32,7 +32,7 @@ pub const FORMAT: &str = "msgp-model";
 /// Major format version written and read by this build.
 pub const FORMAT_MAJOR: u32 = 1;
 /// Minor format version written by this build (readers accept any minor of their major).
-pub const FORMAT_MINOR: u32 = 1;
+pub const FORMAT_MINOR: u32 = 2;
 
 /// NARX history lengths.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -570,7 +570,7 @@ fn temp_path(path: &Path) -> Result<PathBuf> {
 mod tests {
     use super::*;
     use crate::data::{NoiseScale, SyntheticSystem};
-    use crate::fit::fit;
+    use crate::fit::{MsgpSettings, fit};
 
     fn fitted() -> (Model, ModelFile, Trajectory) {
         let bench = SyntheticSystem::new(4)
@@ -581,9 +581,13 @@ mod tests {
         let settings = FitSettings {
             ly: 2,
             lu: 1,
-            inducing: 10,
-            iterations: 3,
-            one_step_iterations: 20,
+            method: MsgpSettings {
+                inducing: 10,
+                iterations: 3,
+                one_step_iterations: 20,
+                ..MsgpSettings::default()
+            }
+            .into(),
             ..FitSettings::default()
         };
         let (model, report) =

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use msgp_core::data::Benchmark;
 use msgp_core::data::real::{DATA_DIR_VAR, RealSeries, data_dir};
 use msgp_core::data::{NoiseScale, SyntheticSystem};
-use msgp_core::fit::{FitOptimizer, FitSettings, fit};
+use msgp_core::fit::{FitOptimizer, FitSettings, MsgpSettings, fit};
 use msgp_core::model::{Method, Metrics};
 
 fn run(bench: &Benchmark, method: Method, iterations: usize) -> Metrics {
@@ -21,15 +21,17 @@ fn run_with(
     iterations: usize,
     optimizer: FitOptimizer,
 ) -> (Metrics, usize) {
-    let settings = FitSettings {
-        method,
+    let mut settings = FitSettings {
         ly: bench.ly,
         lu: bench.lu,
-        iterations,
         seed: 0,
-        optimizer,
-        ..FitSettings::default()
+        ..FitSettings::new(method)
     };
+    // `iterations` are MSGP's; the baselines run their defaults
+    if let Some(m) = settings.msgp_mut() {
+        m.iterations = iterations;
+        m.optimizer = optimizer;
+    }
     let (model, report) =
         fit(std::slice::from_ref(&bench.train), &settings, &mut |_| {}).expect("fit");
     let m = model.evaluate(&bench.test).expect("evaluate");
@@ -133,10 +135,14 @@ fn lbfgs_lowers_the_msgp_training_loss_faster_than_adam() {
         let settings = FitSettings {
             ly: bench.ly,
             lu: bench.lu,
-            inducing: 30,
-            iterations: 40,
-            validation_fraction: 0.0,
-            optimizer,
+            method: MsgpSettings {
+                inducing: 30,
+                iterations: 40,
+                validation_fraction: 0.0,
+                optimizer,
+                ..MsgpSettings::default()
+            }
+            .into(),
             ..FitSettings::default()
         };
         let mut losses = Vec::new();

@@ -4,7 +4,7 @@
 
 use msgp_core::data::Trajectory;
 use msgp_core::data::{NoiseScale, SyntheticSystem};
-use msgp_core::fit::{FitSettings, TrainingEpisode, fit_episodes};
+use msgp_core::fit::{FitSettings, MsgpSettings, TrainingEpisode, fit_episodes};
 use msgp_core::policy::{LinearPolicy, PolicySpec};
 use nalgebra::{DMatrix, DVector};
 
@@ -49,9 +49,13 @@ fn feedback_and_feed_forward_episodes_train_together() {
     let settings = FitSettings {
         ly: 2,
         lu: 1,
-        inducing: 50,
-        iterations: 60,
-        patience: 100,
+        method: MsgpSettings {
+            inducing: 50,
+            iterations: 60,
+            patience: 100,
+            ..MsgpSettings::default()
+        }
+        .into(),
         ..FitSettings::default()
     };
     let (model, report) = fit_episodes(&episodes, &settings, &mut |_| {}).expect("fit");

@@ -3,8 +3,7 @@
 //! and cut the expected cost; policy search is seeded and reproducible.
 
 use msgp_core::data::Trajectory;
-use msgp_core::fit::{FitSettings, fit};
-use msgp_core::model::Method;
+use msgp_core::fit::{FitSettings, MethodSettings, OneStepFitSettings, fit};
 use msgp_core::model::Model;
 use msgp_core::numeric::parallel::Threads;
 use msgp_core::policy::PidPolicy;
@@ -34,10 +33,12 @@ fn unstable_plant_model() -> Model {
         .collect();
     let traj = Trajectory::siso(&u, &y).expect("traj");
     let settings = FitSettings {
-        method: Method::GpNarx,
         ly: 1,
         lu: 1,
-        inducing: 60,
+        method: MethodSettings::GpNarx(OneStepFitSettings {
+            inducing: 60,
+            ..OneStepFitSettings::default()
+        }),
         ..FitSettings::default()
     };
     fit(&[traj], &settings, &mut |_| {}).expect("fit").0

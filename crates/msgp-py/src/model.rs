@@ -112,9 +112,14 @@ impl Msgp {
     }
 
     fn from_file(file: ModelFile, model: Model, report: Option<FitReport>) -> Self {
+        // before format 1.2 the record held every method's settings, a one-step model's
+        // own count under `one_step_iterations`
+        let before_1_2 = file.format_version == "1.0" || file.format_version == "1.1";
         let iterations = match model.method {
-            Method::Msgp | Method::LinearKf => file.training.settings.get("iterations"),
-            _ => file.training.settings.get("one_step_iterations"),
+            Method::GpNarx | Method::PilcoNarx if before_1_2 => {
+                file.training.settings.get("one_step_iterations")
+            }
+            _ => file.training.settings.get("iterations"),
         }
         .and_then(serde_json::Value::as_u64)
         .and_then(|n| usize::try_from(n).ok());
@@ -305,8 +310,39 @@ impl Msgp {
                         .into());
                     }
                 }
-                // checked now against the defaults, so mistakes show at construction
-                let _: FitSettings = with_overrides(&FitSettings::default(), Some(s), "settings")?;
+                // another method's setting, named as such
+                let keys = |m: Method| {
+                    serde_json::to_value(FitSettings::new(m))
+                        .ok()
+                        .and_then(|v| v.as_object().map(|o| o.keys().cloned().collect::<Vec<_>>()))
+                        .unwrap_or_default()
+                };
+                let own = keys(m);
+                for key in obj.keys().filter(|k| !own.contains(k)) {
+                    let of = Method::ALL
+                        .into_iter()
+                        .filter(|&o| keys(o).contains(key))
+                        .map(|o| o.name())
+                        .collect::<Vec<_>>();
+                    if !of.is_empty() {
+                        let mut takes: Vec<&str> = own
+                            .iter()
+                            .map(String::as_str)
+                            .filter(|k| !OWN_SETTINGS.iter().any(|(o, _)| o == k))
+                            .collect();
+                        takes.sort_unstable();
+                        return Err(input(format!(
+                            "settings[{key:?}]: a setting of method {}, not of {}, whose settings \
+                             are {}",
+                            of.join(" and "),
+                            m.name(),
+                            takes.join(", ")
+                        ))
+                        .into());
+                    }
+                }
+                // checked now against the method's defaults, so mistakes show at construction
+                let _: FitSettings = with_overrides(&FitSettings::new(m), Some(s), "settings")?;
                 Some(user)
             }
         };

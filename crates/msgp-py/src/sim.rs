@@ -57,7 +57,8 @@ pub fn synthetic_system<'py>(
 
 /// The default values of a group of settings as a dict: "pendulum" (plant parameters),
 /// "stability" (stability-test criteria), "learn" (policy-learning loop; `method` picks the
-/// model's defaults, as `learn_policy(method)` uses them), "fit" (model fit).
+/// model's defaults, as `learn_policy(method)` uses them), "fit" (model fit; `method` picks
+/// the method's own settings, as `Msgp(method=...)` uses them).
 #[pyfunction]
 #[pyo3(signature = (what, *, method = None))]
 pub fn defaults<'py>(
@@ -65,9 +66,9 @@ pub fn defaults<'py>(
     what: &str,
     method: Option<&str>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if method.is_some() && what != "learn" {
+    if method.is_some() && what != "learn" && what != "fit" {
         return Err(input(format!(
-            "defaults({what:?}): method applies to the \"learn\" defaults only"
+            "defaults({what:?}): method applies to the \"learn\" and \"fit\" defaults only"
         ))
         .into());
     }
@@ -78,7 +79,10 @@ pub fn defaults<'py>(
             let m = crate::model::method(method.unwrap_or("msgp"))?;
             to_python(py, &LearnSettings::for_method(m))
         }
-        "fit" => to_python(py, &FitSettings::default()),
+        "fit" => {
+            let m = crate::model::method(method.unwrap_or("msgp"))?;
+            to_python(py, &FitSettings::new(m))
+        }
         other => Err(input(format!(
             "no defaults for {other:?}: expected \"pendulum\", \"stability\", \"learn\" or \"fit\""
         ))
@@ -278,10 +282,19 @@ pub fn learn_policy<'py>(
                 .into());
             }
         }
+        if let Some(fit) = d
+            .get_item("fit")?
+            .and_then(|f| f.cast_into::<PyDict>().ok())
+            && fit.contains("method")?
+        {
+            return Err(input(
+                "settings[\"fit\"][\"method\"]: set it with the learn_policy(method=...) argument",
+            )
+            .into());
+        }
     }
     let base: LearnSettings = with_overrides(&LearnSettings::for_method(m), settings, "settings")?;
     let mut s = LearnSettings {
-        method: m,
         iterations,
         seed,
         ..base

@@ -54,11 +54,32 @@ def test_bad_fit_data(u, y, message):
         (dict(settings={"seed": 3}), r"Msgp\(seed=...\)"),
         (dict(settings={"learning_rate": "fast"}), "settings.learning_rate: invalid type: string \"fast\", expected f64"),
         (dict(settings={"learning_rate": float("nan")}), "not finite"),
+        # each method has its own settings: another method's is named as such
+        (
+            dict(method="gp-narx", settings={"learning_rate": 0.1}),
+            r'settings\["learning_rate"\]: a setting of method msgp, not of gp-narx, whose settings are integrators, mean',
+        ),
+        (
+            dict(method="linear-kf", settings={"mean": "zero"}),
+            r'settings\["mean"\]: a setting of method msgp and gp-narx and pilco-narx, not of linear-kf',
+        ),
     ],
 )
 def test_bad_constructor_arguments(kwargs, message):
     with pytest.raises(ValueError, match=message):
         msgp.Msgp(**kwargs)
+
+
+def test_fit_defaults_are_the_methods_own():
+    """`defaults("fit", method=...)`: the shared settings and the method's own only."""
+    shared = {"ly", "lu", "seed", "integrators", "method"}
+    assert set(msgp.defaults("fit", method="gp-narx")) == shared | {"inducing", "mean", "iterations"}
+    assert set(msgp.defaults("fit", method="linear-kf")) == shared | {"iterations"}
+    full = msgp.defaults("fit")
+    assert full == msgp.defaults("fit", method="msgp")
+    assert {"learning_rate", "one_step_iterations", "start_window"} <= set(full)
+    with pytest.raises(ValueError, match=r'settings\["fit"\]\["method"\]: set it with the learn_policy\(method=...\)'):
+        msgp.learn_policy(iterations=1, settings={"fit": {"method": "GpNarx"}})
 
 
 def test_bad_names():

@@ -14,10 +14,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seed: u64 = args.get(2).map_or(Ok(0), |s| s.parse())?;
     let iterations: usize = args.get(3).map_or(Ok(8), |s| s.parse())?;
     let settings = LearnSettings {
-        method,
         seed,
         iterations,
-        ..LearnSettings::default()
+        ..LearnSettings::for_method(method)
     };
     let start = std::time::Instant::now();
     let out = learn_policy(&PendulumParams::default(), &settings, &mut |r| {

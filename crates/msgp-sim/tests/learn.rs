@@ -1,7 +1,7 @@
 //! The policy-learning loop end to end on the simulator (small settings): it runs, reports every
 //! field, counts interaction time, and is reproducible for a seed.
 
-use msgp_core::fit::FitSettings;
+use msgp_core::fit::{FitSettings, MsgpSettings};
 use msgp_core::policy_search::PolicySearchSettings;
 use std::ops::ControlFlow;
 
@@ -18,9 +18,13 @@ fn small(iterations: usize) -> LearnSettings {
         fit: FitSettings {
             ly: 2,
             lu: 2,
-            inducing: 20,
-            iterations: 10,
-            validation_fraction: 0.0,
+            method: MsgpSettings {
+                inducing: 20,
+                iterations: 10,
+                validation_fraction: 0.0,
+                ..MsgpSettings::default()
+            }
+            .into(),
             ..FitSettings::default()
         },
         search: PolicySearchSettings {
@@ -171,10 +175,15 @@ fn random_policy_rollouts_run_drawn_gains_and_record_them() {
 fn feedback_segments_change_msgp_fits_only() {
     let params = PendulumParams::default();
     let run = |method: msgp_core::model::Method, fb_segment: Option<usize>| {
+        let small = small(2);
+        let fit = match method {
+            Method::GpNarx => small.fit.one_step_start().expect("msgp settings"),
+            _ => small.fit.clone(),
+        };
         let settings = LearnSettings {
-            method,
+            fit,
             fb_segment,
-            ..small(2)
+            ..small
         };
         learn_policy(&params, &settings, &mut |_| {})
             .expect("learn")
@@ -216,10 +225,7 @@ fn linear_kf_defaults_declare_the_end_effector_kinematic_and_run() {
             policy_horizon_seconds: LearnSettings::default().policy_horizon_seconds,
             ..kf.clone()
         },
-        LearnSettings {
-            method: Method::LinearKf,
-            ..LearnSettings::default()
-        },
+        LearnSettings::default(),
         "nothing else differs"
     );
     assert_eq!(

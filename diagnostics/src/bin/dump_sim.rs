@@ -1,6 +1,6 @@
 //! Writes the test free simulation of one benchmark fit to CSV (t, y, mean, std) for plotting:
 //! synthetic system `k` (seed 0, noise read as a standard deviation), the `FitSettings`
-//! defaults.
+//! defaults of the method.
 //!
 //! `cargo run --release -p msgp-diagnostics --bin dump_sim -- <k: 1..5> <msgp|gp-narx> <out.csv>
 //! [threads=N]` (`threads`: the fit's threads, default every core; results do not depend on it)
@@ -31,11 +31,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (k, method, out, threads) = options().unwrap_or_else(|e| usage_error(USAGE, &e));
     let b = SyntheticSystem::new(k)?.generate(0, NoiseScale::StdDev)?;
     let s = FitSettings {
-        method,
         ly: b.ly,
         lu: b.lu,
         threads,
-        ..FitSettings::default()
+        ..FitSettings::new(method)
     };
     let (m, _) = fit(std::slice::from_ref(&b.train), &s, &mut |_| {})?;
     let sim = m.simulate(&b.test)?;

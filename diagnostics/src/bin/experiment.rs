@@ -20,7 +20,7 @@ use std::path::Path;
 
 use msgp_core::data::real::{RealSeries, data_dir};
 use msgp_core::data::{NoiseScale, SyntheticSystem};
-use msgp_core::fit::{FitSettings, fit};
+use msgp_core::fit::{FitSettings, MethodSettings, MsgpSettings, OneStepFitSettings, fit};
 use msgp_core::loss::Complexity;
 use msgp_core::model::Method;
 use msgp_diagnostics::{Switches, usage_error};
@@ -82,43 +82,54 @@ fn options() -> Result<Options, String> {
         Some("std") => NoiseScale::StdDev,
         Some(other) => return Err(format!("unknown noise reading `{other}`")),
     };
-    let mut settings = FitSettings {
-        method,
+    // the MSGP settings; a one-step method takes their pseudo-inputs and one-step iterations
+    let mut msgp = MsgpSettings {
         iterations: sw.arg(2, "iters")?.unwrap_or(400),
-        seed: sw.arg(3, "seed")?.unwrap_or(0),
         complexity,
-        threads: sw.threads()?,
-        ..FitSettings::default()
+        ..MsgpSettings::default()
     };
     if let Some(v) = sw.get("lr")? {
-        settings.learning_rate = v;
+        msgp.learning_rate = v;
     }
     if sw.get("lbfgs")? == Some(true) {
-        settings.optimizer = msgp_core::fit::FitOptimizer::Lbfgs;
+        msgp.optimizer = msgp_core::fit::FitOptimizer::Lbfgs;
     }
     if let Some(v) = sw.get("every")? {
-        settings.eval_every = v;
+        msgp.eval_every = v;
     }
     if let Some(v) = sw.get("patience")? {
-        settings.patience = v;
+        msgp.patience = v;
     }
     if let Some(v) = sw.get("valfrac")? {
-        settings.validation_fraction = v;
+        msgp.validation_fraction = v;
     }
     if let Some(v) = sw.get("floor")? {
-        settings.noise_floor = v;
+        msgp.noise_floor = v;
     }
     if let Some(v) = sw.get("inducing")? {
-        settings.inducing = v;
+        msgp.inducing = v;
     }
     if sw.get("freeze_x")? == Some(true) {
-        settings
-            .frozen
-            .push(msgp_core::gp::ParamGroup::PseudoInputs);
+        msgp.frozen.push(msgp_core::gp::ParamGroup::PseudoInputs);
     }
     if let Some(v) = sw.get("onestep")? {
-        settings.one_step_iterations = v;
+        msgp.one_step_iterations = v;
     }
+    let one_step = OneStepFitSettings {
+        inducing: msgp.inducing,
+        mean: msgp.mean,
+        iterations: msgp.one_step_iterations,
+    };
+    let settings = FitSettings {
+        seed: sw.arg(3, "seed")?.unwrap_or(0),
+        threads: sw.threads()?,
+        method: match method {
+            Method::GpNarx => MethodSettings::GpNarx(one_step),
+            Method::PilcoNarx => MethodSettings::PilcoNarx(one_step),
+            _ => msgp.into(),
+        },
+        ..FitSettings::default()
+    };
     Ok(Options {
         name,
         bench,
@@ -155,7 +166,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!(
         "{} {} rmse {:.4} nll {:.3} cov {:.3} best_it {} of {} time {:.1}s jitter {:?}",
         o.name,
-        settings.method.name(),
+        settings.method().name(),
         m.rmse,
         m.nll,
         m.coverage_2sigma,

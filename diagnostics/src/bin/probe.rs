@@ -79,10 +79,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut fit = settings.fit.clone();
     fit.seed = seed + 1;
     fit.threads = threads;
-    fit.start_window = match start_samples {
+    let msgp = fit
+        .msgp_mut()
+        .ok_or("probe fits the loop's default model, MSGP")?;
+    msgp.start_window = match start_samples {
         0 => StartWindow::Measured,
         samples => StartWindow::Smoothed { samples, degree: 2 },
     };
+    let complexity = msgp.complexity;
     let mut training = Vec::new();
     for k in 0..settings.random_rollouts {
         let s = seed * 1000 + k as u64;
@@ -180,7 +184,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             &model.config,
             &model.spec,
             &eps,
-            fit.complexity,
+            complexity,
             &mut log,
         )?;
         println!(

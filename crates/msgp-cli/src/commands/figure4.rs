@@ -3,6 +3,7 @@
 //! time of the first policy that passes the stability test, and the cost curves.
 
 use anyhow::Context;
+use msgp_core::fit::FitOptimizer;
 use msgp_sim::PendulumParams;
 use msgp_sim::learn::{IterationReport, LearnSettings};
 
@@ -169,7 +170,11 @@ fn render(
         "- Command: `cargo run --release --locked --bin msgp -- {}`\n",
         invocation()
     ));
-    let solver = learned.fit.optimizer.name();
+    let solver = learned
+        .fit
+        .msgp()
+        .map_or(FitOptimizer::default(), |s| s.optimizer)
+        .name();
     let warm = match d.warm_start {
         None | Some(0) => String::new(),
         Some(n) => format!(", from the second iteration on warm-started for {n} iterations"),

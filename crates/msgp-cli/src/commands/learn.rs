@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
+use msgp_core::fit::MethodSettings;
 use msgp_core::model::Method;
 use msgp_core::narx::start_window::StartWindow;
 use msgp_core::numeric::parallel::Threads;
@@ -200,7 +201,8 @@ pub fn settings(
     let d = LearnSettings::for_method(method);
     let threads = Threads::from_env()?;
     // the experiment switches, each at the loop's default unless set
-    let mut start_smoothing = match d.fit.start_window {
+    let msgp_defaults = d.fit.msgp().cloned().unwrap_or_default();
+    let mut start_smoothing = match msgp_defaults.start_window {
         StartWindow::Smoothed { samples, .. } => samples,
         StartWindow::Measured => 0,
     };
@@ -209,8 +211,19 @@ pub fn settings(
     let mut excitation = d.excitation;
     let mut random_policies = d.random_policies;
     let mut trust_region = d.search.trust_region;
-    let mut optimizer = d.fit.optimizer;
+    let mut optimizer = msgp_defaults.optimizer;
     for e in &args.experimental {
+        if matches!(
+            e,
+            Experiment::StartSmoothing(_) | Experiment::FitOptimizer(_)
+        ) && method != Method::Msgp
+        {
+            anyhow::bail!(
+                "--experimental {}: a setting of the MSGP fit; --model {} does not have it",
+                e.key(),
+                method.name()
+            );
+        }
         match *e {
             Experiment::StartSmoothing(n) => start_smoothing = n,
             Experiment::FbSegment(n) => fb_segment = n,
@@ -243,26 +256,31 @@ pub fn settings(
     excitation
         .validate()
         .with_context(|| format!("--experimental excitation-max-hz={}", excitation.max_hz))?;
-    let fit = msgp_core::fit::FitSettings {
-        inducing: args.inducing,
-        mean: args.mean.into(),
+    let mut fit = msgp_core::fit::FitSettings {
         // a linear-kf model has the linear mean whatever --mean says
         integrators: match (method, args.mean, free_position) {
             (_, _, true) => Vec::new(),
             (Method::LinearKf, _, false) | (_, MeanArg::Linear, false) => d.fit.integrators.clone(),
             _ => Vec::new(),
         },
-        optimizer,
-        start_window,
         threads,
         ..d.fit.clone()
-    };
+    }
+    .with_inducing(args.inducing);
+    match &mut fit.method {
+        MethodSettings::Msgp(s) => {
+            s.mean = args.mean.into();
+            s.optimizer = optimizer;
+            s.start_window = start_window;
+        }
+        MethodSettings::GpNarx(s) | MethodSettings::PilcoNarx(s) => s.mean = args.mean.into(),
+        MethodSettings::LinearKf(_) => {}
+    }
     let fit = match args.fit_iters {
-        Some(n) => fit.with_solver_iterations(method, n),
+        Some(n) => fit.with_solver_iterations(n),
         None => fit,
     };
     Ok(LearnSettings {
-        method,
         iterations,
         random_rollouts: args.random_rollouts,
         random_policies,
@@ -330,11 +348,11 @@ pub fn learn(
     // each iteration's model fit gets a bar (a line every few seconds when stderr is not a
     // terminal): an MSGP fit takes up to a minute
     let mut bar: Option<FitBar> = None;
-    let method = settings.method.name();
+    let method = settings.method().name();
     let learned = learn_policy_observed(params, settings, &mut |e| {
         match e {
             LearnEvent::FitStarted { iteration } => {
-                let stage = match (settings.method, settings.warm_start, iteration) {
+                let stage = match (settings.method(), settings.warm_start, iteration) {
                     (Method::LinearKf, _, _) => "filter likelihood",
                     (Method::Msgp, Some(_), 2..) => "continuing the previous model",
                     _ => "one-step initialisation",

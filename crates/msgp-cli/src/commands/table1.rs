@@ -9,7 +9,7 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use msgp_core::data::real::{RealSeries, data_dir};
 use msgp_core::data::{Benchmark, NoiseScale, SyntheticSystem};
-use msgp_core::fit::{FitOptimizer, FitProgress, FitSettings, fit};
+use msgp_core::fit::{FitOptimizer, FitProgress, FitSettings, MsgpSettings, fit};
 use msgp_core::model::{Method, Metrics};
 use msgp_core::numeric::parallel::Threads;
 use serde_json::json;
@@ -177,17 +177,20 @@ pub fn run(args: &Table1Args) -> anyhow::Result<()> {
         let threads = Threads::from_env()?;
         for &method in &methods {
             done += 1;
-            let settings = FitSettings {
-                method,
+            let mut settings = FitSettings {
                 ly: bench.ly,
                 lu: bench.lu,
-                inducing: args.inducing,
-                iterations: args.iters.unwrap_or(FitSettings::default().iterations),
                 seed: args.seed,
-                optimizer: args.optimizer.into(),
                 threads,
-                ..FitSettings::default()
-            };
+                ..FitSettings::new(method)
+            }
+            .with_inducing(args.inducing);
+            if let Some(msgp) = settings.msgp_mut() {
+                msgp.optimizer = args.optimizer.into();
+            }
+            if let (Some(n), Method::Msgp | Method::LinearKf) = (args.iters, method) {
+                settings = settings.with_solver_iterations(n);
+            }
             let label = format!("[{done}/{total}] {} on {}", method.name(), task.key);
             let mut bar = FitBar::new(&label, args.quiet);
             let fitted = fit(
@@ -323,10 +326,10 @@ fn render(
          (`docs/design.md`), noise-free test outputs. Real series: the paper's Table 3 splits \
          and history lengths (first samples train, the rest test). Every method: m = {m} \
          pseudo-inputs, seed {seed}; MSGP: at most {iters} {solver} iterations with early stopping \
-         on the last 20 % of the training data (`msgp_core::fit::FitSettings` defaults).\n",
+         on the last 20 % of the training data (`msgp_core::fit::MsgpSettings` defaults).\n",
         seed = args.seed,
         m = args.inducing,
-        iters = args.iters.unwrap_or(FitSettings::default().iterations),
+        iters = args.iters.unwrap_or(MsgpSettings::default().iterations),
     );
     let _ = writeln!(
         s,

@@ -5,18 +5,20 @@
 //! ## Guarding against noise collapse
 //! The trajectory likelihood can be lowered by shrinking the noise variances while the free
 //! simulation gets worse. Two guards, both documented in `docs/design.md`:
-//! 1. a variance floor on `σ_x²` and `σ_y²` ([`FitSettings::noise_floor`], normalised units),
+//! 1. a variance floor on `σ_x²` and `σ_y²` ([`MsgpSettings::noise_floor`], normalised units),
 //!    built into the parametrisation `σ² = floor + e^θ`;
 //! 2. early stopping on a held-out tail of the *training* data: the last
-//!    [`FitSettings::validation_fraction`] of each training trajectory is kept out of training,
-//!    its free-simulation NLL is computed every [`FitSettings::eval_every`] iterations, and the
+//!    [`MsgpSettings::validation_fraction`] of each training trajectory is kept out of training,
+//!    its free-simulation NLL is computed every [`MsgpSettings::eval_every`] iterations, and the
 //!    parameters with the best validation NLL are returned. The test data are never seen.
 
 use std::ops::ControlFlow;
 use std::time::Instant;
 
 use super::one_step::{OneStepSettings, fit_one_step, one_step_pairs};
-use super::{FIT_LBFGS, FitOptimizer, FitProgress, FitReport, FitSettings, TrainingEpisode};
+use super::{
+    FIT_LBFGS, FitOptimizer, FitProgress, FitReport, FitSettings, MsgpSettings, TrainingEpisode,
+};
 use crate::data::{Normalizer, Trajectory};
 use crate::error::{MsgpError, Result};
 use crate::gp::integrator::Structure;
@@ -38,6 +40,7 @@ pub(super) fn fit_msgp(
     normalizer: Normalizer,
     spec: NarxSpec,
     settings: &FitSettings,
+    msgp: &MsgpSettings,
     previous: Option<&Model>,
     one_step: &OneStepSettings,
     start: Instant,
@@ -61,8 +64,8 @@ pub(super) fn fit_msgp(
             continue;
         }
         all_eps.push(Episode::feed_forward(t.clone()));
-        let n_val = (t.len() as f64 * settings.validation_fraction).round() as usize;
-        if settings.validation_fraction > 0.0 && n_val >= 10 && t.len() - n_val > w + 10 {
+        let n_val = (t.len() as f64 * msgp.validation_fraction).round() as usize;
+        if msgp.validation_fraction > 0.0 && n_val >= 10 && t.len() - n_val > w + 10 {
             head_eps.push(Episode::feed_forward(t.slice(0, t.len() - n_val)));
             tails.push(Episode::feed_forward(t.slice(t.len() - n_val - w, t.len())));
         } else {
@@ -70,15 +73,16 @@ pub(super) fn fit_msgp(
         }
     }
     let config = GpConfig {
-        noise_floor: settings.noise_floor,
-        mean: settings.mean,
-        start: settings.start_window,
+        noise_floor: msgp.noise_floor,
+        mean: msgp.mean,
+        start: msgp.start_window,
         ..GpConfig::default()
     };
     let mut stage = Stage {
         spec,
         config,
         settings,
+        msgp,
         start,
         progress,
         report: &mut report,
@@ -87,10 +91,9 @@ pub(super) fn fit_msgp(
         Some(p) => p.params.clone(),
         None => stage.initial(&head_eps, one_step)?,
     };
-    let (mut chosen, best_iteration) =
-        stage.train(init, &head_eps, &tails, settings.iterations, 1)?;
+    let (mut chosen, best_iteration) = stage.train(init, &head_eps, &tails, msgp.iterations, 1)?;
     stage.report.best_iteration = best_iteration;
-    if settings.refit && !tails.is_empty() {
+    if msgp.refit && !tails.is_empty() {
         // stage 2: the same number of iterations on the whole training data
         let init = match previous {
             Some(p) => p.params.clone(),
@@ -171,6 +174,7 @@ struct Stage<'a, 'p> {
     spec: NarxSpec,
     config: GpConfig,
     settings: &'a FitSettings,
+    msgp: &'a MsgpSettings,
     start: Instant,
     progress: &'p mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
     report: &'a mut FitReport,
@@ -188,7 +192,7 @@ impl Stage<'_, '_> {
         let data = one_step_pairs(&self.spec, &refs)?;
         let mut init = fit_one_step(
             &data,
-            self.settings.inducing,
+            self.msgp.inducing,
             one_step,
             &self.config,
             &Structure::new(&self.settings.integrators, &self.spec),
@@ -207,7 +211,7 @@ impl Stage<'_, '_> {
             .iter()
             .map(|e| e.traj.len() - self.spec.warmup())
             .sum();
-        if self.settings.complexity == Complexity::NegHalfLogDet && predicted <= m {
+        if self.msgp.complexity == Complexity::NegHalfLogDet && predicted <= m {
             return Err(MsgpError::InvalidSetting {
                 name: "inducing",
                 reason: format!(
@@ -235,7 +239,7 @@ impl Stage<'_, '_> {
         // which parameters move: the frozen groups (and `A` without a linear mean) stay
         let mut free = GpParams::filled(shape, true);
         let no_mean = (self.config.mean == MeanFunction::Zero).then_some(ParamGroup::LinearMean);
-        for g in self.settings.frozen.iter().chain(no_mean.iter()) {
+        for g in self.msgp.frozen.iter().chain(no_mean.iter()) {
             free.fill_group(*g, false);
         }
         // … and what integrating outputs fix: their rows of `A` on their own lags, the
@@ -258,21 +262,21 @@ impl Stage<'_, '_> {
             spec: self.spec,
             config: self.config,
             episodes,
-            complexity: self.settings.complexity,
+            complexity: self.msgp.complexity,
             threads: self.settings.threads,
             log: JitterLog::default(),
             failure: None,
         };
-        let solver = match self.settings.optimizer {
+        let solver = match self.msgp.optimizer {
             FitOptimizer::Adam => Solver::Adam(Adam {
-                learning_rate: self.settings.learning_rate,
+                learning_rate: self.msgp.learning_rate,
                 ..Adam::default()
             }),
             FitOptimizer::Lbfgs => Solver::Lbfgs(FIT_LBFGS),
         };
-        let (spec, config, settings, start) = (self.spec, self.config, self.settings, self.start);
-        let every = match settings.optimizer {
-            FitOptimizer::Adam => settings.eval_every.max(1),
+        let (spec, config, msgp, start) = (self.spec, self.config, self.msgp, self.start);
+        let every = match msgp.optimizer {
+            FitOptimizer::Adam => msgp.eval_every.max(1),
             FitOptimizer::Lbfgs => 1,
         };
         let mut best: (f64, Vec<f64>, usize) = (f64::INFINITY, init.to_flat(), 0);
@@ -327,7 +331,7 @@ impl Stage<'_, '_> {
                     stopped = Some(it);
                     return Ok(Flow::Stop);
                 }
-                if it == iterations || (!tails.is_empty() && since_best >= settings.patience) {
+                if it == iterations || (!tails.is_empty() && since_best >= msgp.patience) {
                     return Ok(Flow::Stop);
                 }
                 Ok(Flow::Continue)

@@ -1,7 +1,8 @@
 //! Tests of the fits (every method) through the public entry points.
 
 use super::*;
-use crate::gp::PreparedGp;
+use crate::gp::integrator::Structure;
+use crate::gp::{MeanFunction, PreparedGp};
 use crate::numeric::parallel::Threads;
 use crate::rollout::{Control, rollout};
 use nalgebra::DMatrix;
@@ -40,9 +41,13 @@ fn a_warm_start_continues_the_previous_model() {
     let settings = FitSettings {
         ly: 2,
         lu: 2,
-        inducing: 12,
-        iterations: 15,
-        validation_fraction: 0.0,
+        method: MsgpSettings {
+            inducing: 12,
+            iterations: 15,
+            validation_fraction: 0.0,
+            ..MsgpSettings::default()
+        }
+        .into(),
         ..FitSettings::default()
     };
     let (previous, _) = fit_episodes(&first, &settings, &mut |_| {}).expect("first fit");
@@ -56,10 +61,7 @@ fn a_warm_start_continues_the_previous_model() {
         traj: Trajectory::siso(&u, &y).expect("finite"),
         policy: None,
     });
-    let zero = FitSettings {
-        iterations: 0,
-        ..settings.clone()
-    };
+    let zero = settings.clone().with_solver_iterations(0);
     let (same, _) = refit_episodes(&more, &zero, &previous, &mut |_| {}).expect("refit 0");
     assert_eq!(same.params, previous.params);
     assert_eq!(same.normalizer, previous.normalizer);
@@ -81,19 +83,14 @@ fn a_warm_start_continues_the_previous_model() {
     assert_ne!(scratch[0], losses[0]);
     for (bad, needle) in [
         (
-            FitSettings {
-                inducing: 13,
-                ..settings.clone()
+            {
+                let mut s = settings.clone();
+                s.msgp_mut().expect("msgp").inducing = 13;
+                s
             },
             "13",
         ),
-        (
-            FitSettings {
-                method: Method::GpNarx,
-                ..settings.clone()
-            },
-            "only MSGP",
-        ),
+        (settings.one_step_start().expect("msgp"), "only MSGP"),
         (
             FitSettings {
                 lu: 3,
@@ -124,14 +121,19 @@ fn first_order(a: f64) -> Trajectory {
 #[test]
 fn without_validation_the_fit_returns_its_lowest_training_loss() {
     let traj = first_order(0.2);
+    let iterations = 300;
     let settings = FitSettings {
         ly: 1,
         lu: 1,
-        inducing: 10,
-        iterations: 300,
-        learning_rate: 0.04,
-        validation_fraction: 0.0,
-        mean: MeanFunction::Linear,
+        method: MsgpSettings {
+            inducing: 10,
+            iterations,
+            learning_rate: 0.04,
+            validation_fraction: 0.0,
+            mean: MeanFunction::Linear,
+            ..MsgpSettings::default()
+        }
+        .into(),
         ..FitSettings::default()
     };
     let mut losses = Vec::new();
@@ -144,21 +146,18 @@ fn without_validation_the_fit_returns_its_lowest_training_loss() {
         "{:?}",
         report.numerical_stop
     );
-    assert_eq!(losses.len(), settings.iterations + 1);
+    assert_eq!(losses.len(), iterations + 1);
     let (best, lowest) = losses
         .iter()
         .copied()
         .enumerate()
         .fold((0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
     assert!(
-        best < settings.iterations && losses[settings.iterations] > lowest + 1e-2,
+        best < iterations && losses[iterations] > lowest + 1e-2,
         "the run must end above its best for the test to mean anything: {losses:?}"
     );
     assert_eq!(report.best_iteration, best);
-    let stopped = FitSettings {
-        iterations: best,
-        ..settings.clone()
-    };
+    let stopped = settings.clone().with_solver_iterations(best);
     let (at_best, _) =
         fit(std::slice::from_ref(&traj), &stopped, &mut |_| {}).expect("fit to the best");
     assert_eq!(model.params, at_best.params);
@@ -175,10 +174,14 @@ fn an_observer_can_stop_a_fit() {
     let settings = FitSettings {
         ly: 1,
         lu: 1,
-        inducing: 10,
-        iterations: 40,
-        validation_fraction: 0.0,
-        mean: MeanFunction::Linear,
+        method: MsgpSettings {
+            inducing: 10,
+            iterations: 40,
+            validation_fraction: 0.0,
+            mean: MeanFunction::Linear,
+            ..MsgpSettings::default()
+        }
+        .into(),
         ..FitSettings::default()
     };
     let mut seen = Vec::new();
@@ -208,11 +211,15 @@ fn a_numerically_failing_step_keeps_parameters_that_evaluate() {
     let settings = FitSettings {
         ly: 1,
         lu: 1,
-        inducing: 10,
-        iterations: 200,
-        learning_rate: 30.0,
-        validation_fraction: 0.0,
-        mean: MeanFunction::Linear,
+        method: MsgpSettings {
+            inducing: 10,
+            iterations: 200,
+            learning_rate: 30.0,
+            validation_fraction: 0.0,
+            mean: MeanFunction::Linear,
+            ..MsgpSettings::default()
+        }
+        .into(),
         ..FitSettings::default()
     };
     let (model, report) =
@@ -273,11 +280,10 @@ fn a_linear_kf_fit_simulates_an_integrator_under_a_mean_command() {
     let (clean, traj) = lag_and_double_integrator(u, (0.9, 0.1, 1e-3), 1e-4);
     let integrators = vec![KINEMATIC_Y1];
     let settings = FitSettings {
-        method: Method::LinearKf,
         ly: 2,
         lu: 1,
-        iterations: 200,
         integrators: integrators.clone(),
+        method: LinearKfSettings { iterations: 200 }.into(),
         ..FitSettings::default()
     };
     let (model, report) = fit(std::slice::from_ref(&traj), &settings, &mut |_| {}).expect("fit");
@@ -314,11 +320,10 @@ fn a_linear_kf_fit_continues_the_previous_model() {
         policy: None,
     };
     let settings = FitSettings {
-        method: Method::LinearKf,
         ly: 2,
         lu: 1,
-        iterations: 100,
         integrators: vec![KINEMATIC_Y1],
+        method: LinearKfSettings { iterations: 100 }.into(),
         ..FitSettings::default()
     };
     let (first, _) =
@@ -327,10 +332,7 @@ fn a_linear_kf_fit_continues_the_previous_model() {
     let again = |iterations| {
         refit_episodes(
             &all,
-            &FitSettings {
-                iterations,
-                ..settings.clone()
-            },
+            &settings.clone().with_solver_iterations(iterations),
             &first,
             &mut |_| {},
         )
@@ -362,10 +364,11 @@ fn a_linear_kf_fit_continues_the_previous_model() {
     let (gp, _) = fit_episodes(
         &all,
         &FitSettings {
-            method: Method::GpNarx,
-            inducing: 10,
-            one_step_iterations: 5,
-            mean: MeanFunction::Linear,
+            method: MethodSettings::GpNarx(OneStepFitSettings {
+                inducing: 10,
+                iterations: 5,
+                mean: MeanFunction::Linear,
+            }),
             ..settings.clone()
         },
         &mut |_| {},
@@ -390,12 +393,16 @@ fn an_msgp_fit_keeps_what_an_integrating_output_fixes() {
     let settings = FitSettings {
         ly: 2,
         lu: 1,
-        inducing: 15,
-        iterations: 20,
-        learning_rate: 0.01,
-        validation_fraction: 0.0,
-        mean: MeanFunction::Linear,
         integrators: integrators.clone(),
+        method: MsgpSettings {
+            inducing: 15,
+            iterations: 20,
+            learning_rate: 0.01,
+            validation_fraction: 0.0,
+            mean: MeanFunction::Linear,
+            ..MsgpSettings::default()
+        }
+        .into(),
         ..FitSettings::default()
     };
     let (model, _) = fit(std::slice::from_ref(&traj), &settings, &mut |_| {}).expect("fit");
@@ -415,10 +422,7 @@ fn an_msgp_fit_keeps_what_an_integrating_output_fixes() {
     // the free part was trained: the same fit without Adam steps differs
     let (start, _) = fit(
         std::slice::from_ref(&traj),
-        &FitSettings {
-            iterations: 0,
-            ..settings.clone()
-        },
+        &settings.clone().with_solver_iterations(0),
         &mut |_| {},
     )
     .expect("start");
@@ -427,9 +431,10 @@ fn an_msgp_fit_keeps_what_an_integrating_output_fixes() {
     // an integrator without the linear mean is refused
     let err = fit(
         std::slice::from_ref(&traj),
-        &FitSettings {
-            mean: MeanFunction::Zero,
-            ..settings
+        &{
+            let mut s = settings;
+            s.msgp_mut().expect("msgp").mean = MeanFunction::Zero;
+            s
         },
         &mut |_| {},
     )
@@ -443,27 +448,38 @@ fn options_default_inducing_and_iterations() {
     let s = options(Method::Msgp, None, Some(30))
         .settings(&[traj(50), traj(50)])
         .expect("settings");
+    let m = s.msgp().expect("msgp");
     assert_eq!(
-        (s.inducing, s.iterations, s.one_step_iterations),
+        (m.inducing, m.iterations, m.one_step_iterations),
         (47, 30, 300)
+    );
+    let d = MsgpSettings::default();
+    assert_eq!(
+        (m.learning_rate, m.frozen.clone()),
+        (d.learning_rate, d.frozen)
     );
     assert_eq!((s.ly, s.lu, s.seed), (2, 3, 7));
     let s = options(Method::GpNarx, None, Some(30))
         .settings(&[traj(1000)])
         .expect("settings");
-    assert_eq!(
-        (s.inducing, s.iterations, s.one_step_iterations),
-        (100, 400, 30)
-    );
+    let one_step = |inducing, iterations| OneStepFitSettings {
+        inducing,
+        mean: MeanFunction::Zero,
+        iterations,
+    };
+    assert_eq!(s.method, MethodSettings::GpNarx(one_step(100, 30)));
     let s = options(Method::PilcoNarx, Some(5), None)
         .settings(&[traj(4)])
         .expect("settings");
-    assert_eq!((s.inducing, s.one_step_iterations), (5, 300));
-    let d = FitSettings::default();
+    assert_eq!(s.method, MethodSettings::PilcoNarx(one_step(5, 300)));
+    let s = options(Method::LinearKf, Some(5), Some(12))
+        .settings(&[traj(40)])
+        .expect("settings");
     assert_eq!(
-        (s.learning_rate, s.frozen.clone()),
-        (d.learning_rate, d.frozen)
+        s.method,
+        MethodSettings::LinearKf(LinearKfSettings { iterations: 12 })
     );
+    assert_eq!(s.inducing(), None);
 }
 
 #[test]
@@ -491,4 +507,62 @@ fn options_refuse_bad_input_clearly() {
     .settings(&[traj(10)])
     .expect_err("l_y = 0");
     assert!(e.to_string().contains("l_y"), "{e}");
+}
+
+/// The settings serialise flat: the shared keys, `method` and the method's own keys only; an
+/// MSGP record has exactly the keys of format 1.1, and every method's record reads back equal.
+#[test]
+fn settings_serialise_with_the_methods_own_keys() {
+    let keys = |s: &FitSettings| {
+        let v = serde_json::to_value(s).expect("json");
+        let mut k: Vec<String> = v.as_object().expect("object").keys().cloned().collect();
+        k.sort();
+        k
+    };
+    let shared = ["integrators", "ly", "lu", "method", "seed"];
+    let with = |own: &[&str]| {
+        let mut k: Vec<String> = shared.iter().chain(own).map(|s| s.to_string()).collect();
+        k.sort();
+        k
+    };
+    let msgp_1_1 = [
+        "complexity",
+        "eval_every",
+        "frozen",
+        "inducing",
+        "iterations",
+        "learning_rate",
+        "mean",
+        "noise_floor",
+        "one_step_iterations",
+        "optimizer",
+        "patience",
+        "refit",
+        "start_window",
+        "validation_fraction",
+    ];
+    assert_eq!(keys(&FitSettings::new(Method::Msgp)), with(&msgp_1_1));
+    for m in [Method::GpNarx, Method::PilcoNarx] {
+        assert_eq!(
+            keys(&FitSettings::new(m)),
+            with(&["inducing", "iterations", "mean"])
+        );
+    }
+    assert_eq!(
+        keys(&FitSettings::new(Method::LinearKf)),
+        with(&["iterations"])
+    );
+    for m in [
+        Method::Msgp,
+        Method::GpNarx,
+        Method::PilcoNarx,
+        Method::LinearKf,
+    ] {
+        let s = FitSettings::new(m);
+        let v = serde_json::to_value(&s).expect("json");
+        assert_eq!(v["method"], serde_json::to_value(m).expect("method"));
+        let back: FitSettings = serde_json::from_value(v).expect("reads back");
+        assert_eq!(back, s);
+        assert_eq!(back.method(), m);
+    }
 }

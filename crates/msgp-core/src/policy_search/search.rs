@@ -245,9 +245,8 @@ pub fn optimise_pid_scaled(
 mod tests {
     use super::*;
     use crate::data::Trajectory;
-    use crate::fit::{FitSettings, fit};
+    use crate::fit::{FitSettings, MethodSettings, OneStepFitSettings, fit};
     use crate::gp::MeanFunction;
-    use crate::model::Method;
     use crate::model::Model;
     use crate::policy_search::{SaturatingCost, policy_gradient_duals};
     use nalgebra::{DMatrix, DVector};
@@ -264,12 +263,13 @@ mod tests {
         let y = DMatrix::from_fn(n, 2, |t, j| (t as f64 * 0.1 + j as f64).cos() + extra(t, j));
         let traj = Trajectory::new(u, y).expect("traj");
         let settings = FitSettings {
-            method: Method::GpNarx,
             ly: 2,
             lu: 1,
-            inducing: 20,
-            one_step_iterations: 30,
-            mean,
+            method: MethodSettings::GpNarx(OneStepFitSettings {
+                inducing: 20,
+                iterations: 30,
+                mean,
+            }),
             ..FitSettings::default()
         };
         fit(&[traj], &settings, &mut |_| {}).expect("fit").0

@@ -38,10 +38,12 @@ class Msgp:
 
     history: (l_y, l_u), past outputs and inputs in the GP input.
     inducing: pseudo-inputs; None: min(100, training windows / 2).
-    iterations: Adam iterations (MSGP: trajectory likelihood, default 400; baselines:
-        one-step marginal likelihood, default 300) — `msgp fit --iters`.
+    iterations: the method's own solver iterations (MSGP: trajectory likelihood, default 400;
+        baselines: one-step marginal likelihood, default 300; linear-kf: L-BFGS on the filter
+        likelihood, default 400) — `msgp fit --iters`.
     seed: seed of every random choice.
-    settings: other fields of `defaults("fit")` to override (advanced), e.g.
+    settings: other fields of `defaults("fit", method=method)` to override (advanced; each
+        method has its own: a setting of another method is refused by name), e.g.
         `{"mean": "linear", "integrators": [{"output": 0, "order": 2}]}` declares output 0 a
         pure double integrator (`msgp fit --integrating 0:2`; add `"linear": True` for
         `0:2:linear`); `{"optimizer": "lbfgs"}` fits by L-BFGS (`msgp fit --optimizer lbfgs`).
@@ -130,8 +132,9 @@ def synthetic_system(k: int, seed: int = 0, noise: str = "std") -> Dict[str, Any
     (1-D arrays) and history (l_y, l_u)."""
 
 def defaults(what: str, *, method: Optional[str] = None) -> Dict[str, Any]:
-    """Defaults of "pendulum", "stability", "learn" or "fit" settings; for "learn", those of
-    the model `method` ("msgp" when None; "linear-kf" warm-starts and searches over 10 s)."""
+    """Defaults of "pendulum", "stability", "learn" or "fit" settings; for "learn" and "fit",
+    those of the model `method` ("msgp" when None; a "linear-kf" loop warm-starts and searches
+    over 10 s; a method's fit settings are the shared ones and its own)."""
 
 def run_episode(
     controller: Optional[Gains] = None,

@@ -62,7 +62,7 @@ pub(super) fn msgp_segments(
     settings: &LearnSettings,
 ) -> Result<Vec<Trajectory>, SimError> {
     match segment {
-        Some(len) if settings.method == Method::Msgp => {
+        Some(len) if settings.method() == Method::Msgp => {
             segments(&traj, len, settings.fit.ly.max(settings.fit.lu) + 5)
         }
         _ => Ok(vec![traj]),

@@ -24,8 +24,8 @@ use problem::gains_from;
 pub use problem::{episode_cost, modelled_policy, pendulum_problem};
 pub use report::{IterationReport, LearnOutcome};
 pub use settings::{
-    END_EFFECTOR_INTEGRATOR, END_EFFECTOR_KINEMATIC, LINEAR_KF_POLICY_HORIZON_SECONDS,
-    LINEAR_KF_WARM_START, LearnSettings, learn_excitation,
+    END_EFFECTOR_INTEGRATOR, END_EFFECTOR_KINEMATIC, LEARN_INDUCING,
+    LINEAR_KF_POLICY_HORIZON_SECONDS, LINEAR_KF_WARM_START, LearnSettings, learn_excitation,
 };
 
 use std::ops::ControlFlow;
@@ -177,8 +177,8 @@ pub fn learn_policy_observed(
     let mut reports = Vec::new();
     let mut previous_model: Option<msgp_core::model::Model> = None;
     for it in 1..=settings.iterations {
+        let method = settings.method();
         let fit_settings = FitSettings {
-            method: settings.method,
             seed: settings.seed.wrapping_add(it as u64),
             ..settings.fit.clone()
         };
@@ -188,16 +188,16 @@ pub fn learn_policy_observed(
             return Err(stopped);
         }
         let warm = match (&previous_model, settings.warm_start) {
-            (Some(prev), Some(n)) if matches!(settings.method, Method::Msgp | Method::LinearKf) => {
+            (Some(prev), Some(n)) if matches!(method, Method::Msgp | Method::LinearKf) => {
                 Some((prev, n))
             }
             _ => None,
         };
         let fitted = fit_episodes_observed(
             &training,
-            &FitSettings {
-                iterations: warm.map_or(fit_settings.iterations, |(_, n)| n),
-                ..fit_settings.clone()
+            &match warm {
+                Some((_, n)) => fit_settings.clone().with_solver_iterations(n),
+                None => fit_settings.clone(),
             },
             warm.map(|(prev, _)| prev),
             &mut |p| {
@@ -214,10 +214,9 @@ pub fn learn_policy_observed(
             Err(
                 e @ (msgp_core::MsgpError::NonFinite(_)
                 | msgp_core::MsgpError::NotPositiveDefinite { .. }),
-            ) if settings.method == Method::Msgp => {
-                let one_step = FitSettings {
-                    method: Method::GpNarx,
-                    ..fit_settings.clone()
+            ) if method == Method::Msgp => {
+                let Some(one_step) = fit_settings.one_step_start() else {
+                    return Err(e.into());
                 };
                 let (model, mut report) = fit_episodes(&training, &one_step, &mut |_| {})?;
                 report.numerical_stop = Some(format!(
@@ -232,7 +231,7 @@ pub fn learn_policy_observed(
         let fit_seconds = clock.elapsed().as_secs_f64();
         // a one-step fallback model is not continued: the next fit starts over
         if settings.warm_start.is_some() {
-            previous_model = (model.method == settings.method).then(|| model.clone());
+            previous_model = (model.method == method).then(|| model.clone());
         }
         let problem = pendulum_problem(&model, params, cost.clone(), policy_horizon);
         let search = PolicySearchSettings {

@@ -3,7 +3,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use msgp_core::fit::FitSettings;
+use msgp_core::fit::{
+    FitSettings, LinearKfSettings, MethodSettings, MsgpSettings, OneStepFitSettings,
+};
 use msgp_core::gp::MeanFunction;
 use msgp_core::gp::integrator::Integrator;
 use msgp_core::model::Method;
@@ -14,8 +16,6 @@ use crate::controller::ExcitationConfig;
 /// Settings of the learning loop.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LearnSettings {
-    /// Model training method (`Msgp` or the one-step `GpNarx` of standard PILCO).
-    pub method: Method,
     /// Policy-learning iterations after the random rollouts.
     pub iterations: usize,
     /// Random episodes before the first policy.
@@ -44,7 +44,8 @@ pub struct LearnSettings {
     pub policy_horizon_seconds: f64,
     /// Seed of everything random (episodes, excitation, fits, restarts).
     pub seed: u64,
-    /// Model fit settings (history, inducing points, iterations). The default prior mean is
+    /// Model fit settings: the model's method (MSGP, the one-step GP-NARX of standard PILCO,
+    /// linear-kf) and its settings (history, inducing points, iterations). The default prior mean is
     /// linear (an ARX map under the GP, started by instrumental variables): with a zero mean the
     /// fitted models lose the pole's angular velocity (docs/design.md). The end effector is
     /// declared a double integrator ([`END_EFFECTOR_INTEGRATOR`]).
@@ -88,7 +89,6 @@ pub struct LearnSettings {
 impl Default for LearnSettings {
     fn default() -> Self {
         Self {
-            method: Method::Msgp,
             iterations: 8,
             random_rollouts: 4,
             random_policies: 0,
@@ -99,12 +99,16 @@ impl Default for LearnSettings {
             fit: FitSettings {
                 ly: 2,
                 lu: 3,
-                inducing: 50,
-                iterations: 300,
-                learning_rate: 0.01,
-                validation_fraction: 0.0,
-                mean: MeanFunction::Linear,
                 integrators: vec![END_EFFECTOR_INTEGRATOR],
+                method: MsgpSettings {
+                    inducing: LEARN_INDUCING,
+                    iterations: 300,
+                    learning_rate: 0.01,
+                    validation_fraction: 0.0,
+                    mean: MeanFunction::Linear,
+                    ..MsgpSettings::default()
+                }
+                .into(),
                 ..FitSettings::default()
             },
             search: PolicySearchSettings {
@@ -136,9 +140,17 @@ impl LearnSettings {
     /// instead of the command. Its fits are warm-started ([`LINEAR_KF_WARM_START`]), and its gains
     /// are optimised over [`LINEAR_KF_POLICY_HORIZON_SECONDS`].
     pub fn for_method(method: Method) -> Self {
-        let mut s = Self {
-            method,
-            ..Self::default()
+        let mut s = Self::default();
+        let one_step = OneStepFitSettings {
+            inducing: LEARN_INDUCING,
+            mean: MeanFunction::Linear,
+            ..OneStepFitSettings::default()
+        };
+        s.fit.method = match method {
+            Method::Msgp => s.fit.method,
+            Method::GpNarx => MethodSettings::GpNarx(one_step),
+            Method::PilcoNarx => MethodSettings::PilcoNarx(one_step),
+            Method::LinearKf => LinearKfSettings { iterations: 300 }.into(),
         };
         if method == Method::LinearKf {
             for i in s.fit.integrators.iter_mut() {
@@ -152,6 +164,16 @@ impl LearnSettings {
         s
     }
 }
+
+impl LearnSettings {
+    /// The model's training method ([`FitSettings::method`]).
+    pub fn method(&self) -> Method {
+        self.fit.method()
+    }
+}
+
+/// Pseudo-inputs of the loop's GP models.
+pub const LEARN_INDUCING: usize = 50;
 
 /// The policy horizon of a linear-kf loop \[s\]: the stability test's length. Once the pole is
 /// held, a 5 s horizon lets the search trade a slow drift of the end effector (an ever more

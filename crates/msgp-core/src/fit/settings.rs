@@ -1,0 +1,444 @@
+//! What controls a fit, per method: the settings every method shares (the NARX history, the
+//! seed, declared integrators, threads) and one settings type per method ([`MsgpSettings`],
+//! [`OneStepFitSettings`] for the two one-step baselines, [`LinearKfSettings`]), so a setting
+//! exists only where it means something. [`FitSettings::validate`] checks them against the data
+//! once; [`FitOptions`] is the smaller set of choices the front ends offer.
+//!
+//! Serialised (the model file's training record, the Python `settings=` keys) as one flat
+//! object: the shared keys, `"method"` and the method's own keys.
+
+use serde::{Deserialize, Serialize};
+
+use crate::data::Trajectory;
+use crate::error::{MsgpError, Result};
+use crate::gp::integrator::{self, Integrator};
+use crate::gp::{MeanFunction, ParamGroup};
+use crate::loss::Complexity;
+use crate::model::Method;
+use crate::narx::NarxSpec;
+use crate::narx::start_window::StartWindow;
+use crate::numeric::parallel::Threads;
+use crate::optim::Lbfgs;
+
+/// Everything that controls a fit: the shared settings and the method's own.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FitSettings {
+    /// `l_y`.
+    pub ly: usize,
+    /// `l_u`.
+    pub lu: usize,
+    /// Seed for every random choice (k-means).
+    pub seed: u64,
+    /// Outputs known to integrate the rest of the system ([`crate::gp::integrator`]); a GP
+    /// model needs the linear mean for them, whose coefficients on their own lags they fix.
+    #[serde(default)]
+    pub integrators: Vec<Integrator>,
+    /// The method and its own settings.
+    #[serde(flatten)]
+    pub method: MethodSettings,
+    /// Threads of the fit's independent work (the loss gradient's episodes, the one-step fits'
+    /// outputs); the result does not depend on it. Not part of a model's training record.
+    #[serde(skip)]
+    pub threads: Threads,
+}
+
+/// A training method with its own settings (serialised with the tag `"method"`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "method")]
+pub enum MethodSettings {
+    /// MSGP: the trajectory likelihood ([`Method::Msgp`]).
+    Msgp(MsgpSettings),
+    /// One-step GP-NARX, marginal likelihood ([`Method::GpNarx`]).
+    GpNarx(OneStepFitSettings),
+    /// One-step GP-NARX with PILCO's hyperparameter penalties ([`Method::PilcoNarx`]).
+    PilcoNarx(OneStepFitSettings),
+    /// The window model without a GP by the Kalman-filter likelihood ([`Method::LinearKf`]).
+    LinearKf(LinearKfSettings),
+}
+
+/// The settings of an MSGP fit.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MsgpSettings {
+    /// Number of pseudo-inputs `m`.
+    pub inducing: usize,
+    /// Prior mean of the GP (the paper's model has none).
+    #[serde(default)]
+    pub mean: MeanFunction,
+    /// Solver iterations on the MSGP loss.
+    pub iterations: usize,
+    /// Solver of the MSGP loss.
+    #[serde(default)]
+    pub optimizer: FitOptimizer,
+    /// Adam step size.
+    pub learning_rate: f64,
+    /// Complexity term of the MSGP loss.
+    pub complexity: Complexity,
+    /// Fraction of each training trajectory held out for early stopping.
+    pub validation_fraction: f64,
+    /// Adam iterations between validation checks (L-BFGS checks after every iteration: one of
+    /// its steps goes as far as many of Adam's).
+    pub eval_every: usize,
+    /// Stop after this many validation checks without improvement.
+    pub patience: usize,
+    /// Floor on the noise variances (normalised units).
+    pub noise_floor: f64,
+    /// Parameter groups kept fixed during training.
+    pub frozen: Vec<ParamGroup>,
+    /// Adam iterations of the one-step fit that starts the training.
+    pub one_step_iterations: usize,
+    /// After early stopping, refit on all training data for the chosen number of iterations.
+    pub refit: bool,
+    /// How the loss starts each training trajectory's rollout ([`StartWindow`]).
+    #[serde(default)]
+    pub start_window: StartWindow,
+}
+
+impl Default for MsgpSettings {
+    fn default() -> Self {
+        Self {
+            inducing: DEFAULT_MAX_INDUCING,
+            mean: MeanFunction::Zero,
+            iterations: 400,
+            optimizer: FitOptimizer::Adam,
+            learning_rate: 0.002,
+            complexity: Complexity::PseudoDataNll,
+            validation_fraction: 0.2,
+            eval_every: 10,
+            patience: 20,
+            noise_floor: 1e-4,
+            // the paper optimises "the GP hyperparameters and targets"; moving the pseudo-inputs
+            // too overfits (docs/design.md)
+            frozen: vec![ParamGroup::PseudoInputs],
+            one_step_iterations: DEFAULT_ONE_STEP_ITERATIONS,
+            refit: false,
+            start_window: StartWindow::Measured,
+        }
+    }
+}
+
+/// The settings of a one-step fit (GP-NARX, PILCO GP-NARX).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OneStepFitSettings {
+    /// Number of pseudo-inputs `m`.
+    pub inducing: usize,
+    /// Prior mean of the GP.
+    #[serde(default)]
+    pub mean: MeanFunction,
+    /// Adam iterations on the one-step marginal likelihood.
+    pub iterations: usize,
+}
+
+impl Default for OneStepFitSettings {
+    fn default() -> Self {
+        Self {
+            inducing: DEFAULT_MAX_INDUCING,
+            mean: MeanFunction::Zero,
+            iterations: DEFAULT_ONE_STEP_ITERATIONS,
+        }
+    }
+}
+
+/// The settings of a linear-kf fit (its prior mean is the model: always linear).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LinearKfSettings {
+    /// L-BFGS iterations on the filter likelihood (per start).
+    pub iterations: usize,
+}
+
+impl Default for LinearKfSettings {
+    fn default() -> Self {
+        Self { iterations: 400 }
+    }
+}
+
+impl From<MsgpSettings> for MethodSettings {
+    fn from(s: MsgpSettings) -> Self {
+        MethodSettings::Msgp(s)
+    }
+}
+
+impl From<LinearKfSettings> for MethodSettings {
+    fn from(s: LinearKfSettings) -> Self {
+        MethodSettings::LinearKf(s)
+    }
+}
+
+/// Adam iterations of a one-step fit by default (a baseline's, MSGP's start).
+pub const DEFAULT_ONE_STEP_ITERATIONS: usize = 300;
+
+impl Default for FitSettings {
+    fn default() -> Self {
+        Self::new(Method::Msgp)
+    }
+}
+
+impl FitSettings {
+    /// The defaults of `method`: history (2, 2), seed 0, no integrators, the method's own
+    /// defaults.
+    pub fn new(method: Method) -> Self {
+        let method = match method {
+            Method::Msgp => MethodSettings::Msgp(MsgpSettings::default()),
+            Method::GpNarx => MethodSettings::GpNarx(OneStepFitSettings::default()),
+            Method::PilcoNarx => MethodSettings::PilcoNarx(OneStepFitSettings::default()),
+            Method::LinearKf => MethodSettings::LinearKf(LinearKfSettings::default()),
+        };
+        Self {
+            ly: 2,
+            lu: 2,
+            seed: 0,
+            integrators: Vec::new(),
+            method,
+            threads: Threads::default(),
+        }
+    }
+
+    /// The training method.
+    pub fn method(&self) -> Method {
+        match self.method {
+            MethodSettings::Msgp(_) => Method::Msgp,
+            MethodSettings::GpNarx(_) => Method::GpNarx,
+            MethodSettings::PilcoNarx(_) => Method::PilcoNarx,
+            MethodSettings::LinearKf(_) => Method::LinearKf,
+        }
+    }
+
+    /// The MSGP settings, for an MSGP fit.
+    pub fn msgp(&self) -> Option<&MsgpSettings> {
+        match &self.method {
+            MethodSettings::Msgp(s) => Some(s),
+            _ => None,
+        }
+    }
+
+    /// The MSGP settings to change, for an MSGP fit.
+    pub fn msgp_mut(&mut self) -> Option<&mut MsgpSettings> {
+        match &mut self.method {
+            MethodSettings::Msgp(s) => Some(s),
+            _ => None,
+        }
+    }
+
+    /// The number of pseudo-inputs of a GP model (`None` for linear-kf).
+    pub fn inducing(&self) -> Option<usize> {
+        match &self.method {
+            MethodSettings::Msgp(s) => Some(s.inducing),
+            MethodSettings::GpNarx(s) | MethodSettings::PilcoNarx(s) => Some(s.inducing),
+            MethodSettings::LinearKf(_) => None,
+        }
+    }
+
+    /// The prior mean the fitted model gets: a linear-kf model is its linear mean.
+    pub fn mean(&self) -> MeanFunction {
+        match &self.method {
+            MethodSettings::Msgp(s) => s.mean,
+            MethodSettings::GpNarx(s) | MethodSettings::PilcoNarx(s) => s.mean,
+            MethodSettings::LinearKf(_) => MeanFunction::Linear,
+        }
+    }
+
+    /// Iterations of the method's own solver: on the trajectory likelihood (MSGP), the
+    /// one-step marginal likelihood (the baselines), the filter likelihood (linear-kf).
+    pub fn solver_iterations(&self) -> usize {
+        match &self.method {
+            MethodSettings::Msgp(s) => s.iterations,
+            MethodSettings::GpNarx(s) | MethodSettings::PilcoNarx(s) => s.iterations,
+            MethodSettings::LinearKf(s) => s.iterations,
+        }
+    }
+
+    /// These settings with `n` iterations of the method's own solver
+    /// ([`FitSettings::solver_iterations`]; an MSGP fit's one-step start keeps its own).
+    pub fn with_solver_iterations(mut self, n: usize) -> Self {
+        match &mut self.method {
+            MethodSettings::Msgp(s) => s.iterations = n,
+            MethodSettings::GpNarx(s) | MethodSettings::PilcoNarx(s) => s.iterations = n,
+            MethodSettings::LinearKf(s) => s.iterations = n,
+        }
+        self
+    }
+
+    /// These settings with `m` pseudo-inputs (a GP method's; linear-kf has none).
+    pub fn with_inducing(mut self, m: usize) -> Self {
+        match &mut self.method {
+            MethodSettings::Msgp(s) => s.inducing = m,
+            MethodSettings::GpNarx(s) | MethodSettings::PilcoNarx(s) => s.inducing = m,
+            MethodSettings::LinearKf(_) => {}
+        }
+        self
+    }
+
+    /// The one-step GP-NARX fit that starts an MSGP fit of these settings (its pseudo-inputs,
+    /// prior mean and one-step iterations), as a fit of its own; `None` for other methods.
+    pub fn one_step_start(&self) -> Option<FitSettings> {
+        let s = self.msgp()?;
+        Some(FitSettings {
+            method: MethodSettings::GpNarx(OneStepFitSettings {
+                inducing: s.inducing,
+                mean: s.mean,
+                iterations: s.one_step_iterations,
+            }),
+            ..self.clone()
+        })
+    }
+
+    /// The NARX spec of `train` under these settings, with every setting checked against the
+    /// data once, here: the history, the integrators against the history and the prior mean,
+    /// the start window, every trajectory's length and values, the pseudo-input count.
+    pub fn validate(&self, train: &[&Trajectory]) -> Result<NarxSpec> {
+        let first = train
+            .first()
+            .ok_or_else(|| MsgpError::Data("no training trajectories".into()))?;
+        let spec = NarxSpec {
+            ly: self.ly,
+            lu: self.lu,
+            dy: first.y.ncols(),
+            du: first.u.ncols(),
+        };
+        spec.validate()?;
+        integrator::validate(&self.integrators, &spec, self.mean())?;
+        let warmup = spec.warmup();
+        if let Some(s) = self.msgp() {
+            s.start_window.validate(warmup)?;
+        }
+        for (k, t) in train.iter().enumerate() {
+            if t.len() <= warmup {
+                return Err(MsgpError::Data(format!(
+                    "training trajectory {k} has {} samples; the history (l_y={}, l_u={}) needs \
+                     more than {warmup}",
+                    t.len(),
+                    self.ly,
+                    self.lu
+                )));
+            }
+            t.check(&spec)
+                .map_err(|e| MsgpError::Data(format!("training trajectory {k}: {e}")))?;
+        }
+        if self.inducing() == Some(0) {
+            return Err(MsgpError::InvalidSetting {
+                name: "inducing",
+                reason: "need at least one pseudo-input".into(),
+            });
+        }
+        Ok(spec)
+    }
+}
+
+/// How the MSGP loss is minimised.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FitOptimizer {
+    /// Adam with [`MsgpSettings::learning_rate`] (the paper's choice): runs every iteration
+    /// (or until early stopping).
+    #[default]
+    Adam,
+    /// L-BFGS with a backtracking line search ([`Lbfgs`]): far fewer iterations on these smooth,
+    /// ill-conditioned losses; stops by itself when converged.
+    Lbfgs,
+}
+
+impl FitOptimizer {
+    /// Display name: "Adam" or "L-BFGS".
+    pub fn name(&self) -> &'static str {
+        match self {
+            FitOptimizer::Adam => "Adam",
+            FitOptimizer::Lbfgs => "L-BFGS",
+        }
+    }
+}
+
+/// The L-BFGS of [`FitOptimizer::Lbfgs`]: a first step that moves no parameter by more than
+/// 0.01 (as far as a few Adam steps) and no later step by more than 0.3 (log length-scales,
+/// log variances and normalised pseudo-targets alike), so that the validation checks, made
+/// after every L-BFGS iteration, see the path to the training optimum rather than a jump to it.
+pub const FIT_LBFGS: Lbfgs = Lbfgs {
+    memory: 10,
+    max_step: 0.3,
+    first_step: 0.01,
+    c1: 1e-4,
+    max_backtracks: 30,
+    tolerance: 1e-7,
+    patience: 5,
+};
+
+/// Upper bound of the default number of pseudo-inputs ([`FitOptions::inducing`]).
+pub const DEFAULT_MAX_INDUCING: usize = 100;
+
+/// The choices a user makes for a fit: what `msgp fit` and the Python `msgp.Msgp` take. Turned
+/// into [`FitSettings`] by [`FitOptions::settings`], so both front ends fit with identical
+/// settings (and give identical numbers) for the same data, options and seed.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FitOptions {
+    /// Training method.
+    pub method: Method,
+    /// `l_y`.
+    pub ly: usize,
+    /// `l_u`.
+    pub lu: usize,
+    /// Number of pseudo-inputs (GP methods); `None`: `min(100, training windows / 2)` (at least
+    /// 1), where a trajectory of `T` samples has `T − max(l_y, l_u)` windows.
+    pub inducing: Option<usize>,
+    /// Iterations of the method's own solver ([`FitSettings::with_solver_iterations`]): on the
+    /// trajectory likelihood for MSGP, on the one-step marginal likelihood for the baselines, on
+    /// the filter likelihood for linear-kf; `None`: the method's default. The MSGP
+    /// initialisation always runs the default one-step iterations.
+    pub iterations: Option<usize>,
+    /// Seed of every random choice.
+    pub seed: u64,
+    /// Prior mean of the GP (a linear-kf model is always linear).
+    pub mean: MeanFunction,
+    /// Outputs declared integrating ([`crate::gp::integrator`]; needs the linear mean).
+    pub integrators: Vec<Integrator>,
+    /// Solver of the MSGP loss.
+    pub optimizer: FitOptimizer,
+    /// Threads of the fit ([`FitSettings::threads`]); front ends take it from
+    /// [`Threads::from_env`].
+    pub threads: Threads,
+}
+
+impl FitOptions {
+    /// The full settings for fitting `train`, every other field at the method's default,
+    /// checked against the data ([`FitSettings::validate`]).
+    pub fn settings(&self, train: &[Trajectory]) -> Result<FitSettings> {
+        if self.inducing == Some(0) {
+            return Err(MsgpError::InvalidSetting {
+                name: "inducing",
+                reason: "need at least one pseudo-input".into(),
+            });
+        }
+        let warmup = self.ly.max(self.lu);
+        let windows: usize = train.iter().map(|t| t.len().saturating_sub(warmup)).sum();
+        let inducing = self
+            .inducing
+            .unwrap_or_else(|| DEFAULT_MAX_INDUCING.min((windows / 2).max(1)));
+        let one_step = OneStepFitSettings {
+            inducing,
+            mean: self.mean,
+            ..OneStepFitSettings::default()
+        };
+        let method = match self.method {
+            Method::Msgp => MethodSettings::Msgp(MsgpSettings {
+                inducing,
+                mean: self.mean,
+                optimizer: self.optimizer,
+                ..MsgpSettings::default()
+            }),
+            Method::GpNarx => MethodSettings::GpNarx(one_step),
+            Method::PilcoNarx => MethodSettings::PilcoNarx(one_step),
+            Method::LinearKf => MethodSettings::LinearKf(LinearKfSettings::default()),
+        };
+        let settings = FitSettings {
+            ly: self.ly,
+            lu: self.lu,
+            seed: self.seed,
+            integrators: self.integrators.clone(),
+            method,
+            threads: self.threads,
+        };
+        let settings = match self.iterations {
+            Some(n) => settings.with_solver_iterations(n),
+            None => settings,
+        };
+        settings.validate(&train.iter().collect::<Vec<_>>())?;
+        Ok(settings)
+    }
+}
