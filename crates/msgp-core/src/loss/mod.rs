@@ -24,19 +24,26 @@
 //! The loss is written once, generic over the scalar ([`msgp_loss`]: what forward-mode duals
 //! differentiate); its gradient for the fits is the adjoint sweep of `gradient`
 //! ([`loss_and_gradient`]).
+//!
+//! ## The filter likelihood
+//! [`filter`] scores the same trajectories by their joint density instead of the product of the
+//! free run's marginals: an assumed-density filter over the same window state, conditioned on
+//! each observation ([`filter_nll`], [`filter_loss`]; forward pass, generic over the scalar).
 
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
+pub mod filter;
 mod gradient;
 
+pub use filter::{FilterNll, FilterStep, filter_loss, filter_nll, filter_steps};
 pub use gradient::loss_and_gradient;
 
 use crate::error::{MsgpError, Result};
 use crate::gp::{GpConfig, GpParams, PreparedGp};
 use crate::moments::MomentMatch;
 use crate::narx::NarxSpec;
-use crate::numeric::linalg::{JitterLog, JitterPolicy, cholesky};
+use crate::numeric::linalg::{Cholesky, JitterLog, JitterPolicy, cholesky};
 use crate::numeric::scalar::{Scalar, c};
 use crate::policy::FeedbackPolicy;
 use crate::rollout::{Control, rollout_started};
@@ -90,9 +97,15 @@ pub fn gaussian_nll<T: Scalar>(
         y.len(),
         y.iter().zip(mean.iter()).map(|(&a, &m)| c::<T>(a) - m),
     );
+    Ok(factored_nll(&ch, &r))
+}
+
+/// Negative log density of the residual `r` under `N(0, L Lᵀ)` (`ch` the factor `L`): what
+/// [`gaussian_nll`] computes once it has factorised the covariance.
+pub(crate) fn factored_nll<T: Scalar>(ch: &Cholesky<T>, r: &DVector<T>) -> T {
     let z = ch.solve_lower(&DMatrix::from_column_slice(r.len(), 1, r.as_slice()));
     let quad = z.iter().fold(T::zero(), |s, v| s + *v * *v);
-    Ok((quad + ch.log_det() + c::<T>(y.len() as f64 * LN_2PI)) * c::<T>(0.5))
+    (quad + ch.log_det() + c::<T>(r.len() as f64 * LN_2PI)) * c::<T>(0.5)
 }
 
 /// The complexity term for prepared GP factors.

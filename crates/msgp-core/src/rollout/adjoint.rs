@@ -243,9 +243,7 @@ pub(crate) fn rollout_adjoint(
             match policy {
                 None => {
                     if let Some(inputs) = inputs {
-                        for j in 0..du {
-                            amu[u + j] = inputs[(t, j)];
-                        }
+                        layout.set_measured_input(&mut amu, inputs, t);
                     }
                 }
                 Some(p) => {

@@ -15,16 +15,15 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::window::{Layout, StartState, gather, initial_window, noisy_covariances};
+use super::window::{Layout, StartState, StepMoments, gather, initial_window, predict_step};
 use crate::data::Trajectory;
 use crate::error::{MsgpError, Result};
 use crate::gp::PreparedGp;
-use crate::moments::mean::add_linear_mean;
-use crate::moments::{MomentMatch, moment_match};
+use crate::moments::MomentMatch;
 use crate::narx::NarxSpec;
 use crate::narx::start_window::StartWindow;
 use crate::numeric::linalg::JitterLog;
-use crate::numeric::scalar::{Scalar, c};
+use crate::numeric::scalar::Scalar;
 use crate::policy::FeedbackPolicy;
 
 /// Where the inputs of a rollout come from.
@@ -187,16 +186,8 @@ pub fn rollout_from<T: MomentMatch>(
     for t in t0..horizon {
         let wmu = mu.rows(0, d).into_owned();
         let wsigma = sigma.view((0, 0), (d, d)).into_owned();
-        let mut mm = moment_match(gp, &wmu, &wsigma, log)?;
-        if let Some(a) = &gp.linear_mean {
-            add_linear_mean(a, &wmu, &wsigma, &mut mm);
-        }
-        let (xcov, ycov) = noisy_covariances(gp, &mm.cov);
-        if mm.mean.iter().any(|v| !v.re().is_finite()) || ycov.iter().any(|v| !v.re().is_finite()) {
-            return Err(MsgpError::NonFinite(format!(
-                "rollout prediction at step {t}"
-            )));
-        }
+        let StepMoments { mm, xcov, ycov } =
+            predict_step(gp, &wmu, &wsigma, "rollout prediction", t, log)?;
         visit(StepPrediction {
             t,
             mean: mm.mean.clone(),
@@ -209,9 +200,7 @@ pub fn rollout_from<T: MomentMatch>(
         match control {
             Control::FeedForward => {
                 if let Some(u) = inputs {
-                    for j in 0..du {
-                        amu[layout.u_slot() + j] = c(u[(t, j)]);
-                    }
+                    layout.set_measured_input(&mut amu, u, t);
                 }
             }
             Control::Feedback(policy) => {

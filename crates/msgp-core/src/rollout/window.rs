@@ -7,9 +7,11 @@ use nalgebra::{DMatrix, DVector};
 use crate::data::Trajectory;
 use crate::error::{MsgpError, Result};
 use crate::gp::PreparedGp;
+use crate::moments::mean::add_linear_mean;
+use crate::moments::{MomentMatch, Moments, moment_match};
 use crate::narx::NarxSpec;
 use crate::narx::start_window::StartWindow;
-use crate::numeric::linalg::symmetrize;
+use crate::numeric::linalg::{JitterLog, symmetrize};
 use crate::numeric::scalar::{Scalar, c};
 use crate::policy::{FeedbackPolicy, PolicyMoments};
 
@@ -181,6 +183,19 @@ impl Layout {
         (amu, acov)
     }
 
+    /// Sets the slots of `u_{t+1}` to the measured input (row `t` of `inputs`, absolute time
+    /// steps) with zero variance: the augmented covariance already has those rows at zero.
+    pub fn set_measured_input<T: Scalar>(
+        &self,
+        amu: &mut DVector<T>,
+        inputs: &DMatrix<f64>,
+        t: usize,
+    ) {
+        for j in 0..self.du {
+            amu[self.u_slot() + j] = c(inputs[(t, j)]);
+        }
+    }
+
     /// Moments of the policy input `q = [y_{t+1}; p_t]` (`ycov` includes observation noise).
     pub fn policy_input<T: Scalar>(
         &self,
@@ -240,6 +255,39 @@ pub(crate) fn gather<T: Scalar>(
     let mut sigma = DMatrix::from_fn(d, d, |i, j| acov[(sel[i], sel[j])]);
     symmetrize(&mut sigma);
     (mu, sigma)
+}
+
+/// One step's prediction from the window `x̃_t ~ N(μ, Σ)` (steps 1–2 of [`super::forward`]):
+/// the moments of `f` (with the linear prior mean, if any), `Cov[x_{t+1}]` and `Cov[y_{t+1}]`.
+pub(crate) struct StepMoments<T: Scalar> {
+    /// `f`'s moments: `E[x_{t+1}] = mm.mean`, `Cov(x̃_t, x_{t+1}) = mm.io_cov = Σ mm.v`.
+    pub mm: Moments<T>,
+    /// `Cov[x_{t+1}] = S + Σ_x`.
+    pub xcov: DMatrix<T>,
+    /// `Cov[y_{t+1}] = S + Σ_x + Σ_y`.
+    pub ycov: DMatrix<T>,
+}
+
+/// Moment-matches the GP (plus the linear prior mean) at the window `N(wmu, wsigma)` and adds
+/// the noises; fails on a non-finite prediction, naming `what` at step `t`. The one prediction
+/// step of the forward rollout and of the filter ([`crate::loss::filter`]).
+pub(crate) fn predict_step<T: MomentMatch>(
+    gp: &PreparedGp<T>,
+    wmu: &DVector<T>,
+    wsigma: &DMatrix<T>,
+    what: &str,
+    t: usize,
+    log: &mut JitterLog,
+) -> Result<StepMoments<T>> {
+    let mut mm = moment_match(gp, wmu, wsigma, log)?;
+    if let Some(a) = &gp.linear_mean {
+        add_linear_mean(a, wmu, wsigma, &mut mm);
+    }
+    let (xcov, ycov) = noisy_covariances(gp, &mm.cov);
+    if mm.mean.iter().any(|v| !v.re().is_finite()) || ycov.iter().any(|v| !v.re().is_finite()) {
+        return Err(MsgpError::NonFinite(format!("{what} at step {t}")));
+    }
+    Ok(StepMoments { mm, xcov, ycov })
 }
 
 /// `Cov[x_{t+1}] = S + Σ_x` and `Cov[y_{t+1}] = S + Σ_x + Σ_y` from the latent `S`.
