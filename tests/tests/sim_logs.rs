@@ -127,6 +127,7 @@ fn a_model_fitted_on_a_simulator_log_predicts_another_excitation() {
         mean: MeanFunction::Linear,
         integrators: Vec::new(),
         optimizer: FitOptimizer::Adam,
+        likelihood: Default::default(),
         threads: Threads::available(),
     }
     .settings(&train)

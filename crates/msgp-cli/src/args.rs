@@ -7,6 +7,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use msgp_core::fit::FitOptimizer;
 use msgp_core::gp::MeanFunction;
 use msgp_core::gp::integrator::Integrator;
+use msgp_core::loss::Likelihood;
 use msgp_core::model::Method;
 use msgp_sim::Saturation;
 use msgp_sim::learn::LearnSettings;
@@ -120,6 +121,24 @@ impl From<OptimizerArg> for FitOptimizer {
     }
 }
 
+/// The MSGP fit's likelihood on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum LikelihoodArg {
+    /// The paper's: a free simulation's per-step marginals.
+    FreeRun,
+    /// The joint density of the observations by the moment-matched filter.
+    Filter,
+}
+
+impl From<LikelihoodArg> for Likelihood {
+    fn from(l: LikelihoodArg) -> Self {
+        match l {
+            LikelihoodArg::FreeRun => Likelihood::FreeRun,
+            LikelihoodArg::Filter => Likelihood::Filter,
+        }
+    }
+}
+
 /// NARX history lengths `l_y,l_u`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct HistoryArg {
@@ -192,6 +211,11 @@ pub struct FitArgs {
     /// Solver of the MSGP loss.
     #[arg(long, value_enum, default_value_t = OptimizerArg::Adam)]
     pub optimizer: OptimizerArg,
+    /// Likelihood of the MSGP fit: free-run (the paper's product of a free simulation's
+    /// marginals) or filter (the joint density of the observations by the moment-matched
+    /// filter) [default: free-run].
+    #[arg(long, value_enum)]
+    pub likelihood: Option<LikelihoodArg>,
     /// Prior mean of the GP.
     #[arg(long, value_enum, default_value_t = MeanArg::Zero)]
     pub mean: MeanArg,
@@ -294,6 +318,10 @@ impl From<ModelArg> for Method {
 #[derive(Debug, Args)]
 #[command(next_help_heading = "Budget")]
 pub struct BudgetArgs {
+    /// Likelihood of the MSGP fits (free-run or filter; see `msgp fit --likelihood`)
+    /// [default: free-run].
+    #[arg(long, value_enum)]
+    pub likelihood: Option<LikelihoodArg>,
     /// Random episodes before the first policy (random excitation, or random policies: see
     /// `--experimental random-policies=K`).
     #[arg(long, default_value_t = LearnSettings::default().random_rollouts)]
@@ -684,7 +712,12 @@ pub enum Preset {
 #[derive(Debug, Args)]
 #[command(next_help_heading = "Plant")]
 pub struct PlantArgs {
-    /// JSON file with plant parameters (missing fields keep their defaults).
+    /// Measurement-noise tier: apollo (σθ 5.2e-5 rad as in the Apollo code's simulator, σx
+    /// 0.1 mm) or noisy (σθ 5e-3 rad, σx 2 mm: the stress tier); the other flags and --params
+    /// override it.
+    #[arg(long, value_enum, default_value_t = PlantArg::Noisy)]
+    pub plant: PlantArg,
+    /// JSON file with plant parameters (missing fields keep the tier's values).
     #[arg(long, value_name = "PARAMS.json")]
     pub params: Option<PathBuf>,
     /// Pole length [m] (default 1.067).
@@ -720,10 +753,10 @@ pub struct PlantArgs {
     /// First-order lag time constant [s] (default 0.03; 0 = none).
     #[arg(long)]
     pub lag: Option<f64>,
-    /// Angle measurement noise σ [rad] (default 5e-3).
+    /// Angle measurement noise σ [rad] (default: the tier's, 5e-3 for noisy).
     #[arg(long)]
     pub sigma_theta: Option<f64>,
-    /// Position measurement noise σ [m] (default 2e-3).
+    /// Position measurement noise σ [m] (default: the tier's, 2e-3 for noisy).
     #[arg(long)]
     pub sigma_x: Option<f64>,
     /// Switch off measurement noise (overrides --sigma-theta/--sigma-x).
@@ -738,6 +771,24 @@ pub struct PlantArgs {
     /// Early stop when |x| exceeds this [m] (default 0.5).
     #[arg(long)]
     pub stop_x: Option<f64>,
+}
+
+/// A plant tier (`--plant`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum PlantArg {
+    /// The paper's robot's precision.
+    Apollo,
+    /// Today's stress tier.
+    Noisy,
+}
+
+impl From<PlantArg> for msgp_sim::PlantTier {
+    fn from(p: PlantArg) -> Self {
+        match p {
+            PlantArg::Apollo => msgp_sim::PlantTier::Apollo,
+            PlantArg::Noisy => msgp_sim::PlantTier::Noisy,
+        }
+    }
 }
 
 /// Parses "kp_x,ki_x,kd_x,kp_theta,kd_theta".

@@ -786,6 +786,115 @@ fn the_simulator_takes_the_command_saturation() {
     );
 }
 
+/// `--likelihood filter` fits MSGP on the filter's joint density: the model file records it,
+/// the model differs from the free-run one, and another method refuses the option.
+#[test]
+fn the_msgp_likelihood_is_an_option_of_fit() {
+    let dir = Scratch::new("likelihood");
+    dir.write("s.csv", &system_csv(120, None));
+    let model = |likelihood: &str, out: &str| -> Value {
+        ok(
+            &dir,
+            &args(
+                &[
+                    "fit",
+                    "--data",
+                    "s.csv",
+                    "--likelihood",
+                    likelihood,
+                    "--out",
+                    out,
+                ],
+                &FAST,
+            ),
+        );
+        let text = std::fs::read_to_string(dir.path(out)).expect("model file written");
+        serde_json::from_str(&text).expect("model file")
+    };
+    let filter = model("filter", "f.json");
+    let free = model("free-run", "r.json");
+    assert_eq!(filter["training"]["settings"]["likelihood"], "filter");
+    assert_eq!(free["training"]["settings"]["likelihood"], "free-run");
+    assert_ne!(filter["gp"], free["gp"]);
+    fails(
+        &dir,
+        &args(
+            &[
+                "fit",
+                "--data",
+                "s.csv",
+                "--method",
+                "gp-narx",
+                "--likelihood",
+                "filter",
+            ],
+            &FAST,
+        ),
+        &["--likelihood filter", "gp-narx"],
+    );
+}
+
+/// `--plant` picks the measurement-noise tier: the Apollo LQR gains, at the edge on the noisy
+/// tier (their derivative term turns 5 mrad of angle noise into command noise), pass the
+/// stability test on the Apollo tier; individual flags and a params file override the tier.
+#[test]
+fn the_plant_tier_sets_the_measurement_noise() {
+    let dir = Scratch::new("plant-tier");
+    let report = |extra: &[&str]| -> Value {
+        let o = run(
+            &dir,
+            &args(
+                &["sim", "stability", "--preset", "apollo-lqr", "--json"],
+                extra,
+            ),
+        );
+        assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
+        serde_json::from_str(&stdout(&o)).expect("stdout is the JSON report")
+    };
+    let passed = |v: &Value| v["passed"].as_bool().expect("passed");
+    let noisy = report(&[]);
+    assert_eq!(report(&["--plant", "noisy"]), noisy, "noisy is the default");
+    assert!(!passed(&noisy), "{noisy}");
+    let apollo = report(&["--plant", "apollo"]);
+    assert!(passed(&apollo), "{apollo}");
+    assert_eq!(apollo["params"]["sigma_theta"], 5.1985e-5);
+    assert_eq!(apollo["params"]["sigma_x"], 1e-4);
+    // the individual flag wins over the tier
+    let louder = report(&["--plant", "apollo", "--sigma-theta", "5e-3"]);
+    assert_eq!(louder["params"]["sigma_theta"], 5e-3);
+    assert_eq!(louder["params"]["sigma_x"], 1e-4);
+    // a params file's fields go over the tier's, the rest keep the tier's values
+    dir.write("p.json", r#"{"lag_time_constant": 0.02}"#);
+    let file = report(&["--plant", "apollo", "--params", "p.json"]);
+    assert_eq!(file["params"]["lag_time_constant"], 0.02);
+    assert_eq!(file["params"]["sigma_theta"], 5.1985e-5);
+    dir.write("bad.json", r#"{"sigma_thetta": 0.1}"#);
+    fails(
+        &dir,
+        &[
+            "sim",
+            "stability",
+            "--preset",
+            "apollo-lqr",
+            "--params",
+            "bad.json",
+        ],
+        &["bad.json", "sigma_thetta"],
+    );
+    fails(
+        &dir,
+        &[
+            "sim",
+            "stability",
+            "--preset",
+            "apollo-lqr",
+            "--plant",
+            "robot",
+        ],
+        &["apollo", "noisy"],
+    );
+}
+
 /// The thread count comes from `MSGP_THREADS`: a positive integer, else a clear error; the
 /// numbers do not depend on it.
 #[test]

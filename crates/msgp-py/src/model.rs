@@ -9,6 +9,7 @@ use std::sync::Arc;
 use msgp_core::data::Trajectory;
 use msgp_core::fit::{FitOptimizer, FitOptions, FitReport, FitSettings, fit_observed};
 use msgp_core::gp::MeanFunction;
+use msgp_core::loss::Likelihood;
 use msgp_core::model::{Method, Metrics, Model, pool, score};
 use msgp_core::model_file::{FitRecord, ModelFile};
 use msgp_core::numeric::parallel::Threads;
@@ -137,6 +138,12 @@ impl Msgp {
                     .training
                     .settings
                     .get("optimizer")
+                    .and_then(|v| serde_json::from_value(v.clone()).ok())
+                    .unwrap_or_default(),
+                likelihood: file
+                    .training
+                    .settings
+                    .get("likelihood")
                     .and_then(|v| serde_json::from_value(v.clone()).ok())
                     .unwrap_or_default(),
                 threads: Threads::default(),
@@ -293,6 +300,7 @@ impl Msgp {
             mean: MeanFunction::Zero,
             integrators: Vec::new(),
             optimizer: FitOptimizer::Adam,
+            likelihood: Likelihood::FreeRun,
             threads: Threads::default(),
         };
         let overrides = match settings.filter(|s| !s.is_none()) {

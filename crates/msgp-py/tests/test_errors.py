@@ -160,3 +160,21 @@ def test_bad_experiment_arguments():
         msgp.learn_policy(method="pilco")
     with pytest.raises(ValueError, match="no defaults for"):
         msgp.defaults("robot")
+
+
+def test_the_msgp_likelihood_is_a_setting():
+    """`settings={"likelihood": "filter"}` trains MSGP on the filter likelihood (recorded in the
+    saved model's training settings); another method refuses it by name; a bad value is named."""
+    import json
+    d = msgp.synthetic_system(4, seed=0)
+    u, y = d["u_train"][:120], d["y_train"][:120]
+    m = msgp.Msgp(history=(2, 1), inducing=8, iterations=5, settings={"likelihood": "filter"}).fit(u, y)
+    free = msgp.Msgp(history=(2, 1), inducing=8, iterations=5).fit(u, y)
+    doc = json.loads(m.to_json())
+    assert doc["training"]["settings"]["likelihood"] == "filter"
+    assert json.loads(free.to_json())["training"]["settings"]["likelihood"] == "free-run"
+    assert m.params["pseudo_targets"].tolist() != free.params["pseudo_targets"].tolist()
+    with pytest.raises(ValueError, match=r'settings\["likelihood"\]: a setting of method msgp, not of gp-narx'):
+        msgp.Msgp(method="gp-narx", settings={"likelihood": "filter"})
+    with pytest.raises(ValueError, match="settings.likelihood"):
+        msgp.Msgp(settings={"likelihood": "kalman"})

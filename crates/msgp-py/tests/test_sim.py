@@ -129,8 +129,10 @@ def test_learn_defaults_per_model():
     kf = msgp.defaults("learn", method="linear-kf")
     assert kf["warm_start"] == 300
     assert kf["policy_horizon_seconds"] == 10.0
-    assert kf["method"] == "LinearKf"  # the settings' serde name
+    assert kf["fit"]["method"] == "LinearKf"  # the fit settings' serde name
+    assert kf["fit"]["iterations"] == 300 and "learning_rate" not in kf["fit"]
+    assert msgp.defaults("fit", method="linear-kf")["method"] == "LinearKf"
     with pytest.raises(ValueError, match="learn"):
-        msgp.defaults("fit", method="linear-kf")
+        msgp.defaults("pendulum", method="linear-kf")
     with pytest.raises(ValueError, match="method"):
         msgp.defaults("learn", method="pilco")

@@ -50,6 +50,6 @@ pub use controller::{
 pub use episode::{Episode, EpisodeConfig, EpisodeInfo, Sample, Termination, run_episode};
 pub use error::SimError;
 pub use log::{LogFormat, RunLog, encode_run, read_run, write_run};
-pub use params::PendulumParams;
+pub use params::{PendulumParams, PlantTier};
 pub use plant::{LatentState, Measurement, Plant};
 pub use stability::{StabilityCriteria, StabilityReport, StartReport, stability_test};

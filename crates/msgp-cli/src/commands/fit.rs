@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use msgp_core::data::Trajectory;
 use msgp_core::fit::{FitOptimizer, FitOptions, FitProgress, fit};
+use msgp_core::loss::Likelihood;
 use msgp_core::model::Method;
 use msgp_core::model_file::{FitRecord, ModelFile};
 use msgp_core::numeric::parallel::Threads;
@@ -54,6 +55,13 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     check_lengths(&train, warmup, "training")?;
     check_lengths(&test, warmup, "test")?;
     let method = Method::from(args.method);
+    if let (Some(l), false) = (args.likelihood, method == Method::Msgp) {
+        bail!(
+            "--likelihood {}: the likelihood of an MSGP fit; --method {} has its own",
+            Likelihood::from(l).name(),
+            method.name()
+        );
+    }
     let trajs: Vec<Trajectory> = train.iter().map(|p| p.traj.clone()).collect();
     // the same settings as the Python `msgp.Msgp` for the same options
     let settings = FitOptions {
@@ -66,6 +74,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         mean: args.mean.into(),
         integrators: args.integrating.clone(),
         optimizer: args.optimizer.into(),
+        likelihood: args.likelihood.map_or(Likelihood::default(), Into::into),
         threads: Threads::from_env()?,
     }
     .settings(&trajs)?;

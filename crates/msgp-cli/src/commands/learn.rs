@@ -13,6 +13,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use msgp_core::fit::MethodSettings;
+use msgp_core::loss::Likelihood;
 use msgp_core::model::Method;
 use msgp_core::narx::start_window::StartWindow;
 use msgp_core::numeric::parallel::Threads;
@@ -198,6 +199,13 @@ pub fn settings(
         anyhow::bail!("--inducing must be at least 1");
     }
     let method: Method = model.into();
+    if let (Some(l), false) = (args.likelihood, method == Method::Msgp) {
+        anyhow::bail!(
+            "--likelihood {}: the likelihood of an MSGP fit; --model {} has its own",
+            Likelihood::from(l).name(),
+            method.name()
+        );
+    }
     let d = LearnSettings::for_method(method);
     let threads = Threads::from_env()?;
     // the experiment switches, each at the loop's default unless set
@@ -272,6 +280,9 @@ pub fn settings(
             s.mean = args.mean.into();
             s.optimizer = optimizer;
             s.start_window = start_window;
+            if let Some(l) = args.likelihood {
+                s.likelihood = l.into();
+            }
         }
         MethodSettings::GpNarx(s) | MethodSettings::PilcoNarx(s) => s.mean = args.mean.into(),
         MethodSettings::LinearKf(_) => {}

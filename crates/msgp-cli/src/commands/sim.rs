@@ -34,16 +34,26 @@ impl SaturationArgs {
 }
 
 impl PlantArgs {
-    /// Defaults ← `--params` file ← individual flags, then validated.
+    /// The tier ← `--params` file (its fields over the tier's) ← individual flags, then
+    /// validated.
     pub(crate) fn resolve(&self) -> anyhow::Result<PendulumParams> {
+        let tier = PendulumParams::tier(self.plant.into());
         let mut p = match &self.params {
             Some(path) => {
                 let text = std::fs::read_to_string(path)
                     .with_context(|| format!("cannot read plant parameters {}", path.display()))?;
-                serde_json::from_str::<PendulumParams>(&text)
-                    .with_context(|| format!("bad plant parameters in {}", path.display()))?
+                let bad = || format!("bad plant parameters in {}", path.display());
+                let file: serde_json::Value = serde_json::from_str(&text).with_context(bad)?;
+                let serde_json::Value::Object(fields) = file else {
+                    anyhow::bail!("{}: expected a JSON object of plant parameters", bad());
+                };
+                let mut merged = serde_json::to_value(tier)?;
+                if let Some(base) = merged.as_object_mut() {
+                    base.extend(fields);
+                }
+                serde_json::from_value::<PendulumParams>(merged).with_context(bad)?
             }
-            None => PendulumParams::default(),
+            None => tier,
         };
         let set = |field: &mut f64, value: Option<f64>| {
             if let Some(v) = value {
@@ -166,8 +176,21 @@ fn run_stability(args: &StabilityArgs) -> anyhow::Result<()> {
     let gains = args.saturation.apply(gains);
     let report = stability_test(&params, &gains, args.seed, &StabilityCriteria::default())?;
     if args.json {
-        crate::render::output::out(&serde_json::to_string_pretty(&report)?)?;
+        // the report and the plant it ran on
+        let mut json = serde_json::to_value(&report)?;
+        if let Some(o) = json.as_object_mut() {
+            o.insert("params".into(), serde_json::to_value(params)?);
+        }
+        crate::render::output::out(&serde_json::to_string_pretty(&json)?)?;
     } else {
+        crate::render::output::out(&format!(
+            "plant: σθ {} rad, σx {} m, delay {} steps, lag {} s, control {} Hz",
+            params.sigma_theta,
+            params.sigma_x,
+            params.command_delay_steps,
+            params.lag_time_constant,
+            params.control_rate_hz
+        ))?;
         crate::render::output::out(&format!(
             "gains kp_x={} ki_x={} kd_x={} kp_theta={} kd_theta={}, {} saturation, seed {}",
             gains.kp_x,

@@ -23,9 +23,10 @@ use crate::data::{Normalizer, Trajectory};
 use crate::error::{MsgpError, Result};
 use crate::gp::integrator::Structure;
 use crate::gp::{GpConfig, GpParams, GpShape, MeanFunction, ParamGroup};
-use crate::loss::{Complexity, loss_and_gradient, msgp_loss};
+use crate::loss::{Complexity, Likelihood, LossValue, filter_loss, loss_and_gradient, msgp_loss};
 use crate::model::{Method, Model};
 use crate::narx::NarxSpec;
+use crate::numeric::dual;
 use crate::numeric::linalg::JitterLog;
 use crate::numeric::parallel::Threads;
 use crate::optim::{Adam, Flow, Objective, Solver, minimize};
@@ -121,6 +122,9 @@ struct MsgpObjective<'a> {
     spec: NarxSpec,
     config: GpConfig,
     episodes: &'a [Episode],
+    likelihood: Likelihood,
+    /// The free parameters (flat indices).
+    active: Vec<usize>,
     complexity: Complexity,
     threads: Threads,
     log: JitterLog,
@@ -132,15 +136,18 @@ struct MsgpObjective<'a> {
 impl Objective for MsgpObjective<'_> {
     fn value_and_gradient(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>)> {
         let params = GpParams::from_flat(self.shape, x)?;
-        let evaluated = loss_and_gradient(
-            &params,
-            &self.config,
-            &self.spec,
-            self.episodes,
-            self.complexity,
-            self.threads,
-            &mut self.log,
-        );
+        let evaluated = match self.likelihood {
+            Likelihood::FreeRun => loss_and_gradient(
+                &params,
+                &self.config,
+                &self.spec,
+                self.episodes,
+                self.complexity,
+                self.threads,
+                &mut self.log,
+            ),
+            Likelihood::Filter => self.filter_value_and_gradient(x),
+        };
         let (v, mut g) = match evaluated {
             Err(e @ (MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_))) => {
                 self.failure = Some(e);
@@ -156,16 +163,62 @@ impl Objective for MsgpObjective<'_> {
     }
 }
 
-/// Mean NLL per step of free simulations of `episodes` (normalised units): the MSGP loss
+impl MsgpObjective<'_> {
+    /// The filter loss and its gradient over the free parameters by forward-mode duals.
+    fn filter_value_and_gradient(&mut self, x: &[f64]) -> Result<(LossValue<f64>, Vec<f64>)> {
+        let (shape, config, spec, episodes, complexity) = (
+            self.shape,
+            self.config,
+            self.spec,
+            self.episodes,
+            self.complexity,
+        );
+        let value = |x: &[f64]| -> Result<LossValue<f64>> {
+            let p = GpParams::from_flat(shape, x)?;
+            filter_loss(
+                &p,
+                &config,
+                &spec,
+                episodes,
+                complexity,
+                &mut JitterLog::default(),
+            )
+        };
+        let v = value(x)?;
+        let (_, g) = dual::gradient(x, &self.active, self.threads.get(), |xd| {
+            let p = GpParams::from_flat(shape, xd)?;
+            let l = filter_loss(
+                &p,
+                &config,
+                &spec,
+                episodes,
+                complexity,
+                &mut JitterLog::default(),
+            )?;
+            Ok(l.total())
+        })?;
+        Ok((v, g))
+    }
+}
+
+/// Mean NLL per step of `episodes` (normalised units) under `likelihood`: the MSGP loss
 /// without its complexity term.
 fn validation_nll(
     params: &GpParams<f64>,
     config: &GpConfig,
     spec: &NarxSpec,
+    likelihood: Likelihood,
     episodes: &[Episode],
 ) -> Result<f64> {
     let mut log = JitterLog::default();
-    let v = msgp_loss(params, config, spec, episodes, Complexity::None, &mut log)?;
+    let v = match likelihood {
+        Likelihood::FreeRun => {
+            msgp_loss(params, config, spec, episodes, Complexity::None, &mut log)?
+        }
+        Likelihood::Filter => {
+            filter_loss(params, config, spec, episodes, Complexity::None, &mut log)?
+        }
+    };
     Ok(v.nll / v.steps.max(1) as f64)
 }
 
@@ -262,6 +315,8 @@ impl Stage<'_, '_> {
             spec: self.spec,
             config: self.config,
             episodes,
+            likelihood: self.msgp.likelihood,
+            active: (0..active.len()).filter(|&i| active[i]).collect(),
             complexity: self.msgp.complexity,
             threads: self.settings.threads,
             log: JitterLog::default(),
@@ -308,7 +363,7 @@ impl Stage<'_, '_> {
                 let mut validation = None;
                 if !tails.is_empty() && (it % every == 0 || it == iterations) {
                     let p = GpParams::from_flat(shape, x)?;
-                    let v = validation_nll(&p, &config, &spec, tails)?;
+                    let v = validation_nll(&p, &config, &spec, msgp.likelihood, tails)?;
                     validation = Some(v);
                     report.history.push((it, loss, v));
                     if v < best.0 {

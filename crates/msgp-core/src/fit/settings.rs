@@ -13,7 +13,7 @@ use crate::data::Trajectory;
 use crate::error::{MsgpError, Result};
 use crate::gp::integrator::{self, Integrator};
 use crate::gp::{MeanFunction, ParamGroup};
-use crate::loss::Complexity;
+use crate::loss::{Complexity, Likelihood};
 use crate::model::Method;
 use crate::narx::NarxSpec;
 use crate::narx::start_window::StartWindow;
@@ -71,6 +71,9 @@ pub struct MsgpSettings {
     pub optimizer: FitOptimizer,
     /// Adam step size.
     pub learning_rate: f64,
+    /// The trajectory likelihood: the paper's free run, or the filter's joint density.
+    #[serde(default)]
+    pub likelihood: Likelihood,
     /// Complexity term of the MSGP loss.
     pub complexity: Complexity,
     /// Fraction of each training trajectory held out for early stopping.
@@ -88,7 +91,8 @@ pub struct MsgpSettings {
     pub one_step_iterations: usize,
     /// After early stopping, refit on all training data for the chosen number of iterations.
     pub refit: bool,
-    /// How the loss starts each training trajectory's rollout ([`StartWindow`]).
+    /// How the free-run loss starts each training trajectory's rollout ([`StartWindow`]; the
+    /// filter starts from the measured window).
     #[serde(default)]
     pub start_window: StartWindow,
 }
@@ -101,6 +105,7 @@ impl Default for MsgpSettings {
             iterations: 400,
             optimizer: FitOptimizer::Adam,
             learning_rate: 0.002,
+            likelihood: Likelihood::FreeRun,
             complexity: Complexity::PseudoDataNll,
             validation_fraction: 0.2,
             eval_every: 10,
@@ -299,6 +304,14 @@ impl FitSettings {
         let warmup = spec.warmup();
         if let Some(s) = self.msgp() {
             s.start_window.validate(warmup)?;
+            if s.likelihood == Likelihood::Filter && s.start_window != StartWindow::Measured {
+                return Err(MsgpError::InvalidSetting {
+                    name: "start_window",
+                    reason: "the filter likelihood starts from the measured window; a smoothed \
+                             start applies to the free-run likelihood"
+                        .into(),
+                });
+            }
         }
         for (k, t) in train.iter().enumerate() {
             if t.len() <= warmup {
@@ -390,6 +403,8 @@ pub struct FitOptions {
     pub integrators: Vec<Integrator>,
     /// Solver of the MSGP loss.
     pub optimizer: FitOptimizer,
+    /// The MSGP fit's likelihood.
+    pub likelihood: Likelihood,
     /// Threads of the fit ([`FitSettings::threads`]); front ends take it from
     /// [`Threads::from_env`].
     pub threads: Threads,
@@ -420,6 +435,7 @@ impl FitOptions {
                 inducing,
                 mean: self.mean,
                 optimizer: self.optimizer,
+                likelihood: self.likelihood,
                 ..MsgpSettings::default()
             }),
             Method::GpNarx => MethodSettings::GpNarx(one_step),

@@ -3,6 +3,7 @@
 use super::*;
 use crate::gp::integrator::Structure;
 use crate::gp::{MeanFunction, PreparedGp};
+use crate::loss::{Complexity, Likelihood};
 use crate::numeric::parallel::Threads;
 use crate::rollout::{Control, rollout};
 use nalgebra::DMatrix;
@@ -24,6 +25,7 @@ fn options(method: Method, inducing: Option<usize>, iterations: Option<usize>) -
         mean: MeanFunction::Zero,
         integrators: Vec::new(),
         optimizer: FitOptimizer::Adam,
+        likelihood: Likelihood::FreeRun,
         threads: Threads::default(),
     }
 }
@@ -510,7 +512,8 @@ fn options_refuse_bad_input_clearly() {
 }
 
 /// The settings serialise flat: the shared keys, `method` and the method's own keys only; an
-/// MSGP record has exactly the keys of format 1.1, and every method's record reads back equal.
+/// MSGP record has the keys of format 1.1 and `likelihood`, and every method's record reads back
+/// equal.
 #[test]
 fn settings_serialise_with_the_methods_own_keys() {
     let keys = |s: &FitSettings| {
@@ -541,7 +544,9 @@ fn settings_serialise_with_the_methods_own_keys() {
         "start_window",
         "validation_fraction",
     ];
-    assert_eq!(keys(&FitSettings::new(Method::Msgp)), with(&msgp_1_1));
+    let mut msgp_1_2 = msgp_1_1.to_vec();
+    msgp_1_2.push("likelihood");
+    assert_eq!(keys(&FitSettings::new(Method::Msgp)), with(&msgp_1_2));
     for m in [Method::GpNarx, Method::PilcoNarx] {
         assert_eq!(
             keys(&FitSettings::new(m)),
@@ -565,4 +570,61 @@ fn settings_serialise_with_the_methods_own_keys() {
         assert_eq!(back, s);
         assert_eq!(back.method(), m);
     }
+}
+
+/// An MSGP fit on the filter likelihood lowers the filter loss of its training data from the
+/// one-step start, checks its validation tail by the filter too (the history's validation
+/// column is the tail's filter NLL of the returned iterate), and refuses a smoothed start.
+#[test]
+fn an_msgp_fit_trains_on_the_filter_likelihood() {
+    use crate::loss::filter_loss;
+    use crate::rollout::Episode;
+    let traj = first_order(0.3);
+    let settings = |likelihood, iterations| FitSettings {
+        ly: 1,
+        lu: 1,
+        method: MsgpSettings {
+            inducing: 8,
+            iterations,
+            learning_rate: 0.01,
+            likelihood,
+            ..MsgpSettings::default()
+        }
+        .into(),
+        ..FitSettings::default()
+    };
+    let filter_nll = |m: &Model| {
+        let norm = m.normalizer.apply(&traj);
+        let v = filter_loss(
+            &m.params,
+            &m.config,
+            &m.spec,
+            &[Episode::feed_forward(norm)],
+            Complexity::None,
+            &mut JitterLog::default(),
+        )
+        .expect("filter");
+        v.nll / v.steps as f64
+    };
+    let fit_with = |s: &FitSettings| fit(std::slice::from_ref(&traj), s, &mut |_| {}).expect("fit");
+    let (start, _) = fit_with(&settings(Likelihood::Filter, 0));
+    let (trained, report) = fit_with(&settings(Likelihood::Filter, 60));
+    assert!(
+        filter_nll(&trained) < filter_nll(&start) - 0.05,
+        "{} → {}",
+        filter_nll(&start),
+        filter_nll(&trained)
+    );
+    assert!(!report.history.is_empty(), "validation checks ran");
+    // the same settings on the free-run likelihood train another model
+    let (free, _) = fit_with(&settings(Likelihood::FreeRun, 60));
+    assert_ne!(free.params, trained.params);
+    let mut smoothed = settings(Likelihood::Filter, 10);
+    smoothed.msgp_mut().expect("msgp").start_window =
+        crate::narx::start_window::StartWindow::Smoothed {
+            samples: 6,
+            degree: 2,
+        };
+    let err = fit(std::slice::from_ref(&traj), &smoothed, &mut |_| {}).expect_err("refused");
+    assert!(err.to_string().contains("measured window"), "{err}");
 }

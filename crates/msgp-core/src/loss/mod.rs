@@ -51,6 +51,29 @@ use crate::rollout::{Episode, Excitation};
 
 const LN_2PI: f64 = 1.837_877_066_409_345_3;
 
+/// The trajectory likelihood an MSGP fit maximises (eq. 4): both score the same observations
+/// with the same model and parameters.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Likelihood {
+    /// The paper's: the product of a free simulation's per-step marginals ([`msgp_loss`]).
+    #[default]
+    FreeRun,
+    /// The joint density of the observations by the moment-matched filter ([`filter`]:
+    /// [`filter_loss`]).
+    Filter,
+}
+
+impl Likelihood {
+    /// Name on the command line: `free-run` or `filter`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Likelihood::FreeRun => "free-run",
+            Likelihood::Filter => "filter",
+        }
+    }
+}
+
 /// Which complexity term is added to the trajectory likelihood.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Complexity {

@@ -5,7 +5,7 @@ use nalgebra::DMatrix;
 
 use msgp_core::data::Trajectory;
 use msgp_core::fit::TrainingEpisode;
-use msgp_core::model::Method;
+use msgp_core::loss::Likelihood;
 use msgp_core::policy::PolicySpec;
 
 use crate::controller::{Controller, PidPdGains, PidPdPolicy};
@@ -53,16 +53,21 @@ pub fn segments(
     Ok(out)
 }
 
-/// `traj` cut into segments of `segment` samples for MSGP fits; whole otherwise, and always
-/// for one-step and linear-kf fits (they see every pair once: segments would duplicate the
-/// overlaps; the filter handles a whole unstable episode).
+/// `traj` cut into segments of `segment` samples for free-run MSGP fits; whole otherwise:
+/// one-step and linear-kf fits see every pair once (segments would duplicate the overlaps),
+/// and a filter likelihood (MSGP's or linear-kf's) handles a whole unstable episode.
 pub(super) fn msgp_segments(
     traj: Trajectory,
     segment: Option<usize>,
     settings: &LearnSettings,
 ) -> Result<Vec<Trajectory>, SimError> {
     match segment {
-        Some(len) if settings.method() == Method::Msgp => {
+        Some(len)
+            if settings
+                .fit
+                .msgp()
+                .is_some_and(|m| m.likelihood == Likelihood::FreeRun) =>
+        {
             segments(&traj, len, settings.fit.ly.max(settings.fit.lu) + 5)
         }
         _ => Ok(vec![traj]),
