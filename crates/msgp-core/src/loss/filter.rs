@@ -41,7 +41,9 @@
 //! the policy (a function of the measured outputs and its own state) produced, so `u_{<t}` is a
 //! function of `y_{<t}` and conditioning on it changes no factor of the decomposition.
 //!
-//! The code is generic over [`MomentMatch`] (f64, or forward-mode duals for gradients).
+//! The code is generic over [`MomentMatch`] (f64, or forward-mode duals for gradients). Its
+//! exact reverse-mode gradient, what a fit trains on, is [`super::filter_loss_and_gradient`] (the
+//! adjoint sweep of `filter_gradient`, which runs this filter's steps and `kalman_update`).
 
 use nalgebra::{DMatrix, DVector};
 

@@ -2,7 +2,9 @@
 //! (`crate::rollout::adjoint`): every episode's rollout scored by the likelihood of its
 //! measured outputs, then the pull-back through the GP's preparation (`β = K̃⁻¹ȳ`, `K̃⁻¹`,
 //! `log|K̃|`, `K̃ = K + σ_x² I`) to the parameters. Tested against forward-mode duals through
-//! [`super::msgp_loss`] (`tests/adjoint_vs_dual.rs`).
+//! [`super::msgp_loss`] (`tests/adjoint_vs_dual.rs`). The episodes, their parallel sum and the
+//! pull-back through the preparation are `gradient_over_episodes`, shared with the filter
+//! likelihood's gradient ([`super::filter_loss_and_gradient`]).
 
 use nalgebra::{DMatrix, DVector};
 
