@@ -1,4 +1,5 @@
-//! One MSGP loss evaluation and one full gradient (adjoint and forward-mode duals) at
+//! One MSGP loss evaluation and one full gradient (adjoint and forward-mode duals; and the
+//! filter likelihood's adjoint gradient on the same episodes) at
 //! D = 4 (l_y = l_u = 2), m = 100, T = 500 (the dryer / synthetic-4 configuration) and value +
 //! adjoint gradient at the actuator-like D = 20 (l_y = l_u = 10), m = 100, T = 512.
 
@@ -47,6 +48,24 @@ fn bench_loss(c: &mut Criterion) {
                         &mut log,
                     )
                     .expect("grad"),
+                )
+            })
+        });
+        // the filter likelihood's adjoint gradient on the same episodes (the fit's other loss)
+        group.bench_function("filter_loss_and_gradient", |b| {
+            b.iter(|| {
+                let mut log = JitterLog::default();
+                black_box(
+                    loss::filter_loss_and_gradient(
+                        &params,
+                        &config,
+                        &spec,
+                        &episodes,
+                        complexity,
+                        Threads::available(),
+                        &mut log,
+                    )
+                    .expect("filter grad"),
                 )
             })
         });

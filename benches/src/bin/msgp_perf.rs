@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! msgp_perf dump --d 4 --m 100 --t 500 [--seed 0] --out problem.json
-//! msgp_perf time --d 4 --m 100 --t 500 [--seed 0] [--reps 10] [--what loss,grad,rollout,mm,kernel,exp]
+//! msgp_perf time --d 4 --m 100 --t 500 [--seed 0] [--reps 10] [--what loss,grad,filter_grad,rollout,mm,kernel,exp]
 //! ```
 //!
 //! `dump` writes the seeded problem of [`msgp_benches::problem`] (data, every parameter, the
@@ -36,7 +36,7 @@ type AnyResult<T> = std::result::Result<T, Box<dyn std::error::Error>>;
 
 const USAGE: &str = "usage: msgp_perf dump --d D --m M --t T [--seed S] --out FILE\n       \
                      msgp_perf time --d D --m M --t T [--seed S] [--reps N] \
-                     [--what loss,grad,rollout,mm,kernel,exp]";
+                     [--what loss,grad,filter_grad,rollout,mm,kernel,exp]";
 
 struct Args {
     cmd: String,
@@ -245,6 +245,19 @@ fn time(args: &Args) -> AnyResult<()> {
             "grad" => measure("grad", &p, reps, 1, || {
                 let mut log = JitterLog::default();
                 black_box(loss::loss_and_gradient(
+                    &p.params,
+                    &p.config,
+                    &p.spec,
+                    &p.episodes,
+                    p.complexity,
+                    threads,
+                    &mut log,
+                )?);
+                Ok(())
+            })?,
+            "filter_grad" => measure("filter_grad", &p, reps, 1, || {
+                let mut log = JitterLog::default();
+                black_box(loss::filter_loss_and_gradient(
                     &p.params,
                     &p.config,
                     &p.spec,

@@ -41,7 +41,9 @@
 //! the policy (a function of the measured outputs and its own state) produced, so `u_{<t}` is a
 //! function of `y_{<t}` and conditioning on it changes no factor of the decomposition.
 //!
-//! The code is generic over [`MomentMatch`] (f64, or forward-mode duals for gradients).
+//! The code is generic over [`MomentMatch`] (f64, or forward-mode duals for gradients). Its
+//! exact reverse-mode gradient, what a fit trains on, is [`super::filter_loss_and_gradient`] (the
+//! adjoint sweep of `filter_gradient`, which runs this filter's steps and `kalman_update`).
 
 use nalgebra::{DMatrix, DVector};
 
@@ -53,7 +55,7 @@ use crate::loss::Complexity;
 use crate::moments::MomentMatch;
 use crate::narx::NarxSpec;
 use crate::narx::start_window::StartWindow;
-use crate::numeric::linalg::{JitterLog, cholesky, symmetrize};
+use crate::numeric::linalg::{Cholesky, JitterLog, cholesky, symmetrize};
 use crate::numeric::scalar::{Scalar, c};
 use crate::rollout::Episode;
 use crate::rollout::window::{Layout, StepMoments, gather, initial_window, predict_step};
@@ -139,7 +141,6 @@ pub fn filter_steps<T: MomentMatch>(
     let (mut mu, mut sigma) = (start.mean, start.cov);
     let mut nll = T::zero();
     let mut steps = 0usize;
-    let mut row = DVector::<T>::zeros(dy);
     for t in start.t0..traj.len() {
         let StepMoments { mm, xcov, ycov } =
             predict_step(gp, &mu, &sigma, "filter prediction", t, log)?;
@@ -147,31 +148,9 @@ pub fn filter_steps<T: MomentMatch>(
         layout.set_measured_input(&mut amu, &traj.u, t);
         let cross = acov.view((0, layout.x_slot()), (d, dy)).into_owned();
         let (pmu, psigma) = gather(&amu, &acov, &sel);
-
-        let chol = cholesky(&ycov, &gp.jitter, "the filter's innovation covariance")?;
-        log.record(chol.jitter);
-        for j in 0..dy {
-            row[j] = c::<T>(traj.y[(t, j)]) - mm.mean[j];
-        }
-        let step_nll = factored_nll(&chol, &row);
-        nll += step_nll;
+        let up = kalman_update(gp, &pmu, &psigma, &ycov, &mm.mean, traj, t, log)?;
+        nll += up.nll;
         steps += 1;
-
-        // K = P Hᵀ S_inn⁻¹ (D × d_y)
-        let pht = psigma.columns(0, dy).into_owned();
-        let gain = chol.solve(&pht.transpose()).transpose();
-        let fmu = &pmu + &gain * &row;
-        // Joseph form: (I − KH) P (I − KH)ᵀ + K Σ_y Kᵀ
-        let mut a = DMatrix::<T>::identity(d, d);
-        let mut ksy = gain.clone();
-        for (j, o) in gp.outputs.iter().enumerate() {
-            for i in 0..d {
-                a[(i, j)] -= gain[(i, j)];
-                ksy[(i, j)] *= o.sy2;
-            }
-        }
-        let mut fsigma = &a * &psigma * a.transpose() + &ksy * gain.transpose();
-        symmetrize(&mut fsigma);
 
         visit(&FilterStep {
             t,
@@ -182,13 +161,13 @@ pub fn filter_steps<T: MomentMatch>(
             cross_cov: &cross,
             prior_mean: &pmu,
             prior_cov: &psigma,
-            innovation: &row,
+            innovation: &up.innovation,
             innovation_cov: &ycov,
-            nll: step_nll,
-            filtered_mean: &fmu,
-            filtered_cov: &fsigma,
+            nll: up.nll,
+            filtered_mean: &up.mean,
+            filtered_cov: &up.cov,
         })?;
-        (mu, sigma) = (fmu, fsigma);
+        (mu, sigma) = (up.mean, up.cov);
     }
     if !nll.re().is_finite() {
         return Err(MsgpError::NonFinite(
@@ -196,6 +175,67 @@ pub fn filter_steps<T: MomentMatch>(
         ));
     }
     Ok(FilterNll { nll, steps })
+}
+
+/// Steps 2–3 of one filter step (see the module docs): the score of the observation and the
+/// window conditioned on it.
+pub(crate) struct KalmanUpdate<T: Scalar> {
+    /// The factor of the innovation covariance `S_inn`.
+    pub chol: Cholesky<T>,
+    /// The innovation `e = y_t − M` (d_y).
+    pub innovation: DVector<T>,
+    /// `−log N(e; 0, S_inn)`.
+    pub nll: T,
+    /// The gain `K = P Hᵀ S_inn⁻¹` (D × d_y).
+    pub gain: DMatrix<T>,
+    /// `E[x̃_t | y_{≤t}] = μ_p + K e`.
+    pub mean: DVector<T>,
+    /// `Cov[x̃_t | y_{≤t}]`, Joseph form, symmetrised.
+    pub cov: DMatrix<T>,
+}
+
+/// Scores `y_t` (row `t` of `traj.y`) under the prediction `x_t ~ N(x_mean, ·)` with innovation
+/// covariance `ycov`, and conditions the predicted window `N(pmu, psigma)` on it (the lag-0
+/// latent outputs are its first d_y entries). Shared by [`filter_steps`] and the filter's
+/// adjoint sweep ([`super::filter_loss_and_gradient`]), so both compute the same bits.
+pub(crate) fn kalman_update<T: Scalar>(
+    gp: &PreparedGp<T>,
+    pmu: &DVector<T>,
+    psigma: &DMatrix<T>,
+    ycov: &DMatrix<T>,
+    x_mean: &DVector<T>,
+    traj: &Trajectory,
+    t: usize,
+    log: &mut JitterLog,
+) -> Result<KalmanUpdate<T>> {
+    let (d, dy) = (pmu.len(), x_mean.len());
+    let chol = cholesky(ycov, &gp.jitter, "the filter's innovation covariance")?;
+    log.record(chol.jitter);
+    let row = DVector::<T>::from_fn(dy, |j, _| c::<T>(traj.y[(t, j)]) - x_mean[j]);
+    let nll = factored_nll(&chol, &row);
+    // K = P Hᵀ S_inn⁻¹ (D × d_y)
+    let pht = psigma.columns(0, dy).into_owned();
+    let gain = chol.solve(&pht.transpose()).transpose();
+    let mean = pmu + &gain * &row;
+    // Joseph form: (I − KH) P (I − KH)ᵀ + K Σ_y Kᵀ
+    let mut a = DMatrix::<T>::identity(d, d);
+    let mut ksy = gain.clone();
+    for (j, o) in gp.outputs.iter().enumerate() {
+        for i in 0..d {
+            a[(i, j)] -= gain[(i, j)];
+            ksy[(i, j)] *= o.sy2;
+        }
+    }
+    let mut cov = &a * psigma * a.transpose() + &ksy * gain.transpose();
+    symmetrize(&mut cov);
+    Ok(KalmanUpdate {
+        chol,
+        innovation: row,
+        nll,
+        gain,
+        mean,
+        cov,
+    })
 }
 
 /// The filter counterpart of [`super::msgp_loss`]: the summed [`filter_nll`] of every episode

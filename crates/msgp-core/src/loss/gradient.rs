@@ -2,7 +2,9 @@
 //! (`crate::rollout::adjoint`): every episode's rollout scored by the likelihood of its
 //! measured outputs, then the pull-back through the GP's preparation (`β = K̃⁻¹ȳ`, `K̃⁻¹`,
 //! `log|K̃|`, `K̃ = K + σ_x² I`) to the parameters. Tested against forward-mode duals through
-//! [`super::msgp_loss`] (`tests/adjoint_vs_dual.rs`).
+//! [`super::msgp_loss`] (`tests/adjoint_vs_dual.rs`). The episodes, their parallel sum and the
+//! pull-back through the preparation are `gradient_over_episodes`, shared with the filter
+//! likelihood's gradient ([`super::filter_loss_and_gradient`]).
 
 use nalgebra::{DMatrix, DVector};
 
@@ -127,6 +129,41 @@ pub fn loss_and_gradient(
     threads: Threads,
     log: &mut JitterLog,
 ) -> Result<(LossValue<f64>, Vec<f64>)> {
+    gradient_over_episodes(
+        params,
+        config,
+        spec,
+        episodes,
+        complexity,
+        threads,
+        log,
+        |gp, ep, adj, elog| {
+            let policy = match &ep.excitation {
+                Excitation::FeedForward => None,
+                Excitation::Feedback(p) => Some(p.as_ref()),
+            };
+            episode_adjoint(gp, spec, &ep.traj, policy, adj, elog)
+        },
+    )
+}
+
+/// The frame of every loss gradient by adjoints (the free run's [`loss_and_gradient`], the
+/// filter's [`super::filter_loss_and_gradient`]): prepares the GP, runs `episode` on every
+/// episode (up to `threads` at a time; each adds its GP adjoints to its own accumulator and
+/// returns its NLL and step count), sums the episodes in order (the result does not depend on
+/// `threads`), adds the complexity term and pulls the summed adjoints through the GP's
+/// preparation to the parameters ([`GpParams::to_flat`] layout).
+pub(crate) fn gradient_over_episodes(
+    params: &GpParams<f64>,
+    config: &GpConfig,
+    spec: &NarxSpec,
+    episodes: &[Episode],
+    complexity: Complexity,
+    threads: Threads,
+    log: &mut JitterLog,
+    episode: impl Fn(&PreparedGp<f64>, &Episode, &mut GpAdjoint, &mut JitterLog) -> Result<(f64, usize)>
+    + Sync,
+) -> Result<(LossValue<f64>, Vec<f64>)> {
     let shape: GpShape = params.shape()?;
     let GpShape { m, d, e } = shape;
     let gp = PreparedGp::new(params, config, log)?;
@@ -136,13 +173,9 @@ pub fn loss_and_gradient(
         ep.traj
             .check(spec)
             .map_err(|err| MsgpError::Data(format!("episode {k}: {err}")))?;
-        let policy = match &ep.excitation {
-            Excitation::FeedForward => None,
-            Excitation::Feedback(p) => Some(p.as_ref()),
-        };
         let mut adj = GpAdjoint::zeros(m, d, e);
         let mut elog = JitterLog::default();
-        let (nll, steps) = episode_adjoint(&gp, spec, &ep.traj, policy, &mut adj, &mut elog)?;
+        let (nll, steps) = episode(&gp, ep, &mut adj, &mut elog)?;
         Ok(EpisodeOut {
             adj,
             nll,

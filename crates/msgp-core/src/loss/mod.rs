@@ -28,15 +28,19 @@
 //! ## The filter likelihood
 //! [`filter`] scores the same trajectories by their joint density instead of the product of the
 //! free run's marginals: an assumed-density filter over the same window state, conditioned on
-//! each observation ([`filter_nll`], [`filter_loss`]; forward pass, generic over the scalar).
+//! each observation ([`filter_nll`], [`filter_loss`]; forward pass, generic over the scalar). Its
+//! gradient for the fits is the adjoint sweep of `filter_gradient` ([`filter_loss_and_gradient`],
+//! the signature and conventions of [`loss_and_gradient`]).
 
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 pub mod filter;
+mod filter_gradient;
 mod gradient;
 
 pub use filter::{FilterNll, FilterStep, filter_loss, filter_nll, filter_steps};
+pub use filter_gradient::filter_loss_and_gradient;
 pub use gradient::loss_and_gradient;
 
 use crate::error::{MsgpError, Result};

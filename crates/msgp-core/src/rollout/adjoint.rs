@@ -46,19 +46,200 @@ pub(crate) trait StepScore {
     fn vjp(&self, y: &Predicted<'_>) -> Result<(DVector<f64>, DMatrix<f64>)>;
 }
 
-/// What the forward rollout records per step.
-struct StepRecord {
-    sigma: DMatrix<f64>,
+/// One prediction step as the adjoint sweeps record it (the free run's here, the filter's in
+/// [`crate::loss::filter`]'s gradient): the window predicted from, the moment-matching
+/// intermediates and the moments of the new latent output. [`PredictRecord::forward`] computes
+/// what [`super::window::predict_step`] does, bit for bit (the same kernel, in the same order).
+pub(crate) struct PredictRecord {
+    /// The window's mean (D).
+    pub wmu: DVector<f64>,
+    /// The window's covariance (D × D).
+    pub wsig: DMatrix<f64>,
     /// The moment-matching intermediates (O(m·D) per step; `Q` is recomputed in the backward
     /// pass).
-    cache: MmState,
-    ycov: DMatrix<f64>,
-    /// `E[y_t]`.
-    mean: DVector<f64>,
-    v: DMatrix<f64>,
-    /// The GP's own `V` (without the linear mean) and the window mean.
-    v_gp: DMatrix<f64>,
-    wmu: DVector<f64>,
+    pub cache: MmState,
+    /// The GP's own `V` (without the linear mean).
+    pub v_gp: DMatrix<f64>,
+    /// `E[x_{t+1}]` (with the linear mean).
+    pub mean: DVector<f64>,
+    /// `V = Σ⁻¹ Cov(x̃_t, x_{t+1})` (with the linear mean).
+    pub v: DMatrix<f64>,
+    /// `Cov[x_{t+1}] = S + Σ_x`.
+    pub xcov: DMatrix<f64>,
+    /// `Cov[y_{t+1}] = S + Σ_x + Σ_y`.
+    pub ycov: DMatrix<f64>,
+}
+
+impl PredictRecord {
+    /// Moment-matches the GP (plus the linear prior mean) at the window `N(wmu, wsig)` and
+    /// adds the noises, keeping what the backward pass needs.
+    pub(crate) fn forward(
+        gp: &PreparedGp<f64>,
+        wmu: DVector<f64>,
+        wsig: DMatrix<f64>,
+        log: &mut JitterLog,
+    ) -> Result<Self> {
+        let (d, dy) = (wmu.len(), gp.output_dim());
+        let mut mm = MmState::default();
+        mm.forward(gp, &wmu, &wsig, log)?;
+        let v_gp = DMatrix::from_fn(d, dy, |k, a| mm.outs[a].acc[k]);
+        // the moments of f = A x̃ + g (the GP's own stay in the cache for the backward pass)
+        let (mut fmean, mut fcov, mut v) = (mm.mean.clone(), mm.cov.clone(), v_gp.clone());
+        if let Some(a) = &gp.linear_mean {
+            let mut mom = Moments {
+                mean: mm.mean.clone(),
+                cov: mm.cov.clone(),
+                io_cov: DMatrix::zeros(d, dy),
+                v: v_gp.clone(),
+            };
+            add_linear_mean(a, &wmu, &wsig, &mut mom);
+            (fmean, fcov, v) = (mom.mean, mom.cov, mom.v);
+        }
+        let (xcov, ycov) = noisy_covariances(gp, &fcov);
+        Ok(Self {
+            wmu,
+            wsig,
+            cache: mm,
+            v_gp,
+            mean: fmean,
+            v,
+            xcov,
+            ycov,
+        })
+    }
+}
+
+/// The adjoints of one step's quantities, as a backward sweep accumulates them: the current
+/// state `[x̃_t, p_t]` (n), the new latent output's mean, its covariance with and without
+/// observation noise, and `V`.
+pub(crate) struct StepBar {
+    /// `μ̄` of the state (n).
+    pub mubar: DVector<f64>,
+    /// `Σ̄` of the state (n × n).
+    pub sigmabar: DMatrix<f64>,
+    /// `M̄` (d_y).
+    pub mbar: DVector<f64>,
+    /// Adjoint of `Cov[x_{t+1}]` (d_y × d_y).
+    pub xcovbar: DMatrix<f64>,
+    /// Adjoint of `Cov[y_{t+1}]` (d_y × d_y).
+    pub ycovbar: DMatrix<f64>,
+    /// `V̄` (D × d_y).
+    pub vbar: DMatrix<f64>,
+}
+
+impl StepBar {
+    /// All zero, for a state of `n` entries, a window of `d` and `dy` outputs.
+    pub(crate) fn zeros(n: usize, d: usize, dy: usize) -> Self {
+        Self {
+            mubar: DVector::zeros(n),
+            sigmabar: DMatrix::zeros(n, n),
+            mbar: DVector::zeros(dy),
+            xcovbar: DMatrix::zeros(dy, dy),
+            ycovbar: DMatrix::zeros(dy, dy),
+            vbar: DMatrix::zeros(d, dy),
+        }
+    }
+}
+
+/// The adjoint of [`gather`]: scatters the next state's `μ̄`, `Σ̄` (`sigmabar` symmetric) back
+/// to the augmented vector of `len` entries.
+pub(crate) fn gather_backward(
+    sel: &[usize],
+    len: usize,
+    mubar: &DVector<f64>,
+    sigmabar: &DMatrix<f64>,
+) -> (DVector<f64>, DMatrix<f64>) {
+    let n = sel.len();
+    let mut amubar = DVector::<f64>::zeros(len);
+    let mut acovbar = DMatrix::<f64>::zeros(len, len);
+    for i in 0..n {
+        amubar[sel[i]] += mubar[i];
+        for j in 0..n {
+            acovbar[(sel[i], sel[j])] += sigmabar[(i, j)];
+        }
+    }
+    (amubar, acovbar)
+}
+
+/// The adjoint of [`Layout::augmented`] (`[z; x_{t+1}]`, `Cov(z, x) = Σ[:, :d] V`; `sigma`
+/// the state's covariance): adds to `bar`'s state, mean, `Cov[x]` and `V` adjoints. The policy
+/// slots' adjoints are the caller's.
+pub(crate) fn augmented_backward(
+    layout: &Layout,
+    sigma: &DMatrix<f64>,
+    v: &DMatrix<f64>,
+    amubar: &DVector<f64>,
+    acovbar: &DMatrix<f64>,
+    bar: &mut StepBar,
+) {
+    let (n, x, d, dy) = (layout.n(), layout.x_slot(), layout.d, layout.dy);
+    bar.mubar += amubar.rows(0, n);
+    bar.mbar += amubar.rows(x, dy);
+    bar.sigmabar += acovbar.view((0, 0), (n, n));
+    let zxbar =
+        acovbar.view((0, x), (n, dy)).into_owned() + acovbar.view((x, 0), (dy, n)).transpose();
+    add_block(&mut bar.sigmabar, (0, 0), &(&zxbar * v.transpose()));
+    bar.vbar += sigma.columns(0, d).transpose() * &zxbar;
+    bar.xcovbar += acovbar.view((x, x), (dy, dy));
+}
+
+/// The adjoint of [`PredictRecord::forward`]: pulls `bar`'s `M̄`, `Cov[x]`, `Cov[y]` and `V̄`
+/// back through the noises (to `adj.sx2`, `adj.sy2`), the linear mean and the moment matching
+/// ([`Backward::pull`]), adding the window's `μ̄`, `Σ̄` to `bar`'s state adjoints.
+pub(crate) fn predict_backward(
+    gp: &PreparedGp<f64>,
+    rec: &PredictRecord,
+    bar: &mut StepBar,
+    adj: &mut GpAdjoint,
+    work: &mut BackWork,
+) {
+    let d = rec.wmu.len();
+    bar.xcovbar += &bar.ycovbar;
+    for j in 0..bar.mbar.len() {
+        adj.sy2[j] += bar.ycovbar[(j, j)];
+        adj.sx2[j] += bar.xcovbar[(j, j)];
+    }
+    let wsig = &rec.wsig;
+    if let Some(a) = &gp.linear_mean {
+        let lb = linear_mean_backward(
+            a,
+            &rec.wmu,
+            wsig,
+            &rec.v_gp,
+            &bar.mbar,
+            &bar.xcovbar,
+            &bar.vbar,
+        );
+        adj.lin += &lb.a;
+        for k in 0..d {
+            bar.mubar[k] += lb.mu[k];
+        }
+        add_block(&mut bar.sigmabar, (0, 0), &lb.sigma);
+        bar.vbar = lb.v;
+    }
+    let (mub, sigb) = Backward {
+        gp,
+        sigma: wsig,
+        c: &rec.cache,
+        mbar_in: &bar.mbar,
+        sbar: &bar.xcovbar,
+        vbar: &bar.vbar,
+        adj,
+        w: work,
+    }
+    .pull();
+    for k in 0..d {
+        bar.mubar[k] += mub[k];
+    }
+    add_block(&mut bar.sigmabar, (0, 0), &sigb);
+}
+
+/// What the forward rollout records per step.
+struct StepRecord {
+    /// The state's covariance `Cov[x̃_t, p_t]`.
+    sigma: DMatrix<f64>,
+    /// The prediction.
+    pred: PredictRecord,
     /// Closed loop: policy input moments, the policy's output, and `Cov(z, q)`.
     policy: Option<PolicyRecord>,
 }
@@ -201,45 +382,31 @@ pub(crate) fn rollout_adjoint(
     for t in t0..horizon {
         let wsig = sigma.view((0, 0), (d, d)).into_owned();
         let wmu = mu.rows(0, d).into_owned();
-        let mut mm = MmState::default();
-        mm.forward(gp, &wmu, &wsig, log)?;
-        let v_gp = DMatrix::from_fn(d, dy, |k, a| mm.outs[a].acc[k]);
-        // the moments of f = A x̃ + g (the GP's own stay in the cache for the backward pass)
-        let (mut fmean, mut fcov, mut v) = (mm.mean.clone(), mm.cov.clone(), v_gp.clone());
-        if let Some(a) = &gp.linear_mean {
-            let mut mom = Moments {
-                mean: mm.mean.clone(),
-                cov: mm.cov.clone(),
-                io_cov: DMatrix::zeros(d, dy),
-                v: v_gp.clone(),
-            };
-            add_linear_mean(a, &wmu, &wsig, &mut mom);
-            (fmean, fcov, v) = (mom.mean, mom.cov, mom.v);
-        }
-        let (xcov, ycov) = noisy_covariances(gp, &fcov);
+        let pred = PredictRecord::forward(gp, wmu, wsig, log)?;
         let predicted = Predicted {
             t,
-            mean: &fmean,
-            cov: &ycov,
+            mean: &pred.mean,
+            cov: &pred.ycov,
             jitter: &gp.jitter,
         };
         total += score.value(&predicted, &mut nll_log)?;
         if !total.is_finite() {
             return Err(MsgpError::NonFinite(format!("rollout loss at step {t}")));
         }
-        let mean = fmean;
         let mut rec = StepRecord {
             sigma: sigma.clone(),
-            cache: mm,
-            ycov: ycov.clone(),
-            mean: mean.clone(),
-            v: v.clone(),
-            v_gp,
-            wmu,
+            pred,
             policy: None,
         };
         if t + 1 < horizon {
-            let (mut amu, mut acov) = layout.augmented(&mu, &sigma, &mean, &v, &xcov);
+            let PredictRecord {
+                mean,
+                v,
+                xcov,
+                ycov,
+                ..
+            } = &rec.pred;
+            let (mut amu, mut acov) = layout.augmented(&mu, &sigma, mean, v, xcov);
             match policy {
                 None => {
                     if let Some(inputs) = inputs {
@@ -247,7 +414,7 @@ pub(crate) fn rollout_adjoint(
                     }
                 }
                 Some(p) => {
-                    let (qm, qc) = layout.policy_input(&amu, &acov, &ycov);
+                    let (qm, qc) = layout.policy_input(&amu, &acov, ycov);
                     let pm = p.policy.moments(&qm, &qc)?;
                     let mut zq = DMatrix::<f64>::zeros(u, dy + ds);
                     zq.view_mut((0, 0), (u, dy))
@@ -270,22 +437,10 @@ pub(crate) fn rollout_adjoint(
     let mut sigmabar_next = DMatrix::<f64>::zeros(n, n);
     let last = recs.len() - 1;
     for (s, rec) in recs.iter().enumerate().rev() {
-        let mut mbar = DVector::<f64>::zeros(dy);
-        let mut xcovbar = DMatrix::<f64>::zeros(dy, dy);
-        let mut ycovbar = DMatrix::<f64>::zeros(dy, dy);
-        let mut mubar = DVector::<f64>::zeros(n);
-        let mut sigmabar = DMatrix::<f64>::zeros(n, n);
-        let mut vbar = DMatrix::<f64>::zeros(d, dy);
+        let mut bar = StepBar::zeros(n, d, dy);
         if s < last {
             symmetrize(&mut sigmabar_next);
-            let mut amubar = DVector::<f64>::zeros(len);
-            let mut acovbar = DMatrix::<f64>::zeros(len, len);
-            for i in 0..n {
-                amubar[sel[i]] += mubar_next[i];
-                for j in 0..n {
-                    acovbar[(sel[i], sel[j])] += sigmabar_next[(i, j)];
-                }
-            }
+            let (mut amubar, mut acovbar) = gather_backward(&sel, len, &mubar_next, &sigmabar_next);
             if let (Some(pr), Some(pa)) = (&rec.policy, policy) {
                 let no = du + ds;
                 // set_policy_output: mean, cov, and cross = Z_q C
@@ -309,7 +464,7 @@ pub(crate) fn rollout_adjoint(
                 for k in 0..ds {
                     amubar[d + k] += qm_bar[dy + k];
                 }
-                ycovbar += qc_bar.view((0, 0), (dy, dy));
+                bar.ycovbar += qc_bar.view((0, 0), (dy, dy));
                 add_block(
                     &mut acovbar,
                     (x, d),
@@ -326,56 +481,26 @@ pub(crate) fn rollout_adjoint(
                     &qc_bar.view((dy, dy), (ds, ds)).into_owned(),
                 );
             }
-            // augmented: [z; x_{t+1}] with Cov(z, x) = Σ[:, :d] V
-            mubar += amubar.rows(0, n);
-            mbar += amubar.rows(x, dy);
-            sigmabar += acovbar.view((0, 0), (n, n));
-            let zxbar = acovbar.view((0, x), (n, dy)).into_owned()
-                + acovbar.view((x, 0), (dy, n)).transpose();
-            add_block(&mut sigmabar, (0, 0), &(&zxbar * rec.v.transpose()));
-            vbar += rec.sigma.columns(0, d).transpose() * &zxbar;
-            xcovbar += acovbar.view((x, x), (dy, dy));
+            augmented_backward(
+                &layout,
+                &rec.sigma,
+                &rec.pred.v,
+                &amubar,
+                &acovbar,
+                &mut bar,
+            );
         }
         let (gm, gc) = score.vjp(&Predicted {
             t: t0 + s,
-            mean: &rec.mean,
-            cov: &rec.ycov,
+            mean: &rec.pred.mean,
+            cov: &rec.pred.ycov,
             jitter: &gp.jitter,
         })?;
-        mbar += gm;
-        ycovbar += gc;
-        xcovbar += &ycovbar;
-        for j in 0..dy {
-            adj.sy2[j] += ycovbar[(j, j)];
-            adj.sx2[j] += xcovbar[(j, j)];
-        }
-        let wsig = rec.sigma.view((0, 0), (d, d)).into_owned();
-        if let Some(a) = &gp.linear_mean {
-            let lb = linear_mean_backward(a, &rec.wmu, &wsig, &rec.v_gp, &mbar, &xcovbar, &vbar);
-            adj.lin += &lb.a;
-            for k in 0..d {
-                mubar[k] += lb.mu[k];
-            }
-            add_block(&mut sigmabar, (0, 0), &lb.sigma);
-            vbar = lb.v;
-        }
-        let (mub, sigb) = Backward {
-            gp,
-            sigma: &wsig,
-            c: &rec.cache,
-            mbar_in: &mbar,
-            sbar: &xcovbar,
-            vbar: &vbar,
-            adj,
-            w: &mut work,
-        }
-        .pull();
-        for k in 0..d {
-            mubar[k] += mub[k];
-        }
-        add_block(&mut sigmabar, (0, 0), &sigb);
-        mubar_next = mubar;
-        sigmabar_next = sigmabar;
+        bar.mbar += gm;
+        bar.ycovbar += gc;
+        predict_backward(gp, &rec.pred, &mut bar, adj, &mut work);
+        mubar_next = bar.mubar;
+        sigmabar_next = bar.sigmabar;
     }
     Ok(RolloutAdjoint {
         total,
@@ -386,7 +511,7 @@ pub(crate) fn rollout_adjoint(
 }
 
 /// `m[at..] += b` for a block.
-fn add_block(m: &mut DMatrix<f64>, at: (usize, usize), b: &DMatrix<f64>) {
+pub(crate) fn add_block(m: &mut DMatrix<f64>, at: (usize, usize), b: &DMatrix<f64>) {
     for i in 0..b.nrows() {
         for j in 0..b.ncols() {
             m[(at.0 + i, at.1 + j)] += b[(i, j)];
