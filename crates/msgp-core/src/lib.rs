@@ -20,6 +20,7 @@
 //! - [`rollout`]: open- and closed-loop rollouts of the window's joint Gaussian, and their
 //!   adjoint sweep;
 //! - [`loss`]: the trajectory likelihood (eq. 4) with its complexity term, and its gradient;
+//!   the free-run likelihood (the paper's) and the filter likelihood ([`loss::filter`]);
 //! - [`model`]: the fitted model, its free simulation and scores;
 //! - [`fit`]: MSGP, the one-step baselines and linear-kf, from trajectories to a model;
 //! - [`model_file`]: the versioned model file (a model and its training record);

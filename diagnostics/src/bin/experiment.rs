@@ -3,7 +3,7 @@
 //!
 //! `cargo run --release -p msgp-diagnostics --bin experiment -- [system] [method] [iters] [seed]
 //! [complexity] [noise] [lr=F] [lbfgs=true] [every=N] [patience=N] [valfrac=F] [floor=F]
-//! [inducing=N] [freeze_x=true] [onestep=N] [dump=true] [threads=N]`
+//! [inducing=N] [freeze_x=true] [onestep=N] [filter=true] [dump=true] [threads=N]`
 //!
 //! Positional: `system` `sys1`…`sys5` or a real series (`actuator`, `ballbeam`, `drives`,
 //! `furnace`, `dryer`; read from `MSGP_DATA_DIR`), default `sys4`; `method` `msgp` (default),
@@ -13,7 +13,8 @@
 //! Switches (each left at the `FitSettings` default unless given): `lr` the learning rate,
 //! `lbfgs=true` the L-BFGS solver, `every` the validation interval, `patience`, `valfrac` the
 //! validation fraction, `floor` the noise floor, `inducing` the pseudo-inputs, `freeze_x=true`
-//! freeze the pseudo-inputs, `onestep` the one-step iterations, `dump=true` print the settings
+//! freeze the pseudo-inputs, `onestep` the one-step iterations, `filter=true` train on the
+//! filter likelihood instead of the free run's, `dump=true` print the settings
 //! (JSON, stderr), `threads` the fit's threads (default every core; results do not depend on it).
 
 use std::path::Path;
@@ -28,11 +29,11 @@ use msgp_diagnostics::{Switches, usage_error};
 const USAGE: &str = "experiment [sys1..sys5|actuator|ballbeam|drives|furnace|dryer] \
     [msgp|gp-narx|pilco-narx] [iters] [seed] [pseudo|none|neg|pos] [var|std] [lr=F] [lbfgs=true] \
     [every=N] [patience=N] [valfrac=F] [floor=F] [inducing=N] [freeze_x=true] [onestep=N] \
-    [dump=true] [threads=N]";
+    [filter=true] [dump=true] [threads=N]";
 
 const SWITCHES: &[&str] = &[
     "lr", "lbfgs", "every", "patience", "valfrac", "floor", "inducing", "freeze_x", "onestep",
-    "dump", "threads",
+    "filter", "dump", "threads",
 ];
 
 enum Bench {
@@ -114,6 +115,9 @@ fn options() -> Result<Options, String> {
     }
     if let Some(v) = sw.get("onestep")? {
         msgp.one_step_iterations = v;
+    }
+    if sw.get("filter")? == Some(true) {
+        msgp.likelihood = msgp_core::loss::Likelihood::Filter;
     }
     let one_step = OneStepFitSettings {
         inducing: msgp.inducing,

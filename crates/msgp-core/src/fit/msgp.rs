@@ -23,10 +23,11 @@ use crate::data::{Normalizer, Trajectory};
 use crate::error::{MsgpError, Result};
 use crate::gp::integrator::Structure;
 use crate::gp::{GpConfig, GpParams, GpShape, MeanFunction, ParamGroup};
-use crate::loss::{Complexity, Likelihood, LossValue, filter_loss, loss_and_gradient, msgp_loss};
+use crate::loss::{
+    Complexity, Likelihood, filter_loss, filter_loss_and_gradient, loss_and_gradient, msgp_loss,
+};
 use crate::model::{Method, Model};
 use crate::narx::NarxSpec;
-use crate::numeric::dual;
 use crate::numeric::linalg::JitterLog;
 use crate::numeric::parallel::Threads;
 use crate::optim::{Adam, Flow, Objective, Solver, minimize};
@@ -123,8 +124,6 @@ struct MsgpObjective<'a> {
     config: GpConfig,
     episodes: &'a [Episode],
     likelihood: Likelihood,
-    /// The free parameters (flat indices).
-    active: Vec<usize>,
     complexity: Complexity,
     threads: Threads,
     log: JitterLog,
@@ -146,7 +145,15 @@ impl Objective for MsgpObjective<'_> {
                 self.threads,
                 &mut self.log,
             ),
-            Likelihood::Filter => self.filter_value_and_gradient(x),
+            Likelihood::Filter => filter_loss_and_gradient(
+                &params,
+                &self.config,
+                &self.spec,
+                self.episodes,
+                self.complexity,
+                self.threads,
+                &mut self.log,
+            ),
         };
         let (v, mut g) = match evaluated {
             Err(e @ (MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_))) => {
@@ -160,44 +167,6 @@ impl Objective for MsgpObjective<'_> {
         let scale = 1.0 / v.steps.max(1) as f64;
         g.iter_mut().for_each(|gi| *gi *= scale);
         Ok((v.total() * scale, g))
-    }
-}
-
-impl MsgpObjective<'_> {
-    /// The filter loss and its gradient over the free parameters by forward-mode duals.
-    fn filter_value_and_gradient(&mut self, x: &[f64]) -> Result<(LossValue<f64>, Vec<f64>)> {
-        let (shape, config, spec, episodes, complexity) = (
-            self.shape,
-            self.config,
-            self.spec,
-            self.episodes,
-            self.complexity,
-        );
-        let value = |x: &[f64]| -> Result<LossValue<f64>> {
-            let p = GpParams::from_flat(shape, x)?;
-            filter_loss(
-                &p,
-                &config,
-                &spec,
-                episodes,
-                complexity,
-                &mut JitterLog::default(),
-            )
-        };
-        let v = value(x)?;
-        let (_, g) = dual::gradient(x, &self.active, self.threads.get(), |xd| {
-            let p = GpParams::from_flat(shape, xd)?;
-            let l = filter_loss(
-                &p,
-                &config,
-                &spec,
-                episodes,
-                complexity,
-                &mut JitterLog::default(),
-            )?;
-            Ok(l.total())
-        })?;
-        Ok((v, g))
     }
 }
 
@@ -316,7 +285,6 @@ impl Stage<'_, '_> {
             config: self.config,
             episodes,
             likelihood: self.msgp.likelihood,
-            active: (0..active.len()).filter(|&i| active[i]).collect(),
             complexity: self.msgp.complexity,
             threads: self.settings.threads,
             log: JitterLog::default(),
