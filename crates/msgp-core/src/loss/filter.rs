@@ -47,7 +47,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::{LossValue, complexity_term, factored_nll};
+use super::{LossValue, factored_nll, over_episodes};
 use crate::data::Trajectory;
 use crate::error::{MsgpError, Result};
 use crate::gp::{GpConfig, GpParams, PreparedGp};
@@ -249,20 +249,18 @@ pub fn filter_loss<T: MomentMatch>(
     complexity: Complexity,
     log: &mut JitterLog,
 ) -> Result<LossValue<T>> {
-    let gp = PreparedGp::new(params, config, log)?;
-    let mut nll = T::zero();
-    let mut steps = 0usize;
-    for (k, ep) in episodes.iter().enumerate() {
-        ep.traj
-            .check(spec)
-            .map_err(|e| MsgpError::Data(format!("episode {k}: {e}")))?;
-        let f = filter_nll(&gp, spec, &ep.traj, log)?;
-        nll += f.nll;
-        steps += f.steps;
-    }
-    Ok(LossValue {
-        nll,
-        complexity: complexity_term(params, &gp, complexity),
-        steps,
-    })
+    over_episodes(
+        params,
+        config,
+        spec,
+        episodes,
+        complexity,
+        log,
+        |gp, ep, nll, steps, log| {
+            let f = filter_nll(gp, spec, &ep.traj, log)?;
+            *nll += f.nll;
+            *steps += f.steps;
+            Ok(())
+        },
+    )
 }

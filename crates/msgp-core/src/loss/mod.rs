@@ -154,6 +154,34 @@ pub fn complexity_term<T: Scalar>(params: &GpParams<T>, gp: &PreparedGp<T>, kind
     total
 }
 
+/// The frame both likelihoods share: the GP prepared once, every episode checked against `spec`
+/// and scored by `score` (which adds its NLL terms to the running sum and counts its scored
+/// steps), then the complexity term.
+pub(crate) fn over_episodes<T: MomentMatch>(
+    params: &GpParams<T>,
+    config: &GpConfig,
+    spec: &NarxSpec,
+    episodes: &[Episode],
+    complexity: Complexity,
+    log: &mut JitterLog,
+    mut score: impl FnMut(&PreparedGp<T>, &Episode, &mut T, &mut usize, &mut JitterLog) -> Result<()>,
+) -> Result<LossValue<T>> {
+    let gp = PreparedGp::new(params, config, log)?;
+    let mut nll = T::zero();
+    let mut steps = 0usize;
+    for (k, ep) in episodes.iter().enumerate() {
+        ep.traj
+            .check(spec)
+            .map_err(|e| MsgpError::Data(format!("episode {k}: {e}")))?;
+        score(&gp, ep, &mut nll, &mut steps, log)?;
+    }
+    Ok(LossValue {
+        nll,
+        complexity: complexity_term(params, &gp, complexity),
+        steps,
+    })
+}
+
 /// The MSGP loss (eq. 7) over a set of episodes.
 pub fn msgp_loss<T: MomentMatch>(
     params: &GpParams<T>,
@@ -163,47 +191,44 @@ pub fn msgp_loss<T: MomentMatch>(
     complexity: Complexity,
     log: &mut JitterLog,
 ) -> Result<LossValue<T>> {
-    let gp = PreparedGp::new(params, config, log)?;
-    let mut nll = T::zero();
-    let mut steps = 0usize;
-    for (k, ep) in episodes.iter().enumerate() {
-        ep.traj
-            .check(spec)
-            .map_err(|e| MsgpError::Data(format!("episode {k}: {e}")))?;
-        let lifted: Option<Box<dyn FeedbackPolicy<T>>> = match &ep.excitation {
-            Excitation::FeedForward => None,
-            Excitation::Feedback(p) => Some(p.lift::<T>()),
-        };
-        let control = match &lifted {
-            None => Control::FeedForward,
-            Some(p) => Control::Feedback(p.as_ref()),
-        };
-        let y = &ep.traj.y;
-        let mut row = vec![0.0; spec.dy];
-        let mut nll_log = JitterLog::default();
-        rollout_started(
-            &gp,
-            spec,
-            &ep.traj,
-            &control,
-            ep.traj.len(),
-            gp.start,
-            log,
-            |p| {
-                for j in 0..spec.dy {
-                    row[j] = y[(p.t, j)];
-                }
-                nll += gaussian_nll(&row, &p.mean, &p.cov, &config.jitter, &mut nll_log)?;
-                steps += 1;
-                Ok(())
-            },
-        )?;
-        log.merge(&nll_log);
-    }
-    let complexity = complexity_term(params, &gp, complexity);
-    Ok(LossValue {
-        nll,
+    over_episodes(
+        params,
+        config,
+        spec,
+        episodes,
         complexity,
-        steps,
-    })
+        log,
+        |gp, ep, nll, steps, log| {
+            let lifted: Option<Box<dyn FeedbackPolicy<T>>> = match &ep.excitation {
+                Excitation::FeedForward => None,
+                Excitation::Feedback(p) => Some(p.lift::<T>()),
+            };
+            let control = match &lifted {
+                None => Control::FeedForward,
+                Some(p) => Control::Feedback(p.as_ref()),
+            };
+            let y = &ep.traj.y;
+            let mut row = vec![0.0; spec.dy];
+            let mut nll_log = JitterLog::default();
+            rollout_started(
+                gp,
+                spec,
+                &ep.traj,
+                &control,
+                ep.traj.len(),
+                gp.start,
+                log,
+                |p| {
+                    for j in 0..spec.dy {
+                        row[j] = y[(p.t, j)];
+                    }
+                    *nll += gaussian_nll(&row, &p.mean, &p.cov, &config.jitter, &mut nll_log)?;
+                    *steps += 1;
+                    Ok(())
+                },
+            )?;
+            log.merge(&nll_log);
+            Ok(())
+        },
+    )
 }
