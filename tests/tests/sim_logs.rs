@@ -124,7 +124,7 @@ fn a_model_fitted_on_a_simulator_log_predicts_another_excitation() {
         inducing: Some(50),
         iterations: Some(100),
         seed: 0,
-        mean: MeanFunction::Linear,
+        mean: Some(MeanFunction::Linear),
         integrators: Vec::new(),
         optimizer: FitOptimizer::Adam,
         likelihood: Default::default(),

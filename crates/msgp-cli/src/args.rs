@@ -8,7 +8,7 @@ use msgp_core::fit::FitOptimizer;
 use msgp_core::gp::MeanFunction;
 use msgp_core::gp::integrator::Integrator;
 use msgp_core::loss::Likelihood;
-use msgp_core::model::Method;
+use msgp_core::model::{Method, Rollout};
 use msgp_sim::Saturation;
 use msgp_sim::learn::LearnSettings;
 
@@ -216,9 +216,10 @@ pub struct FitArgs {
     /// filter) [default: free-run].
     #[arg(long, value_enum)]
     pub likelihood: Option<LikelihoodArg>,
-    /// Prior mean of the GP.
-    #[arg(long, value_enum, default_value_t = MeanArg::Zero)]
-    pub mean: MeanArg,
+    /// Prior mean of the GP [default: msgp trains a zero-mean and a linear-mean recipe and
+    /// keeps the one with the lower validation NLL; the baselines: zero].
+    #[arg(long, value_enum)]
+    pub mean: Option<MeanArg>,
     /// Declare output column OUTPUT (0-based) a pure ORDER-fold integrator (e.g. `0:2` for a
     /// position under a commanded acceleration): its own lags get the fixed coefficients of
     /// `(1 − z⁻¹)^ORDER` and enter nothing else. `OUTPUT:ORDER:linear` also drops its GP (its
@@ -256,6 +257,10 @@ pub struct EvalArgs {
     /// the simulation).
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub from: usize,
+    /// How the simulation propagates predictions: `mm` moment matching (the paper's), `mean`
+    /// feeding back predicted means only (how one-step GP-NARX baselines are often scored).
+    #[arg(long, value_enum, default_value_t = RolloutArg::Mm)]
+    pub rollout: RolloutArg,
     /// Write a PNG of the free simulation.
     #[arg(long, value_name = "OUT.png")]
     pub plot: Option<PathBuf>,
@@ -275,6 +280,9 @@ pub struct SimulateArgs {
     /// Simulate each trajectory from sample N on.
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub from: usize,
+    /// How the simulation propagates predictions (see `msgp eval --rollout`).
+    #[arg(long, value_enum, default_value_t = RolloutArg::Mm)]
+    pub rollout: RolloutArg,
     /// Output CSV: `t, <output>_mean, <output>_std, <output>` per simulated step (and an
     /// `episode` column first when there are several trajectories).
     #[arg(long, value_name = "PRED.csv")]
@@ -282,6 +290,24 @@ pub struct SimulateArgs {
     /// Print a JSON summary instead of text.
     #[arg(long)]
     pub json: bool,
+}
+
+/// How a free simulation propagates the model's predictions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum RolloutArg {
+    /// Moment matching over the window's joint Gaussian (the paper's).
+    Mm,
+    /// Predicted means fed back, no uncertainty propagated.
+    Mean,
+}
+
+impl From<RolloutArg> for Rollout {
+    fn from(r: RolloutArg) -> Self {
+        match r {
+            RolloutArg::Mm => Rollout::MomentMatching,
+            RolloutArg::Mean => Rollout::MeanFeedback,
+        }
+    }
 }
 
 /// Simulated systems the loop can learn on.
@@ -498,12 +524,22 @@ pub enum ReproduceCommand {
     /// Figure 4 of the paper: PILCO on the pendulum with MSGP and GP-NARX models, several
     /// seeds; iterations and interaction time to the first stable policy.
     Figure4(Box<Figure4Args>),
+    /// How MSGP and GP-NARX models generalise: the synthetic systems on three excitations they
+    /// were not trained on, the real series split the other way round.
+    Generalisation(GeneralisationArgs),
 }
 
-/// Options of `msgp reproduce table1`.
+/// Options of `msgp reproduce generalisation`.
 #[derive(Debug, Args)]
-pub struct Table1Args {
-    /// Markdown file to write.
+pub struct GeneralisationArgs {
+    #[command(flatten)]
+    pub common: BenchmarkArgs,
+}
+
+/// The options every reproduction over the ten benchmarks shares.
+#[derive(Debug, Args)]
+pub struct BenchmarkArgs {
+    /// Markdown file whose section of this reproduction is (re)written.
     #[arg(long, value_name = "RESULTS.md", default_value = "RESULTS.md")]
     pub out: PathBuf,
     /// Folder with the real series (actuator.csv, …) [default: $MSGP_DATA_DIR, else
@@ -514,10 +550,33 @@ pub struct Table1Args {
     /// drives, furnace, dryer.
     #[arg(long, value_name = "NAME,...", value_delimiter = ',')]
     pub only: Vec<String>,
+    /// Seeds of data generation (synthetic systems) and of the fits, comma-separated; tables
+    /// report mean ± standard deviation over them.
+    #[arg(
+        long,
+        alias = "seed",
+        value_name = "S,...",
+        value_delimiter = ',',
+        default_value = "0"
+    )]
+    pub seeds: Vec<u64>,
+    /// Print the rows as one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// No progress output on stderr.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Options of `msgp reproduce table1`.
+#[derive(Debug, Args)]
+pub struct Table1Args {
+    #[command(flatten)]
+    pub common: BenchmarkArgs,
     /// Only these methods (comma-separated).
     #[arg(long, value_enum, value_name = "METHOD,...", value_delimiter = ',')]
     pub methods: Vec<MethodArg>,
-    /// Solver iterations on the MSGP loss [default: the fit default, 400].
+    /// Most solver iterations on the MSGP loss, per recipe [default: the fit default, 1000].
     #[arg(long, value_name = "N")]
     pub iters: Option<usize>,
     /// Solver of the MSGP loss; `lbfgs` writes its own section of the results file, next to
@@ -527,15 +586,9 @@ pub struct Table1Args {
     /// Number of pseudo-inputs.
     #[arg(long, value_name = "M", default_value_t = 100)]
     pub inducing: usize,
-    /// Seed of data generation (synthetic systems) and of the fits.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Print the rows as one JSON object.
-    #[arg(long)]
-    pub json: bool,
-    /// No progress output on stderr.
-    #[arg(long)]
-    pub quiet: bool,
+    /// Likelihoods of the MSGP columns, comma-separated [default: both].
+    #[arg(long, value_enum, value_name = "L,...", value_delimiter = ',')]
+    pub likelihoods: Vec<LikelihoodArg>,
 }
 
 /// Options of `msgp reproduce figure4`.
@@ -572,9 +625,10 @@ pub struct DemoArgs {
     /// Seed for data generation and initialisation.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Adam iterations for MSGP.
-    #[arg(long, default_value_t = 400)]
-    pub iters: usize,
+    /// Most Adam iterations for MSGP [default: the fit default, 1000; early stopping ends
+    /// sooner].
+    #[arg(long, value_name = "N")]
+    pub iters: Option<usize>,
     /// Number of pseudo-inputs.
     #[arg(long, default_value_t = 100)]
     pub inducing: usize,

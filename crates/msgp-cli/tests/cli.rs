@@ -269,6 +269,76 @@ fn baselines_text_output_and_default_model_path() {
 }
 
 #[test]
+fn eval_and_simulate_offer_the_mean_feedback_rollout() {
+    let dir = Scratch::new("rollout");
+    dir.write("s.csv", &system_csv(160, None));
+    let v = ok_json(
+        &dir,
+        &[
+            "fit", "--data", "s.csv", "--method", "gp-narx", "--iters", "20", "--train", "80",
+            "--json", "--out", "m.json",
+        ],
+    );
+    assert_eq!(v["diverged"], false, "{v}");
+    assert_eq!(v["divergence"], Value::Null);
+    let model: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path("m.json")).expect("model file"))
+            .expect("model JSON");
+    assert_eq!(model["training"]["diverged"], Value::Null);
+    let base = [
+        "eval", "--model", "m.json", "--data", "s.csv", "--from", "80", "--json",
+    ];
+    let mm = ok_json(&dir, &base);
+    assert_eq!(mm["rollout"], "mm");
+    assert_eq!(
+        mm["rmse"], v["rmse"],
+        "the default is the fit's moment matching"
+    );
+    let mean = ok_json(&dir, &args(&base, &["--rollout", "mean"]));
+    assert_eq!(mean["rollout"], "mean");
+    let (a, b) = (
+        mm["rmse"].as_f64().expect("rmse"),
+        mean["rmse"].as_f64().expect("rmse"),
+    );
+    assert!(
+        a.is_finite() && b.is_finite() && a != b,
+        "MM {a}, mean feedback {b}"
+    );
+    let text = ok(
+        &dir,
+        &[
+            "simulate",
+            "--model",
+            "m.json",
+            "--data",
+            "s.csv",
+            "--from",
+            "80",
+            "--rollout",
+            "mean",
+            "--out",
+            "p.csv",
+        ],
+    );
+    assert!(text.contains("(mean feedback)"), "{text}");
+    let csv = std::fs::read_to_string(dir.path("p.csv")).expect("prediction CSV");
+    assert!(csv.lines().count() > 70, "{csv}");
+    fails(
+        &dir,
+        &[
+            "eval",
+            "--model",
+            "m.json",
+            "--data",
+            "s.csv",
+            "--rollout",
+            "exact",
+        ],
+        &["--rollout"],
+    );
+}
+
+#[test]
 fn linear_prior_mean_is_fitted_saved_and_used() {
     let dir = Scratch::new("linear-mean");
     dir.write("s.csv", &system_csv(160, None));
@@ -931,4 +1001,81 @@ fn the_thread_count_is_checked_and_changes_no_number() {
     };
     assert_eq!(rmse(&one), rmse(&two));
     assert!(rmse(&one).is_f64());
+}
+
+/// `reproduce table1` over two seeds: one row per seed, method and rollout in the JSON, mean ±
+/// standard deviation in the markdown with both rollouts of the baselines; `reproduce
+/// generalisation` scores the unseen excitations against the training-mean predictor.
+#[test]
+fn reproductions_run_over_seeds_and_unseen_excitations() {
+    let dir = Scratch::new("reproduce");
+    let v = ok_json(
+        &dir,
+        &[
+            "reproduce",
+            "table1",
+            "--only",
+            "synthetic5",
+            "--seeds",
+            "0,1",
+            "--likelihoods",
+            "free-run",
+            "--out",
+            "t.md",
+            "--json",
+            "--quiet",
+        ],
+    );
+    let rows = v["rows"].as_array().expect("rows");
+    // 3 methods × 2 seeds × 2 rollouts
+    assert_eq!(rows.len(), 12, "{v}");
+    assert_eq!(v["seeds"], serde_json::json!([0, 1]));
+    for r in rows {
+        assert!(r["rmse"].as_f64().expect("rmse").is_finite(), "{r}");
+    }
+    let md = std::fs::read_to_string(dir.path("t.md")).expect("markdown");
+    assert!(md.contains(" ± "), "{md}");
+    assert!(md.contains("GP-NARX (ours, mean)"), "{md}");
+    assert!(md.contains("at or below the paper's MSGP"), "{md}");
+    fails(
+        &dir,
+        &[
+            "reproduce",
+            "table1",
+            "--only",
+            "synthetic9",
+            "--out",
+            "t.md",
+        ],
+        &["synthetic9"],
+    );
+    let g = ok_json(
+        &dir,
+        &[
+            "reproduce",
+            "generalisation",
+            "--only",
+            "synthetic5",
+            "--out",
+            "g.md",
+            "--json",
+            "--quiet",
+        ],
+    );
+    let rows = g["rows"].as_array().expect("rows");
+    // (Table 2 test + 3 excitations) × 2 methods
+    assert_eq!(rows.len(), 8, "{g}");
+    assert_eq!(rows.iter().filter(|r| r["alternate"] == true).count(), 6);
+    for r in rows {
+        let m = r["mean_predictor_rmse"].as_f64().expect("mean predictor");
+        assert!(
+            m > 0.0 && r["rmse"].as_f64().expect("rmse").is_finite(),
+            "{r}"
+        );
+    }
+    let md = std::fs::read_to_string(dir.path("g.md")).expect("markdown");
+    assert!(
+        md.contains("msgp:generalisation:begin") && md.contains("chirp"),
+        "{md}"
+    );
 }

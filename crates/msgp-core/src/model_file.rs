@@ -109,6 +109,10 @@ pub struct Training {
     pub iterations_run: usize,
     /// Iteration chosen by early stopping.
     pub best_iteration: usize,
+    /// Why the fitted model's free simulation over its training inputs diverges
+    /// (`msgp_core::fit::check_divergence`); `null` when it does not.
+    #[serde(default)]
+    pub diverged: Option<String>,
     /// Every fit setting, as `msgp_core::fit::FitSettings` serialises it (informational).
     pub settings: Value,
 }
@@ -333,6 +337,7 @@ impl ModelFile {
                 train_seconds: record.report.train_seconds,
                 iterations_run: record.report.iterations_run,
                 best_iteration: record.report.best_iteration,
+                diverged: record.report.diverged.clone(),
                 settings: serde_json::to_value(record.settings)
                     .map_err(|e| MsgpError::Data(format!("cannot serialise the settings: {e}")))?,
             },

@@ -1,6 +1,7 @@
-//! Accuracy on the paper's benchmarks (seeded): MSGP beats one-step GP-NARX on synthetic
-//! system 4, reaches RMSE ≤ 0.16 on the real dryer series, and does not degrade when allowed
-//! many more iterations (early stopping on the held-out tail of the training data).
+//! Accuracy on the paper's benchmarks (seeded, the default protocol): MSGP reaches the paper's
+//! RMSE on synthetic system 4 (seed 0) and on the real dryer series, beats one-step GP-NARX,
+//! and does not degrade when allowed many more iterations (early stopping on the held-out tail
+//! of the training data).
 
 use std::path::{Path, PathBuf};
 
@@ -34,6 +35,8 @@ fn run_with(
     }
     let (model, report) =
         fit(std::slice::from_ref(&bench.train), &settings, &mut |_| {}).expect("fit");
+    // the Table-1 fits do not set off the divergence check
+    assert_eq!(report.diverged, None, "{} {}", bench.name, method.name());
     let m = model.evaluate(&bench.test).expect("evaluate");
     println!(
         "{} {}: RMSE {:.4}, NLL {:.3}, 2σ coverage {:.3}, kept iteration {} of {}, {:.1} s",
@@ -75,18 +78,24 @@ fn msgp_beats_gp_narx_on_synthetic_system_4_and_does_not_degrade() {
         .generate(0, NoiseScale::StdDev)
         .expect("gen");
     let narx = run(&bench, Method::GpNarx, 0);
-    let msgp = run(&bench, Method::Msgp, 400);
+    let msgp = run(&bench, Method::Msgp, 1000);
     // paper: GP-NARX 0.5711, MSGP 0.3287
+    assert!(msgp.rmse <= 0.3287, "system 4 RMSE {}", msgp.rmse);
+    assert!(
+        msgp.coverage_2sigma > 0.8,
+        "system 4 2σ coverage {}",
+        msgp.coverage_2sigma
+    );
     assert!(
         msgp.rmse < 0.9 * narx.rmse,
         "MSGP {} vs GP-NARX {}",
         msgp.rmse,
         narx.rmse
     );
-    let long = run(&bench, Method::Msgp, 1500);
+    let long = run(&bench, Method::Msgp, 3000);
     assert!(
         long.rmse <= 1.05 * msgp.rmse,
-        "1500 iterations: {} vs 400: {}",
+        "3000 iterations: {} vs 1000: {}",
         long.rmse,
         msgp.rmse
     );
@@ -97,9 +106,9 @@ fn msgp_beats_gp_narx_on_synthetic_system_4_and_does_not_degrade() {
 fn msgp_reaches_paper_accuracy_on_dryer() {
     let Some(dir) = real_data() else { return };
     let bench = RealSeries::Dryer.load(&dir).expect("load dryer");
-    let msgp = run(&bench, Method::Msgp, 400);
+    let msgp = run(&bench, Method::Msgp, 1000);
     // paper: MSGP 0.1523, GP-NARX 0.2856
-    assert!(msgp.rmse <= 0.16, "dryer RMSE {}", msgp.rmse);
+    assert!(msgp.rmse <= 0.1523, "dryer RMSE {}", msgp.rmse);
     assert!(
         msgp.coverage_2sigma > 0.8,
         "dryer 2σ coverage {}",
@@ -171,4 +180,40 @@ fn lbfgs_lowers_the_msgp_training_loss_faster_than_adam() {
         adam[0] - l,
         adam[0] - a
     );
+}
+
+/// `--mean linear` on drives (`l_y = l_u = 10`, 250 training samples) does not diverge: the
+/// instrumental-variables start had an unstable autoregressive part (test RMSE 1.90 before any
+/// training, 2.04 after), which the fit now scales inside the unit circle.
+#[test]
+fn a_linear_mean_on_drives_does_not_diverge() {
+    use msgp_core::fit::FitOptions;
+    use msgp_core::gp::MeanFunction;
+    let Some(dir) = real_data() else { return };
+    let bench = RealSeries::Drives.load(&dir).expect("load drives");
+    let settings = FitOptions {
+        method: Method::Msgp,
+        ly: bench.ly,
+        lu: bench.lu,
+        inducing: None,
+        iterations: None,
+        seed: 0,
+        mean: Some(MeanFunction::Linear),
+        integrators: Vec::new(),
+        optimizer: FitOptimizer::Adam,
+        likelihood: Default::default(),
+        threads: Default::default(),
+    }
+    .settings(std::slice::from_ref(&bench.train))
+    .expect("settings");
+    let (model, report) =
+        fit(std::slice::from_ref(&bench.train), &settings, &mut |_| {}).expect("fit");
+    assert_eq!(report.diverged, None);
+    let m = model.evaluate(&bench.test).expect("evaluate");
+    println!(
+        "drives, linear mean: RMSE {:.4}, 2σ coverage {:.3}",
+        m.rmse, m.coverage_2sigma
+    );
+    // paper MSGP 0.4217; the zero-mean recipe 0.47
+    assert!(m.rmse < 0.6, "drives with a linear mean: RMSE {}", m.rmse);
 }

@@ -8,7 +8,6 @@ use std::sync::Arc;
 
 use msgp_core::data::Trajectory;
 use msgp_core::fit::{FitOptimizer, FitOptions, FitReport, FitSettings, fit_observed};
-use msgp_core::gp::MeanFunction;
 use msgp_core::loss::Likelihood;
 use msgp_core::model::{Method, Metrics, Model, pool, score};
 use msgp_core::model_file::{FitRecord, ModelFile};
@@ -132,7 +131,7 @@ impl Msgp {
                 inducing: Some(model.params.pseudo_inputs.nrows()),
                 iterations,
                 seed: file.training.seed,
-                mean: model.config.mean,
+                mean: Some(model.config.mean),
                 integrators: Vec::new(),
                 optimizer: file
                     .training
@@ -297,7 +296,7 @@ impl Msgp {
             inducing,
             iterations,
             seed,
-            mean: MeanFunction::Zero,
+            mean: None,
             integrators: Vec::new(),
             optimizer: FitOptimizer::Adam,
             likelihood: Likelihood::FreeRun,
@@ -429,9 +428,21 @@ impl Msgp {
                 report: Some(report),
             }))
         })??;
+        let diverged = fitted.file.training.diverged.clone();
         slf.try_borrow_mut()
             .map_err(|e| Error::Busy(e.to_string()))?
             .fitted = Some(Arc::new(fitted));
+        if let Some(why) = diverged {
+            // the model is kept (and says so in `diverged`); the user is told at once
+            let warning = py.get_type::<pyo3::exceptions::PyRuntimeWarning>();
+            PyErr::warn(
+                py,
+                &warning,
+                &std::ffi::CString::new(format!("the fitted model diverges: {why}"))
+                    .unwrap_or_default(),
+                1,
+            )?;
+        }
         Ok(slf)
     }
 
@@ -619,6 +630,14 @@ impl Msgp {
     #[getter]
     fn training<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         to_python(py, &self.fitted()?.file.training)
+    }
+
+    /// Why the fitted model's free simulation over its training inputs diverges (the fit also
+    /// warns with a RuntimeWarning), or None when it does not; read from the model file, so
+    /// also for a loaded model.
+    #[getter]
+    fn diverged(&self) -> PyResult<Option<String>> {
+        Ok(self.fitted()?.file.training.diverged.clone())
     }
 
     /// The fit's report (iterations_run, best_iteration, history of (iteration, training loss,

@@ -73,11 +73,11 @@ def test_bad_constructor_arguments(kwargs, message):
 def test_fit_defaults_are_the_methods_own():
     """`defaults("fit", method=...)`: the shared settings and the method's own only."""
     shared = {"ly", "lu", "seed", "integrators", "method"}
-    assert set(msgp.defaults("fit", method="gp-narx")) == shared | {"inducing", "mean", "iterations"}
+    assert set(msgp.defaults("fit", method="gp-narx")) == shared | {"inducing", "mean", "iterations", "solver"}
     assert set(msgp.defaults("fit", method="linear-kf")) == shared | {"iterations"}
     full = msgp.defaults("fit")
     assert full == msgp.defaults("fit", method="msgp")
-    assert {"learning_rate", "one_step_iterations", "start_window"} <= set(full)
+    assert {"learning_rate", "one_step_iterations", "start_window", "alternative"} <= set(full)
     with pytest.raises(ValueError, match=r'settings\["fit"\]\["method"\]: set it with the learn_policy\(method=...\)'):
         msgp.learn_policy(iterations=1, settings={"fit": {"method": "GpNarx"}})
 

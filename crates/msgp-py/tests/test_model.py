@@ -223,3 +223,21 @@ def test_fit_reports_progress_and_stops_on_its_exception():
         stopped.params
     with pytest.raises(msgp.InvalidInputError, match="callable"):
         msgp.Msgp(**args).fit(data["u_train"], data["y_train"], progress="loud")
+
+
+def test_the_divergence_check_reaches_python(fitted, tmp_path):
+    """A sound fit is not flagged; a model whose noise floor (10⁶ in normalised units) makes its
+    predicted spread hundreds of times the outputs' range is: the fit warns, `diverged` says
+    why, and the reason survives saving and loading."""
+    model, data = fitted
+    assert model.diverged is None
+    assert model.training["diverged"] is None
+    assert model.report["diverged"] is None
+    wide = msgp.Msgp(history=(1, 1), inducing=8, iterations=2, seed=0,
+                     settings={"noise_floor": 1e6})
+    with pytest.warns(RuntimeWarning, match="diverges"):
+        wide.fit(data["u_train"], data["y_train"])
+    assert "standard deviation" in wide.diverged
+    path = tmp_path / "wide.json"
+    wide.save(str(path))
+    assert msgp.Msgp.load(str(path)).diverged == wide.diverged

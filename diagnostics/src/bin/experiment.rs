@@ -3,7 +3,8 @@
 //!
 //! `cargo run --release -p msgp-diagnostics --bin experiment -- [system] [method] [iters] [seed]
 //! [complexity] [noise] [lr=F] [lbfgs=true] [every=N] [patience=N] [valfrac=F] [floor=F]
-//! [inducing=N] [freeze_x=true] [onestep=N] [filter=true] [dump=true] [threads=N]`
+//! [inducing=N] [freeze_x=true] [free_x=true] [nstart=full] [onestep=N] [filter=true] [dump=true]
+//! [threads=N]`
 //!
 //! Positional: `system` `sys1`…`sys5` or a real series (`actuator`, `ballbeam`, `drives`,
 //! `furnace`, `dryer`; read from `MSGP_DATA_DIR`), default `sys4`; `method` `msgp` (default),
@@ -13,7 +14,8 @@
 //! Switches (each left at the `FitSettings` default unless given): `lr` the learning rate,
 //! `lbfgs=true` the L-BFGS solver, `every` the validation interval, `patience`, `valfrac` the
 //! validation fraction, `floor` the noise floor, `inducing` the pseudo-inputs, `freeze_x=true`
-//! freeze the pseudo-inputs, `onestep` the one-step iterations, `filter=true` train on the
+//! freeze the pseudo-inputs, `free_x=true` let them move, `nstart=full` start both noises at
+//! the one-step noise (default: split it between them), `onestep` the one-step iterations, `filter=true` train on the
 //! filter likelihood instead of the free run's, `dump=true` print the settings
 //! (JSON, stderr), `threads` the fit's threads (default every core; results do not depend on it).
 
@@ -28,12 +30,13 @@ use msgp_diagnostics::{Switches, usage_error};
 
 const USAGE: &str = "experiment [sys1..sys5|actuator|ballbeam|drives|furnace|dryer] \
     [msgp|gp-narx|pilco-narx] [iters] [seed] [pseudo|none|neg|pos] [var|std] [lr=F] [lbfgs=true] \
-    [every=N] [patience=N] [valfrac=F] [floor=F] [inducing=N] [freeze_x=true] [onestep=N] \
+    [every=N] [patience=N] [valfrac=F] [floor=F] [inducing=N] [freeze_x=true] [free_x=true] \
+    [nstart=split|full] [onestep=N] \
     [filter=true] [dump=true] [threads=N]";
 
 const SWITCHES: &[&str] = &[
-    "lr", "lbfgs", "every", "patience", "valfrac", "floor", "inducing", "freeze_x", "onestep",
-    "filter", "dump", "threads",
+    "lr", "lbfgs", "every", "patience", "valfrac", "floor", "inducing", "freeze_x", "free_x",
+    "nstart", "onestep", "filter", "dump", "threads", "ly", "lu", "mean", "init", "alt",
 ];
 
 enum Bench {
@@ -48,6 +51,8 @@ struct Options {
     /// Everything but the history lengths, which the benchmark sets.
     settings: FitSettings,
     dump: bool,
+    ly: Option<usize>,
+    lu: Option<usize>,
 }
 
 /// The arguments: `FitSettings` defaults, the positional arguments, then the switches.
@@ -113,6 +118,31 @@ fn options() -> Result<Options, String> {
     if sw.get("freeze_x")? == Some(true) {
         msgp.frozen.push(msgp_core::gp::ParamGroup::PseudoInputs);
     }
+    if sw.get::<String>("mean")?.as_deref() == Some("linear") {
+        msgp.mean = msgp_core::gp::MeanFunction::Linear;
+    }
+    match sw.get::<String>("init")?.as_deref() {
+        None => {}
+        Some("adam") => msgp.one_step_solver = msgp_core::fit::OneStepSolver::Adam,
+        Some("lbfgs") => msgp.one_step_solver = msgp_core::fit::OneStepSolver::Lbfgs,
+        Some(other) => return Err(format!("unknown init `{other}`")),
+    }
+    if sw.get("alt")? == Some(true) {
+        msgp.alternative = Some(msgp_core::fit::Recipe {
+            mean: msgp_core::gp::MeanFunction::Linear,
+            complexity: Complexity::HalfLogDet,
+            learning_rate: 0.01,
+            noise_start: msgp_core::fit::NoiseStart::Full,
+        });
+    }
+    if sw.get("free_x")? == Some(true) {
+        msgp.frozen.clear();
+    }
+    match sw.get::<String>("nstart")?.as_deref() {
+        None | Some("split") => {}
+        Some("full") => msgp.noise_start = msgp_core::fit::NoiseStart::Full,
+        Some(other) => return Err(format!("unknown noise start `{other}`")),
+    }
     if let Some(v) = sw.get("onestep")? {
         msgp.one_step_iterations = v;
     }
@@ -123,6 +153,7 @@ fn options() -> Result<Options, String> {
         inducing: msgp.inducing,
         mean: msgp.mean,
         iterations: msgp.one_step_iterations,
+        ..OneStepFitSettings::default()
     };
     let settings = FitSettings {
         seed: sw.arg(3, "seed")?.unwrap_or(0),
@@ -140,6 +171,8 @@ fn options() -> Result<Options, String> {
         scale,
         settings,
         dump: sw.get("dump")? == Some(true),
+        ly: sw.get("ly")?,
+        lu: sw.get("lu")?,
     })
 }
 
@@ -151,33 +184,75 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Bench::Real(s) => s.load(&data_dir(Path::new(".")))?,
     };
     let settings = FitSettings {
-        ly: bench.ly,
-        lu: bench.lu,
+        ly: o.ly.unwrap_or(bench.ly),
+        lu: o.lu.unwrap_or(bench.lu),
         ..o.settings
     };
     if o.dump {
         eprintln!("{}", serde_json::to_string(&settings)?);
     }
+    let dump = o.dump;
     let (model, report) = fit(std::slice::from_ref(&bench.train), &settings, &mut |p| {
         if let (Some(v), true) = (p.validation, p.iteration % 50 == 0) {
             eprintln!(
                 "it {:4} loss {:.4} val {:.4} ({:.1}s)",
                 p.iteration, p.loss, v, p.elapsed
             );
+        } else if p.validation.is_none() && p.iteration % 20 == 0 {
+            eprintln!(
+                "it {:4} loss {:.4} ({:.1}s)",
+                p.iteration, p.loss, p.elapsed
+            );
         }
     })?;
+    if dump {
+        let p = &model.params;
+        eprintln!(
+            "sf2 {:.4e} sx2 {:.4e} sy2 {:.4e} log_l {:?} targets |.|max {:.3}",
+            p.log_signal_var.map(f64::exp),
+            p.log_process_noise.map(f64::exp),
+            p.log_obs_noise.map(f64::exp),
+            p.log_lengthscales.map(|v| (v * 100.0).round() / 100.0),
+            p.pseudo_targets.amax(),
+        );
+        for (i, l, v) in &report.history {
+            eprintln!("hist {i} {l:.4} {v:.4}");
+        }
+    }
     let m = model.evaluate(&bench.test)?;
+    let mf = model.evaluate_as(&bench.test, msgp_core::model::Rollout::MeanFeedback)?;
+    if !report.recipes.is_empty() {
+        eprintln!(
+            "recipes {:?} chose {}",
+            report
+                .recipes
+                .iter()
+                .map(|r| r.validation)
+                .collect::<Vec<_>>(),
+            report.chosen_recipe
+        );
+    }
     println!(
-        "{} {} rmse {:.4} nll {:.3} cov {:.3} best_it {} of {} time {:.1}s jitter {:?}",
+        "{} {} rmse {:.4} (mean feedback {:.4}) nll {:.3} cov {:.3} best_it {} of {} val {:.4} \
+         time {:.1}s jitter {:?}{}",
         o.name,
         settings.method().name(),
         m.rmse,
+        mf.rmse,
         m.nll,
         m.coverage_2sigma,
         report.best_iteration,
         report.iterations_run,
+        report
+            .history
+            .iter()
+            .map(|h| h.2)
+            .fold(f64::INFINITY, f64::min),
         report.train_seconds,
-        report.jitter
+        report.jitter,
+        report
+            .diverged
+            .map_or_else(String::new, |d| format!(" DIVERGED: {d}"))
     );
     Ok(())
 }

@@ -43,8 +43,8 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         }
         .with_inducing(args.inducing);
         // `--iters` are MSGP's; the baseline runs its default
-        if method == Method::Msgp {
-            settings = settings.with_solver_iterations(args.iters);
+        if let (Method::Msgp, Some(n)) = (method, args.iters) {
+            settings = settings.with_solver_iterations(n);
         }
         let started = Instant::now();
         let mut last_print = Instant::now();
@@ -74,10 +74,24 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
             started.elapsed().as_secs_f64()
         ))?;
         if method == Method::Msgp {
+            let chosen =
+                report
+                    .recipes
+                    .get(report.chosen_recipe)
+                    .map_or("the settings' own", |r| match r.recipe.mean {
+                        msgp_core::gp::MeanFunction::Zero => "zero-mean",
+                        msgp_core::gp::MeanFunction::Linear => "linear-mean",
+                    });
             eprintln!(
-                "  kept iteration {} of {} (early stopping on the last 20% of the training data)",
-                report.best_iteration, report.iterations_run
+                "  kept iteration {} of the {chosen} recipe ({} iterations over {} recipes; \
+                 chosen by the validation NLL of the last 20% of the training data)",
+                report.best_iteration,
+                report.iterations_run,
+                report.recipes.len()
             );
+            if let Some(why) = &report.diverged {
+                eprintln!("  warning: the fitted model diverges: {why}");
+            }
         }
     }
     Ok(())

@@ -3,7 +3,7 @@
 use std::fmt::Write as _;
 
 use anyhow::{Context, bail};
-use msgp_core::model::Model;
+use msgp_core::model::{Model, Rollout};
 use msgp_core::model_file::{ModelFile, write_atomically};
 use serde_json::json;
 
@@ -79,7 +79,8 @@ fn load(model_path: &std::path::Path, args: &DataArgs, from: usize) -> anyhow::R
 /// Runs `msgp eval`.
 pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
     let l = load(&args.model, &args.data, args.from)?;
-    let sims = l.model.simulate_parts(&l.parts)?;
+    let rollout = Rollout::from(args.rollout);
+    let sims = l.model.simulate_parts_as(&l.parts, rollout)?;
     let metrics = pool(
         &sims.iter().map(|s| s.metrics).collect::<Vec<_>>(),
         l.model.spec.dy,
@@ -87,7 +88,7 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
     if let Some(p) = &args.plot {
         plot(
             p,
-            &format!("{} free simulation", l.file.method),
+            &format!("{} free simulation{}", l.file.method, rollout_note(rollout)),
             &l.data.outputs,
             &sims,
         )?;
@@ -104,6 +105,7 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
             "trajectories": l.parts.len(),
             "n_test": n,
             "from": args.from,
+            "rollout": rollout.name(),
             "plot": args.plot.as_ref().map(|p| p.display().to_string()),
         });
         metrics_json(&mut v, metrics.as_ref());
@@ -116,11 +118,22 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
         trajectories(l.parts.len()),
         args.from
     );
-    text.push_str(&metrics_line("free simulation", metrics.as_ref()));
+    text.push_str(&metrics_line(
+        &format!("free simulation{}", rollout_note(rollout)),
+        metrics.as_ref(),
+    ));
     if let Some(p) = &args.plot {
         text.push_str(&format!("\nplot written to {}", p.display()));
     }
     out(&text)
+}
+
+/// What the reports add to "free simulation" for `rollout`: nothing for the default.
+fn rollout_note(rollout: Rollout) -> &'static str {
+    match rollout {
+        Rollout::MomentMatching => "",
+        Rollout::MeanFeedback => " (mean feedback)",
+    }
 }
 
 /// The prediction CSV.
@@ -164,7 +177,8 @@ fn prediction_csv(outputs: &[String], sims: &[Simulated]) -> String {
 /// Runs `msgp simulate`.
 pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let l = load(&args.model, &args.data, args.from)?;
-    let sims = l.model.simulate_parts(&l.parts)?;
+    let rollout = Rollout::from(args.rollout);
+    let sims = l.model.simulate_parts_as(&l.parts, rollout)?;
     let csv = prediction_csv(&l.data.outputs, &sims);
     write_atomically(&args.out, csv.as_bytes())
         .with_context(|| format!("cannot write predictions to {}", args.out.display()))?;
@@ -180,6 +194,7 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
             "method": l.file.method,
             "out": args.out.display().to_string(),
             "rows": rows,
+            "rollout": rollout.name(),
             "trajectories": sims.len(),
         });
         metrics_json(&mut v, metrics.as_ref());
@@ -189,6 +204,9 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         "wrote {rows} simulated steps of {} to {}\n{}",
         trajectories(sims.len()),
         args.out.display(),
-        metrics_line("free simulation", metrics.as_ref())
+        metrics_line(
+            &format!("free simulation{}", rollout_note(rollout)),
+            metrics.as_ref()
+        )
     ))
 }

@@ -71,7 +71,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         inducing: args.inducing,
         iterations: args.iters,
         seed: args.seed,
-        mean: args.mean.into(),
+        mean: args.mean.map(Into::into),
         integrators: args.integrating.clone(),
         optimizer: args.optimizer.into(),
         likelihood: args.likelihood.map_or(Likelihood::default(), Into::into),
@@ -101,6 +101,10 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     // what the model has (a linear-kf model has one idle pseudo-input and no GP)
     let inducing = model.params.pseudo_inputs.nrows();
     bar.finish(&format!("trained in {:.1} s", report.train_seconds));
+    if let Some(why) = &report.diverged {
+        // a warning, not an error: the model is saved for inspection, and says so itself
+        eprintln!("warning: the fitted model diverges: {why}");
+    }
     let file = ModelFile::from_fit(
         &model,
         &FitRecord {
@@ -151,6 +155,8 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             "train_seconds": report.train_seconds,
             "iterations_run": report.iterations_run,
             "best_iteration": report.best_iteration,
+            "diverged": report.diverged.is_some(),
+            "divergence": report.diverged,
             "model": model_path.display().to_string(),
             "plot": args.plot.as_ref().map(|p| p.display().to_string()),
             "data_hash": file.training.data_hash,
@@ -181,6 +187,9 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         ));
     }
     text.push('\n');
+    if let Some(why) = &report.diverged {
+        text.push_str(&format!("WARNING: the fitted model diverges: {why}\n"));
+    }
     text.push_str(&metrics_line("test free simulation", metrics.as_ref()));
     text.push_str(&format!("\nmodel written to {}", model_path.display()));
     if let Some(p) = &args.plot {

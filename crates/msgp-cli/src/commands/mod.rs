@@ -5,6 +5,7 @@ pub mod demo;
 pub mod eval;
 pub mod figure4;
 pub mod fit;
+pub mod generalisation;
 pub mod learn;
 pub mod sim;
 pub mod table1;

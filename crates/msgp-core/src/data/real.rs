@@ -61,6 +61,24 @@ impl RealSeries {
         }
     }
 
+    /// The series split the other way round: the *last* `n_train` samples of Table 3's split
+    /// train and the samples before them test, for judging a model on a stretch of the plant's
+    /// behaviour it was not trained on (the same amount of training data).
+    pub fn load_swapped(&self, dir: &Path) -> Result<Benchmark> {
+        let b = self.load(dir)?;
+        let (n_train, _) = self.split();
+        let u: Vec<f64> = b.train.u.iter().chain(b.test.u.iter()).copied().collect();
+        let y: Vec<f64> = b.train.y.iter().chain(b.test.y.iter()).copied().collect();
+        let cut = u.len() - n_train;
+        Ok(Benchmark {
+            name: format!("{} (swapped)", self.name()),
+            train: Trajectory::siso(&u[cut..], &y[cut..])?,
+            test: Trajectory::siso(&u[..cut], &y[..cut])?,
+            ly: b.ly,
+            lu: b.lu,
+        })
+    }
+
     /// Loads `<dir>/<name>.csv` (columns `t,u,y`) and splits it.
     pub fn load(&self, dir: &Path) -> Result<Benchmark> {
         let path = dir.join(format!("{}.csv", self.name()));

@@ -159,6 +159,102 @@ impl SyntheticSystem {
     }
 }
 
+/// An excitation of a synthetic system that Table 2 does not train on, for judging how a model
+/// generalises ([`SyntheticSystem::alternate_tests`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Excitation {
+    /// Ten steps: levels drawn uniformly from the training input's range (seeded), each held
+    /// for a tenth of the test length.
+    Steps,
+    /// A linear chirp of amplitude 0.9 × the training input's bound (system 5: 0.9), from one
+    /// period over the test length to 0.2 cycles per sample.
+    Chirp,
+    /// Table 2's test input at half its amplitude (system 5: its seeded random test input,
+    /// halved).
+    HalfTest,
+}
+
+impl Excitation {
+    /// All three, in report order.
+    pub const ALL: [Excitation; 3] = [Excitation::Steps, Excitation::Chirp, Excitation::HalfTest];
+
+    /// Name in reports.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Excitation::Steps => "steps",
+            Excitation::Chirp => "chirp",
+            Excitation::HalfTest => "half test input",
+        }
+    }
+}
+
+impl SyntheticSystem {
+    /// The bound `b` of the training input (`U(−b, b)`; system 5's clipped normal: 1).
+    pub fn input_bound(&self) -> f64 {
+        match self.0 {
+            1 | 2 => 2.0,
+            _ => 1.0,
+        }
+    }
+
+    /// The noise-free response to `excitation` over the Table-2 test length, with `seed` for its
+    /// random parts (the step levels; system 5's test input): deterministic for a seed.
+    pub fn alternate_test(&self, excitation: Excitation, seed: u64) -> Result<Trajectory> {
+        use std::f64::consts::PI;
+        let (_, n) = self.lengths();
+        let mut rng = StdRng::seed_from_u64(
+            seed ^ 0xa076_1d64_78bd_642f ^ (u64::from(self.0) << 8) ^ excitation as u64,
+        );
+        let b = self.input_bound();
+        let u: Vec<f64> = match excitation {
+            Excitation::Steps => {
+                let hold = (n / 10).max(1);
+                let mut level = 0.0;
+                (0..n)
+                    .map(|k| {
+                        if k % hold == 0 {
+                            level = rng.random_range(-b..b);
+                        }
+                        level
+                    })
+                    .collect()
+            }
+            Excitation::Chirp => {
+                let (f0, f1) = (1.0 / n as f64, 0.2);
+                (0..n)
+                    .map(|k| {
+                        let t = k as f64;
+                        let phase = 2.0 * PI * (f0 * t + 0.5 * (f1 - f0) * t * t / n as f64);
+                        0.9 * b * phase.sin()
+                    })
+                    .collect()
+            }
+            Excitation::HalfTest => {
+                // system 5's test input is drawn after its training data: draw both, as
+                // `generate` does, so the halved signal is Table 2's own
+                let test = if self.0 == 5 {
+                    let bench = self.generate(seed, NoiseScale::StdDev)?;
+                    bench.test.u.iter().copied().collect()
+                } else {
+                    self.test_input(n, &mut rng)
+                };
+                test.into_iter().map(|v| 0.5 * v).collect()
+            }
+        };
+        let y = self.respond(&u);
+        Trajectory::siso(&u, &y)
+    }
+
+    /// The three [`Excitation`]s' test trajectories, in [`Excitation::ALL`] order.
+    pub fn alternate_tests(&self, seed: u64) -> Result<Vec<(Excitation, Trajectory)>> {
+        Excitation::ALL
+            .into_iter()
+            .map(|e| Ok((e, self.alternate_test(e, seed)?)))
+            .collect()
+    }
+}
+
 fn clipped_normal(n: usize, rng: &mut StdRng) -> Vec<f64> {
     (0..n)
         .map(|_| {
@@ -193,6 +289,44 @@ mod tests {
         let resid: Vec<f64> = a.train.y.iter().zip(&clean).map(|(y, c)| y - c).collect();
         let var = resid.iter().map(|r| r * r).sum::<f64>() / resid.len() as f64;
         assert!((var - 0.18).abs() < 0.04, "noise variance {var}");
+    }
+
+    /// The alternate excitations: seeded and deterministic, inside the training input's range,
+    /// of the test length, noise-free responses; the half test input is Table 2's halved.
+    #[test]
+    fn alternate_excitations_are_seeded_deterministic_and_in_range() {
+        for s in SyntheticSystem::all() {
+            let (_, n) = s.lengths();
+            let a = s.alternate_tests(3).expect("alternates");
+            let b = s.alternate_tests(3).expect("alternates");
+            assert_eq!(a, b, "system {}: same seed, same signals", s.number());
+            let c = s.alternate_tests(4).expect("alternates");
+            assert_ne!(
+                a[0].1,
+                c[0].1,
+                "system {}: the steps follow the seed",
+                s.number()
+            );
+            for (e, t) in &a {
+                assert_eq!(t.len(), n);
+                let u: Vec<f64> = t.u.iter().copied().collect();
+                assert!(
+                    u.iter().all(|v| v.abs() <= s.input_bound()),
+                    "{e:?} in range"
+                );
+                let y: Vec<f64> = t.y.iter().copied().collect();
+                assert_eq!(s.respond(&u), y, "{e:?}: noise-free response");
+            }
+            let test = s.generate(3, NoiseScale::StdDev).expect("gen").test;
+            let half: Vec<f64> = test.u.iter().map(|v| 0.5 * v).collect();
+            let got: Vec<f64> = a[2].1.u.iter().copied().collect();
+            assert_eq!(got, half, "system {}: half test input", s.number());
+            // ten distinct step levels
+            let steps: Vec<f64> = a[0].1.u.iter().copied().collect();
+            let mut levels: Vec<f64> = steps.iter().step_by(n / 10).copied().collect();
+            levels.dedup();
+            assert_eq!(levels.len(), 10);
+        }
     }
 
     #[test]

@@ -9,14 +9,17 @@
 //! run [`fit_episodes_observed`]; front ends build their [`FitSettings`] from the user's
 //! [`FitOptions`].
 
+mod divergence;
 pub mod linear_kf;
 mod msgp;
 pub mod one_step;
 mod settings;
 
+pub use divergence::{DIVERGENCE_RANGES, check_divergence};
 pub use settings::{
     DEFAULT_MAX_INDUCING, DEFAULT_ONE_STEP_ITERATIONS, FIT_LBFGS, FitOptimizer, FitOptions,
-    FitSettings, LinearKfSettings, MethodSettings, MsgpSettings, OneStepFitSettings,
+    FitSettings, LINEAR_RECIPE, LinearKfSettings, MethodSettings, MsgpSettings, NoiseStart,
+    OneStepFitSettings, OneStepSolver, Recipe,
 };
 
 use std::ops::ControlFlow;
@@ -36,7 +39,8 @@ use one_step::{OneStepSettings, fit_one_step, one_step_pairs};
 /// One line of fit progress.
 #[derive(Clone, Copy, Debug)]
 pub struct FitProgress {
-    /// 1: training with early stopping on the held-out tail; 2: refit on all training data.
+    /// 1: training with early stopping on the held-out tail; 2: refit on all training data;
+    /// 3: training the alternative recipe ([`MsgpSettings::alternative`]).
     pub stage: u8,
     /// Adam iteration.
     pub iteration: usize,
@@ -69,6 +73,27 @@ pub struct FitReport {
     /// stopped there and kept the last parameters that evaluated.
     #[serde(default)]
     pub numerical_stop: Option<String>,
+    /// Set when the fitted model's free simulation over its feed-forward training trajectories
+    /// diverges ([`check_divergence`]): why. The model is returned all the same.
+    #[serde(default)]
+    pub diverged: Option<String>,
+    /// MSGP: each recipe trained ([`MsgpSettings::alternative`]) and its best validation NLL.
+    #[serde(default)]
+    pub recipes: Vec<RecipeOutcome>,
+    /// MSGP: the index in `recipes` of the returned model's recipe.
+    #[serde(default)]
+    pub chosen_recipe: usize,
+}
+
+/// How one MSGP recipe did on the validation tail.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RecipeOutcome {
+    /// The recipe.
+    pub recipe: Recipe,
+    /// Its best validation NLL per step (`None` without a validation tail, or when it failed).
+    pub validation: Option<f64>,
+    /// Why its training failed numerically, if it did.
+    pub failed: Option<String>,
 }
 
 /// Fits a model on training trajectories given in original units.
@@ -204,7 +229,24 @@ fn check_continuation(settings: &FitSettings, previous: &Model) -> Result<()> {
     Ok(())
 }
 
+/// The fit, then the divergence check on its feed-forward training trajectories.
 fn fit_episodes_from(
+    episodes: &[TrainingEpisode],
+    settings: &FitSettings,
+    previous: Option<&Model>,
+    progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
+) -> Result<(Model, FitReport)> {
+    let (model, mut report) = fit_unchecked(episodes, settings, previous, progress)?;
+    let open_loop: Vec<&Trajectory> = episodes
+        .iter()
+        .filter(|e| e.policy.is_none())
+        .map(|e| &e.traj)
+        .collect();
+    report.diverged = check_divergence(&model, &open_loop);
+    Ok((model, report))
+}
+
+fn fit_unchecked(
     episodes: &[TrainingEpisode],
     settings: &FitSettings,
     previous: Option<&Model>,
@@ -263,6 +305,7 @@ fn fit_episodes_from(
             let norm: Vec<Trajectory> = refs.iter().map(|t| normalizer.apply(t)).collect();
             let one_step = OneStepSettings {
                 iterations: msgp.one_step_iterations,
+                solver: msgp.one_step_solver,
                 threads: settings.threads,
                 ..OneStepSettings::default()
             };
@@ -286,6 +329,7 @@ fn fit_episodes_from(
         one_step.inducing,
         &OneStepSettings {
             iterations: one_step.iterations,
+            solver: one_step.solver,
             pilco_penalty,
             threads: settings.threads,
             ..OneStepSettings::default()

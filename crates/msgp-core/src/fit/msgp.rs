@@ -1,6 +1,8 @@
 //! MSGP training (paper section 3): the one-step sparse GP-NARX fit as the start, then Adam or
 //! L-BFGS on the trajectory likelihood ([`crate::loss`]) with its exact adjoint gradient, early
-//! stopping on a held-out tail of the training data, and an optional refit on all of it.
+//! stopping on a held-out tail of the training data, and an optional refit on all of it. With
+//! an alternative recipe ([`MsgpSettings::alternative`]) both recipes train this way and the one
+//! with the lower validation NLL is returned.
 //!
 //! ## Guarding against noise collapse
 //! The trajectory likelihood can be lowered by shrinking the noise variances while the free
@@ -13,11 +15,13 @@
 //!    parameters with the best validation NLL are returned. The test data are never seen.
 
 use std::ops::ControlFlow;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use super::one_step::{OneStepSettings, fit_one_step, one_step_pairs};
 use super::{
-    FIT_LBFGS, FitOptimizer, FitProgress, FitReport, FitSettings, MsgpSettings, TrainingEpisode,
+    FIT_LBFGS, FitOptimizer, FitProgress, FitReport, FitSettings, MsgpSettings, NoiseStart,
+    RecipeOutcome, TrainingEpisode,
 };
 use crate::data::{Normalizer, Trajectory};
 use crate::error::{MsgpError, Result};
@@ -74,39 +78,131 @@ pub(super) fn fit_msgp(
             head_eps.push(Episode::feed_forward(t.clone()));
         }
     }
-    let config = GpConfig {
-        noise_floor: msgp.noise_floor,
-        mean: msgp.mean,
-        start: msgp.start_window,
-        ..GpConfig::default()
-    };
-    let mut stage = Stage {
-        spec,
-        config,
-        settings,
-        msgp,
-        start,
-        progress,
-        report: &mut report,
-    };
-    let init = match previous {
-        Some(p) => p.params.clone(),
-        None => stage.initial(&head_eps, one_step)?,
-    };
-    let (mut chosen, best_iteration) = stage.train(init, &head_eps, &tails, msgp.iterations, 1)?;
-    stage.report.best_iteration = best_iteration;
-    if msgp.refit && !tails.is_empty() {
-        // stage 2: the same number of iterations on the whole training data
-        let init = match previous {
-            Some(p) => p.params.clone(),
-            None => stage.initial(&all_eps, one_step)?,
-        };
-        chosen = if best_iteration == 0 {
-            init
-        } else {
-            stage.train(init, &all_eps, &[], best_iteration, 2)?.0
-        };
+    // the settings' own recipe, then the alternative (only where a validation tail can judge)
+    let mut recipes = vec![msgp.clone()];
+    if let (Some(r), false, None) = (msgp.alternative, tails.is_empty(), previous) {
+        recipes.push(msgp.with_recipe(r));
     }
+    // one recipe's training under its own report and observer
+    let run = |k: usize,
+               recipe: &MsgpSettings,
+               settings: &FitSettings,
+               progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
+               report: &mut FitReport|
+     -> (Result<Trained>, GpConfig) {
+        let config = GpConfig {
+            noise_floor: recipe.noise_floor,
+            mean: recipe.mean,
+            start: recipe.start_window,
+            ..GpConfig::default()
+        };
+        let mut stage = Stage {
+            spec,
+            config,
+            settings,
+            msgp: recipe,
+            start,
+            progress,
+            report,
+        };
+        let stage_number = if k == 0 { 1 } else { 3 };
+        let trained = train_recipe(
+            &mut stage,
+            previous,
+            one_step,
+            &head_eps,
+            &all_eps,
+            &tails,
+            stage_number,
+        );
+        (trained, config)
+    };
+    let results: Vec<(Result<Trained>, GpConfig)> =
+        if recipes.len() == 2 && settings.threads.get() >= 2 {
+            // the two recipes side by side, each on half the threads; the observer sees the
+            // first, and stopping it stops both
+            let half = FitSettings {
+                threads: Threads::new((settings.threads.get() / 2).max(1))?,
+                ..settings.clone()
+            };
+            let stop = AtomicBool::new(false);
+            let mut side = FitReport::default();
+            let (first, second) = std::thread::scope(|scope| {
+                let handle = scope.spawn(|| {
+                    let mut quiet = |_: &FitProgress| {
+                        if stop.load(Ordering::Relaxed) {
+                            ControlFlow::Break(())
+                        } else {
+                            ControlFlow::Continue(())
+                        }
+                    };
+                    run(1, &recipes[1], &half, &mut quiet, &mut side)
+                });
+                let mut observed = |p: &FitProgress| {
+                    let flow = progress(p);
+                    if flow.is_break() {
+                        stop.store(true, Ordering::Relaxed);
+                    }
+                    flow
+                };
+                let first = run(0, &recipes[0], &half, &mut observed, &mut report);
+                if matches!(first.0, Err(MsgpError::Stopped { .. })) {
+                    stop.store(true, Ordering::Relaxed);
+                }
+                let second = handle.join().map_err(|_| {
+                    MsgpError::NonFinite("the alternative recipe's training panicked".into())
+                });
+                (first, second)
+            });
+            let second = second?;
+            report.iterations_run += side.iterations_run;
+            report.jitter.merge(&side.jitter);
+            report.history.extend(side.history);
+            if report.numerical_stop.is_none() {
+                report.numerical_stop = side.numerical_stop;
+            }
+            vec![first, second]
+        } else {
+            recipes
+                .iter()
+                .enumerate()
+                .map(|(k, r)| run(k, r, settings, &mut *progress, &mut report))
+                .collect()
+        };
+    let mut best: Option<(f64, GpParams<f64>, GpConfig, usize)> = None;
+    let mut first_error = None;
+    for (k, ((trained, config), recipe)) in results.into_iter().zip(&recipes).enumerate() {
+        let (params, best_iteration, validation) = match trained {
+            Ok(t) => t,
+            // a recipe whose start already fails numerically (e.g. an unstable linear map)
+            // leaves the choice to the other
+            Err(e @ (MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_)))
+                if recipes.len() > 1 =>
+            {
+                report.recipes.push(RecipeOutcome {
+                    recipe: recipe.recipe(),
+                    validation: None,
+                    failed: Some(e.to_string()),
+                });
+                first_error.get_or_insert(e);
+                continue;
+            }
+            Err(e) => return Err(e),
+        };
+        report.recipes.push(RecipeOutcome {
+            recipe: recipe.recipe(),
+            validation: validation.is_finite().then_some(validation),
+            failed: None,
+        });
+        if best.as_ref().is_none_or(|b| validation < b.0) {
+            best = Some((validation, params, config, best_iteration));
+            report.chosen_recipe = k;
+            report.best_iteration = best_iteration;
+        }
+    }
+    let Some((_, chosen, config, _)) = best else {
+        return Err(first_error.unwrap_or_else(|| MsgpError::NonFinite("no recipe trained".into())));
+    };
     report.train_seconds = start.elapsed().as_secs_f64();
     let model = Model {
         method: Method::Msgp,
@@ -116,6 +212,44 @@ pub(super) fn fit_msgp(
         normalizer,
     };
     Ok((model, report))
+}
+
+/// A recipe's trained parameters, the iteration they are from and their validation NLL per step
+/// (`+∞` without a validation tail).
+type Trained = (GpParams<f64>, usize, f64);
+
+/// One recipe's training: its start (or `previous`), the solver with early stopping on
+/// `tails`, the optional refit. Returns the parameters, the chosen iteration and the best
+/// validation NLL per step (`+∞` without tails).
+#[allow(clippy::too_many_arguments)]
+fn train_recipe(
+    stage: &mut Stage<'_, '_>,
+    previous: Option<&Model>,
+    one_step: &OneStepSettings,
+    head_eps: &[Episode],
+    all_eps: &[Episode],
+    tails: &[Episode],
+    stage_number: u8,
+) -> Result<Trained> {
+    let init = match previous {
+        Some(p) => p.params.clone(),
+        None => stage.initial(head_eps, one_step)?,
+    };
+    let (mut chosen, best_iteration, validation) =
+        stage.train(init, head_eps, tails, stage.msgp.iterations, stage_number)?;
+    if stage.msgp.refit && !tails.is_empty() {
+        // the same number of iterations on the whole training data
+        let init = match previous {
+            Some(p) => p.params.clone(),
+            None => stage.initial(all_eps, one_step)?,
+        };
+        chosen = if best_iteration == 0 {
+            init
+        } else {
+            stage.train(init, all_eps, &[], best_iteration, 2)?.0
+        };
+    }
+    Ok((chosen, best_iteration, validation))
 }
 
 struct MsgpObjective<'a> {
@@ -203,8 +337,8 @@ struct Stage<'a, 'p> {
 }
 
 impl Stage<'_, '_> {
-    /// The sparse one-step GP-NARX fit on `episodes`, with the one-step noise split equally
-    /// between process and observation noise.
+    /// The sparse one-step GP-NARX fit on `episodes`, its noise variance starting both the
+    /// process and the observation noise as [`MsgpSettings::noise_start`] says.
     fn initial(
         &mut self,
         episodes: &[Episode],
@@ -222,11 +356,15 @@ impl Stage<'_, '_> {
             &mut self.report.jitter,
         )?;
         let floor = self.config.noise_floor;
+        let share = match self.msgp.noise_start {
+            NoiseStart::Split => 0.5,
+            NoiseStart::Full => 1.0,
+        };
         for a in 0..self.spec.dy {
             let total = init.log_process_noise[a].exp() + floor;
-            let half = (0.5 * total - floor).max(1e-3 * floor);
-            init.log_process_noise[a] = half.ln();
-            init.log_obs_noise[a] = half.ln();
+            let part = (share * total - floor).max(1e-3 * floor);
+            init.log_process_noise[a] = part.ln();
+            init.log_obs_noise[a] = part.ln();
         }
         let m = init.pseudo_inputs.nrows();
         let predicted: usize = episodes
@@ -256,7 +394,7 @@ impl Stage<'_, '_> {
         tails: &[Episode],
         iterations: usize,
         stage: u8,
-    ) -> Result<(GpParams<f64>, usize)> {
+    ) -> Result<Trained> {
         let shape = init.shape()?;
         // which parameters move: the frozen groups (and `A` without a linear mean) stay
         let mut free = GpParams::filled(shape, true);
@@ -364,6 +502,11 @@ impl Stage<'_, '_> {
         if let Some(iteration) = stopped {
             return Err(MsgpError::Stopped { iteration });
         }
+        let validation = if tails.is_empty() {
+            f64::INFINITY
+        } else {
+            best.0
+        };
         let (x, it) = match (objective.failure.take(), good) {
             (Some(e), None) => return Err(e),
             (Some(e), Some((x, it))) => {
@@ -380,6 +523,6 @@ impl Stage<'_, '_> {
             (None, _) if tails.is_empty() && !best.0.is_finite() => (last_x, last_it),
             (None, _) => (best.1, best.2),
         };
-        Ok((GpParams::from_flat(shape, &x)?, it))
+        Ok((GpParams::from_flat(shape, &x)?, it, validation))
     }
 }

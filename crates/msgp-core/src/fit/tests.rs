@@ -22,7 +22,7 @@ fn options(method: Method, inducing: Option<usize>, iterations: Option<usize>) -
         inducing,
         iterations,
         seed: 7,
-        mean: MeanFunction::Zero,
+        mean: Some(MeanFunction::Zero),
         integrators: Vec::new(),
         optimizer: FitOptimizer::Adam,
         likelihood: Likelihood::FreeRun,
@@ -370,6 +370,7 @@ fn a_linear_kf_fit_continues_the_previous_model() {
                 inducing: 10,
                 iterations: 5,
                 mean: MeanFunction::Linear,
+                ..OneStepFitSettings::default()
             }),
             ..settings.clone()
         },
@@ -468,6 +469,7 @@ fn options_default_inducing_and_iterations() {
         inducing,
         mean: MeanFunction::Zero,
         iterations,
+        solver: OneStepSolver::Lbfgs,
     };
     assert_eq!(s.method, MethodSettings::GpNarx(one_step(100, 30)));
     let s = options(Method::PilcoNarx, Some(5), None)
@@ -546,11 +548,14 @@ fn settings_serialise_with_the_methods_own_keys() {
     ];
     let mut msgp_1_2 = msgp_1_1.to_vec();
     msgp_1_2.push("likelihood");
+    msgp_1_2.push("noise_start");
+    msgp_1_2.push("one_step_solver");
+    msgp_1_2.push("alternative");
     assert_eq!(keys(&FitSettings::new(Method::Msgp)), with(&msgp_1_2));
     for m in [Method::GpNarx, Method::PilcoNarx] {
         assert_eq!(
             keys(&FitSettings::new(m)),
-            with(&["inducing", "iterations", "mean"])
+            with(&["inducing", "iterations", "mean", "solver"])
         );
     }
     assert_eq!(
@@ -627,4 +632,171 @@ fn an_msgp_fit_trains_on_the_filter_likelihood() {
         };
     let err = fit(std::slice::from_ref(&traj), &smoothed, &mut |_| {}).expect_err("refused");
     assert!(err.to_string().contains("measured window"), "{err}");
+}
+
+/// The divergence check: silent on a sound fit (and the fit reports nothing), firing on the
+/// same model made unstable (a linear mean with a pole at 1.3 runs its free simulation far out
+/// of the training outputs' range), and on a model whose predictive variance explodes.
+#[test]
+fn the_divergence_check_fires_on_an_unstable_model_only() {
+    let traj = first_order(0.2);
+    let settings = FitSettings {
+        ly: 1,
+        lu: 1,
+        method: MsgpSettings {
+            inducing: 10,
+            iterations: 30,
+            mean: MeanFunction::Linear,
+            ..MsgpSettings::default()
+        }
+        .into(),
+        ..FitSettings::default()
+    };
+    let (model, report) = fit(std::slice::from_ref(&traj), &settings, &mut |_| {}).expect("fit");
+    assert_eq!(report.diverged, None);
+    assert_eq!(check_divergence(&model, &[&traj]), None);
+    let mut unstable = model.clone();
+    unstable.params.linear_mean[(0, 0)] = 1.3;
+    let why = check_divergence(&unstable, &[&traj]).expect("a pole at 1.3 diverges");
+    assert!(why.contains("leaves the training outputs' range"), "{why}");
+    let mut noisy = model.clone();
+    // a process noise far above the outputs' range: the mean stays, the variance does not
+    noisy.params.log_process_noise[0] = (1e4f64).ln();
+    let why = check_divergence(&noisy, &[&traj]).expect("exploding variance");
+    assert!(why.contains("standard deviation"), "{why}");
+    // nothing to check without feed-forward trajectories
+    assert_eq!(check_divergence(&unstable, &[]), None);
+}
+
+/// The mean-feedback simulation of a fitted GP model: with (almost) no noise the moment-matching
+/// rollout carries almost no variance, and the two simulations agree; the mean-feedback
+/// variance is the one-step predictive variance, never more than the propagated one by much.
+#[test]
+fn mean_feedback_and_moment_matching_agree_without_noise() {
+    use crate::model::Rollout;
+    let traj = first_order(0.2);
+    let settings = FitSettings {
+        ly: 1,
+        lu: 1,
+        method: MsgpSettings {
+            inducing: 15,
+            iterations: 0,
+            ..MsgpSettings::default()
+        }
+        .into(),
+        ..FitSettings::default()
+    };
+    let (mut model, _) = fit(std::slice::from_ref(&traj), &settings, &mut |_| {}).expect("fit");
+    model.config.noise_floor = 0.0;
+    model.params.log_process_noise[0] = (1e-12f64).ln();
+    model.params.log_obs_noise[0] = (1e-12f64).ln();
+    let mm = model.simulate(&traj).expect("mm");
+    let mf = model
+        .simulate_as(&traj, Rollout::MeanFeedback)
+        .expect("mean feedback");
+    assert_eq!(mm.start, mf.start);
+    assert_eq!(mm.mean.shape(), mf.mean.shape());
+    let scale = traj.y.amax();
+    for i in 0..mm.mean.nrows() {
+        let d = (mm.mean[(i, 0)] - mf.mean[(i, 0)]).abs();
+        assert!(
+            d < 1e-3 * scale,
+            "step {i}: MM {} vs mean feedback {}",
+            mm.mean[(i, 0)],
+            mf.mean[(i, 0)]
+        );
+    }
+    // and with noise they differ (the rollout propagates it, mean feedback does not)
+    let (noisy, _) = fit(std::slice::from_ref(&traj), &settings, &mut |_| {}).expect("fit");
+    let mm = noisy.simulate(&traj).expect("mm");
+    let mf = noisy.simulate_as(&traj, Rollout::MeanFeedback).expect("mf");
+    let last = mm.var.nrows() - 1;
+    assert!(
+        mm.var[(last, 0)] > mf.var[(last, 0)],
+        "propagated variance grows"
+    );
+}
+
+/// The default protocol trains both recipes where a validation tail can judge them and keeps
+/// the one of lower validation NLL; the two recipes run side by side on two threads with the
+/// same result, bit for bit, as one after the other; without a validation tail, or with a mean
+/// the user chose, only the settings' own recipe trains.
+#[test]
+fn the_protocol_keeps_the_recipe_with_the_better_validation_nll() {
+    // a linear plant with a long memory: the linear-mean recipe explains it
+    let n = 160;
+    let u: Vec<f64> = (0..n)
+        .map(|i| ((i as f64) * 0.37).sin() + 0.5 * ((i as f64) * 0.05).cos())
+        .collect();
+    let mut y = vec![0.0; n];
+    for t in 2..n {
+        y[t] = 1.5 * y[t - 1] - 0.6 * y[t - 2] + 0.3 * u[t - 1];
+    }
+    let traj = Trajectory::siso(&u, &y).expect("finite");
+    let settings = |threads: usize, validation_fraction: f64| FitSettings {
+        ly: 2,
+        lu: 1,
+        threads: Threads::new(threads).expect("threads"),
+        method: MsgpSettings {
+            inducing: 12,
+            iterations: 60,
+            validation_fraction,
+            ..MsgpSettings::default()
+        }
+        .into(),
+        ..FitSettings::default()
+    };
+    let (one, r1) = fit(std::slice::from_ref(&traj), &settings(1, 0.2), &mut |_| {}).expect("fit");
+    assert_eq!(r1.recipes.len(), 2, "{:?}", r1.recipes);
+    assert_eq!(r1.recipes[1].recipe, LINEAR_RECIPE);
+    let v: Vec<f64> = r1
+        .recipes
+        .iter()
+        .map(|r| r.validation.expect("validated"))
+        .collect();
+    let chosen = if v[1] < v[0] { 1 } else { 0 };
+    assert_eq!(r1.chosen_recipe, chosen);
+    assert_eq!(chosen, 1, "the linear recipe wins on a linear plant: {v:?}");
+    assert_eq!(one.config.mean, MeanFunction::Linear);
+    let (two, r2) = fit(std::slice::from_ref(&traj), &settings(2, 0.2), &mut |_| {}).expect("fit");
+    assert_eq!(one.params, two.params, "two threads give the same model");
+    assert_eq!(r1.chosen_recipe, r2.chosen_recipe);
+    assert_eq!(r1.iterations_run, r2.iterations_run);
+    // no tail: one recipe, the settings' own
+    let (alone, r) = fit(std::slice::from_ref(&traj), &settings(2, 0.0), &mut |_| {}).expect("fit");
+    assert!(
+        r.recipes.len() == 1 && r.chosen_recipe == 0,
+        "{:?}",
+        r.recipes
+    );
+    assert_eq!(alone.config.mean, MeanFunction::Zero);
+    // a mean chosen in the options: no alternative
+    let chosen = FitOptions {
+        ly: 2,
+        lu: 1,
+        mean: Some(MeanFunction::Zero),
+        ..options(Method::Msgp, Some(12), Some(10))
+    }
+    .settings(std::slice::from_ref(&traj))
+    .expect("settings");
+    assert_eq!(chosen.msgp().expect("msgp").alternative, None);
+    let auto = FitOptions {
+        ly: 2,
+        lu: 1,
+        mean: None,
+        ..options(Method::Msgp, Some(12), Some(10))
+    }
+    .settings(std::slice::from_ref(&traj))
+    .expect("settings");
+    assert_eq!(auto.msgp().expect("msgp").alternative, Some(LINEAR_RECIPE));
+    let linear = FitOptions {
+        ly: 2,
+        lu: 1,
+        mean: Some(MeanFunction::Linear),
+        ..options(Method::Msgp, Some(12), Some(10))
+    }
+    .settings(std::slice::from_ref(&traj))
+    .expect("settings");
+    let linear = linear.msgp().expect("msgp");
+    assert_eq!((linear.recipe(), linear.alternative), (LINEAR_RECIPE, None));
 }

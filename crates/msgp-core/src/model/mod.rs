@@ -11,7 +11,7 @@ use crate::error::{MsgpError, Result};
 use crate::gp::{GpConfig, GpParams, PreparedGp};
 use crate::narx::NarxSpec;
 use crate::numeric::linalg::JitterLog;
-use crate::rollout::{Control, simulate};
+use crate::rollout::{Control, simulate, simulate_mean_feedback};
 
 mod metrics;
 
@@ -56,6 +56,32 @@ impl Method {
     }
 }
 
+/// How a free simulation propagates the model's predictions through the NARX window.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Rollout {
+    /// Moment matching over the window's joint Gaussian (the paper's, the default).
+    #[default]
+    #[serde(rename = "mm")]
+    MomentMatching,
+    /// Predicted means fed back, no uncertainty propagated
+    /// ([`crate::rollout::mean_feedback`]): how one-step GP-NARX baselines are often simulated.
+    #[serde(rename = "mean")]
+    MeanFeedback,
+}
+
+impl Rollout {
+    /// Name on the command line and in reports: `mm` or `mean`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Rollout::MomentMatching => "mm",
+            Rollout::MeanFeedback => "mean",
+        }
+    }
+
+    /// Both, the default first.
+    pub const ALL: [Rollout; 2] = [Rollout::MomentMatching, Rollout::MeanFeedback];
+}
+
 /// A model ready to simulate.
 #[derive(Clone, Debug)]
 pub struct Model {
@@ -86,10 +112,30 @@ impl Model {
     /// Open-loop free simulation of `traj` (original units) from its first `max(l_y, l_u)`
     /// samples, driven by its inputs.
     pub fn simulate(&self, traj: &Trajectory) -> Result<Simulation> {
+        self.simulate_as(traj, Rollout::MomentMatching)
+    }
+
+    /// Open-loop free simulation of `traj` (original units) by `rollout`.
+    pub fn simulate_as(&self, traj: &Trajectory, rollout: Rollout) -> Result<Simulation> {
         traj.check(&self.spec)?;
         let norm = self.normalizer.apply(traj);
         let mut log = JitterLog::default();
         let gp = PreparedGp::new(&self.params, &self.config, &mut log)?;
+        let dy = self.spec.dy;
+        if rollout == Rollout::MeanFeedback {
+            let (mut mean, mut var) = simulate_mean_feedback(&gp, &self.spec, &norm, traj.len())?;
+            for i in 0..mean.nrows() {
+                for j in 0..dy {
+                    mean[(i, j)] = self.normalizer.y_to_original(j, mean[(i, j)]);
+                    var[(i, j)] = self.normalizer.y_var_to_original(j, var[(i, j)]);
+                }
+            }
+            return Ok(Simulation {
+                start: self.spec.warmup(),
+                mean,
+                var,
+            });
+        }
         let steps = simulate(
             &gp,
             &self.spec,
@@ -98,7 +144,6 @@ impl Model {
             traj.len(),
             &mut log,
         )?;
-        let dy = self.spec.dy;
         let n = steps.len();
         let mut mean = DMatrix::zeros(n, dy);
         let mut var = DMatrix::zeros(n, dy);
@@ -117,19 +162,31 @@ impl Model {
 
     /// Free simulation of `traj` scored against its measured outputs.
     pub fn evaluate(&self, traj: &Trajectory) -> Result<Metrics> {
-        let sim = self.simulate(traj)?;
+        self.evaluate_as(traj, Rollout::MomentMatching)
+    }
+
+    /// Free simulation of `traj` by `rollout`, scored against its measured outputs.
+    pub fn evaluate_as(&self, traj: &Trajectory, rollout: Rollout) -> Result<Metrics> {
+        let sim = self.simulate_as(traj, rollout)?;
         score(&sim, traj)
     }
 
     /// Free simulation and scores of every part of a dataset; an error names the part.
     pub fn simulate_parts(&self, parts: &[Part]) -> Result<Vec<Simulated>> {
+        self.simulate_parts_as(parts, Rollout::MomentMatching)
+    }
+
+    /// [`simulate_parts`](Self::simulate_parts) by `rollout`.
+    pub fn simulate_parts_as(&self, parts: &[Part], rollout: Rollout) -> Result<Vec<Simulated>> {
         parts
             .iter()
             .map(|p| {
                 let named = |what: &str, e: MsgpError| {
                     MsgpError::Data(format!("{what} {}: {e}", p.label()))
                 };
-                let sim = self.simulate(&p.traj).map_err(|e| named("simulating", e))?;
+                let sim = self
+                    .simulate_as(&p.traj, rollout)
+                    .map_err(|e| named("simulating", e))?;
                 let metrics = score(&sim, &p.traj).map_err(|e| named("scoring", e))?;
                 Ok(Simulated {
                     part: p.clone(),

@@ -245,7 +245,7 @@ pub fn optimise_pid_scaled(
 mod tests {
     use super::*;
     use crate::data::Trajectory;
-    use crate::fit::{FitSettings, MethodSettings, OneStepFitSettings, fit};
+    use crate::fit::{FitSettings, MethodSettings, OneStepFitSettings, OneStepSolver, fit};
     use crate::gp::MeanFunction;
     use crate::model::Model;
     use crate::policy_search::{SaturatingCost, policy_gradient_duals};
@@ -269,6 +269,9 @@ mod tests {
                 inducing: 20,
                 iterations: 30,
                 mean,
+                // a one-step fit stopped short: on these noise-free outputs the optimum's noise
+                // sits at the floor and the rollouts lose the digits these tests compare
+                solver: OneStepSolver::Adam,
             }),
             ..FitSettings::default()
         };

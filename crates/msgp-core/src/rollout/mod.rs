@@ -3,14 +3,17 @@
 //!
 //! Modules: [`forward`] (the rollout: one loop, any scalar), `window` (the Gaussian state and
 //! its one-step layout), `adjoint` (the hand-derived reverse sweep, f64), [`episode`] (a
-//! trajectory and how its inputs were produced).
+//! trajectory and how its inputs were produced), [`mean_feedback`] (the baselines' simulation
+//! that feeds back predicted means only).
 
 pub(crate) mod adjoint;
 pub mod episode;
 pub mod forward;
+pub mod mean_feedback;
 pub(crate) mod window;
 
 pub use episode::{Episode, Excitation};
 pub(crate) use forward::rollout_started;
 pub use forward::{Control, StepPrediction, rollout, rollout_from, simulate};
+pub use mean_feedback::simulate_mean_feedback;
 pub use window::StartState;

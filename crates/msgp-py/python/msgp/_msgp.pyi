@@ -114,6 +114,11 @@ class Msgp:
     @property
     def report(self) -> Optional[Dict[str, Any]]: ...
     @property
+    def diverged(self) -> Optional[str]:
+        """Why the fitted model's free simulation over its training inputs diverges (the fit
+        also warns with a RuntimeWarning), or None."""
+        ...
+    @property
     def reference(self) -> Optional[Dict[str, Array]]: ...
 
 def load(
