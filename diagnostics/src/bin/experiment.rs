@@ -4,7 +4,7 @@
 //! `cargo run --release -p msgp-diagnostics --bin experiment -- [system] [method] [iters] [seed]
 //! [complexity] [noise] [lr=F] [lbfgs=true] [every=N] [patience=N] [valfrac=F] [floor=F]
 //! [inducing=N] [freeze_x=true] [free_x=true] [nstart=full] [onestep=N] [filter=true] [dump=true]
-//! [threads=N]`
+//! [threads=N] [ly=N] [lu=N] [mean=linear] [init=adam|lbfgs] [alt=false]`
 //!
 //! Positional: `system` `sys1`…`sys5` or a real series (`actuator`, `ballbeam`, `drives`,
 //! `furnace`, `dryer`; read from `MSGP_DATA_DIR`), default `sys4`; `method` `msgp` (default),
@@ -15,7 +15,10 @@
 //! `lbfgs=true` the L-BFGS solver, `every` the validation interval, `patience`, `valfrac` the
 //! validation fraction, `floor` the noise floor, `inducing` the pseudo-inputs, `freeze_x=true`
 //! freeze the pseudo-inputs, `free_x=true` let them move, `nstart=full` start both noises at
-//! the one-step noise (default: split it between them), `onestep` the one-step iterations, `filter=true` train on the
+//! the one-step noise (default: split it between them), `ly`/`lu` override the benchmark's
+//! history, `mean=linear` the linear prior mean, `init` the one-step start's solver,
+//! `alt=false` train the settings' recipe alone (default: the protocol's linear-mean recipe
+//! beside it, `MsgpSettings::alternative`), `onestep` the one-step iterations, `filter=true` train on the
 //! filter likelihood instead of the free run's, `dump=true` print the settings
 //! (JSON, stderr), `threads` the fit's threads (default every core; results do not depend on it).
 
@@ -127,13 +130,8 @@ fn options() -> Result<Options, String> {
         Some("lbfgs") => msgp.one_step_solver = msgp_core::fit::OneStepSolver::Lbfgs,
         Some(other) => return Err(format!("unknown init `{other}`")),
     }
-    if sw.get("alt")? == Some(true) {
-        msgp.alternative = Some(msgp_core::fit::Recipe {
-            mean: msgp_core::gp::MeanFunction::Linear,
-            complexity: Complexity::HalfLogDet,
-            learning_rate: 0.01,
-            noise_start: msgp_core::fit::NoiseStart::Full,
-        });
+    if sw.get("alt")? == Some(false) {
+        msgp.alternative = None;
     }
     if sw.get("free_x")? == Some(true) {
         msgp.frozen.clear();
