@@ -7,11 +7,10 @@
 //! outputs' mean, with 2σ coverage.
 
 use std::fmt::Write as _;
-use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use msgp_core::data::real::{RealSeries, data_dir};
+use msgp_core::data::real::RealSeries;
 use msgp_core::data::{Benchmark, NoiseScale, SyntheticSystem, Trajectory};
 use msgp_core::fit::{FitProgress, FitSettings, fit};
 use msgp_core::model::{Method, Metrics, Model};
@@ -117,15 +116,9 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
             );
         }
     }
-    if args.common.seeds.is_empty() {
-        bail!("--seeds: give at least one seed");
-    }
+    args.common.check_seeds()?;
     sources.retain(|s| args.common.only.is_empty() || args.common.only.contains(&s.key()));
-    let dir = args
-        .common
-        .data_dir
-        .clone()
-        .unwrap_or_else(|| data_dir(Path::new(".")));
+    let dir = args.common.data_dir();
     let threads = Threads::from_env()?;
     let mut cases = Vec::new();
     for source in &sources {

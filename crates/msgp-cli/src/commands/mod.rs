@@ -10,8 +10,29 @@ pub mod learn;
 pub mod sim;
 pub mod table1;
 
-use crate::args::DataArgs;
+use std::path::{Path, PathBuf};
+
+use crate::args::{BenchmarkArgs, DataArgs};
 use msgp_core::data::dataset::Selection;
+use msgp_core::data::real::data_dir;
+
+impl BenchmarkArgs {
+    /// The folder with the real series: `--data-dir`, else `$MSGP_DATA_DIR`, else
+    /// `../shared/data/real`.
+    pub fn data_dir(&self) -> PathBuf {
+        self.data_dir
+            .clone()
+            .unwrap_or_else(|| data_dir(Path::new(".")))
+    }
+
+    /// At least one seed was given.
+    pub fn check_seeds(&self) -> anyhow::Result<()> {
+        if self.seeds.is_empty() {
+            anyhow::bail!("--seeds: give at least one seed");
+        }
+        Ok(())
+    }
+}
 
 impl DataArgs {
     /// The columns or signals these options select.

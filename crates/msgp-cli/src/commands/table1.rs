@@ -4,11 +4,10 @@
 //! simulated both by moment matching and by mean feedback, our NLL and 2σ coverage.
 
 use std::fmt::Write as _;
-use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use msgp_core::data::real::{RealSeries, data_dir};
+use msgp_core::data::real::RealSeries;
 use msgp_core::data::{Benchmark, NoiseScale, SyntheticSystem};
 use msgp_core::fit::{FitOptimizer, FitProgress, FitSettings, MsgpSettings, fit};
 use msgp_core::loss::Likelihood;
@@ -239,9 +238,7 @@ pub fn run(args: &Table1Args) -> anyhow::Result<()> {
             );
         }
     }
-    if args.common.seeds.is_empty() {
-        bail!("--seeds: give at least one seed");
-    }
+    args.common.check_seeds()?;
     let chosen: Vec<&Task> = all
         .iter()
         .filter(|t| args.common.only.is_empty() || args.common.only.iter().any(|n| n == t.key))
@@ -273,11 +270,7 @@ pub fn run(args: &Table1Args) -> anyhow::Result<()> {
             _ => true,
         })
         .collect();
-    let dir = args
-        .common
-        .data_dir
-        .clone()
-        .unwrap_or_else(|| data_dir(Path::new(".")));
+    let dir = args.common.data_dir();
     let threads = Threads::from_env()?;
     let total = chosen.len() * columns.len() * args.common.seeds.len();
     let mut done = 0;
