@@ -169,7 +169,7 @@ pub(super) fn fit_msgp(
                 .map(|(k, r)| run(k, r, settings, &mut *progress, &mut report))
                 .collect()
         };
-    let mut best: Option<(f64, GpParams<f64>, GpConfig, usize)> = None;
+    let mut best: Option<(f64, GpParams<f64>, GpConfig)> = None;
     let mut first_error = None;
     for (k, ((trained, config), recipe)) in results.into_iter().zip(&recipes).enumerate() {
         let (params, best_iteration, validation) = match trained {
@@ -195,12 +195,12 @@ pub(super) fn fit_msgp(
             failed: None,
         });
         if best.as_ref().is_none_or(|b| validation < b.0) {
-            best = Some((validation, params, config, best_iteration));
+            best = Some((validation, params, config));
             report.chosen_recipe = k;
             report.best_iteration = best_iteration;
         }
     }
-    let Some((_, chosen, config, _)) = best else {
+    let Some((_, chosen, config)) = best else {
         return Err(first_error.unwrap_or_else(|| MsgpError::NonFinite("no recipe trained".into())));
     };
     report.train_seconds = start.elapsed().as_secs_f64();
