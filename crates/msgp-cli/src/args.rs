@@ -341,7 +341,7 @@ impl From<ModelArg> for Method {
 }
 
 /// Sizes of the loop: data, model, policy search.
-#[derive(Debug, Args)]
+#[derive(Clone, Debug, Args)]
 #[command(next_help_heading = "Budget")]
 pub struct BudgetArgs {
     /// Likelihood of the MSGP fits (free-run or filter; see `msgp fit --likelihood`)
@@ -597,9 +597,10 @@ pub struct Figure4Args {
     /// Markdown file whose `figure4` section is (re)written.
     #[arg(long, value_name = "RESULTS.md", default_value = "RESULTS.md")]
     pub out: PathBuf,
-    /// Folder for every run's artefacts and the cost-curve plot.
-    #[arg(long, value_name = "DIR", default_value = "results/figure4")]
-    pub dir: PathBuf,
+    /// Folder for every run's artefacts and the cost-curve plot [default:
+    /// results/figure4-<plant tier>].
+    #[arg(long, value_name = "DIR")]
+    pub dir: Option<PathBuf>,
     /// Seeds 0..N per model.
     #[arg(long, default_value_t = 5)]
     pub seeds: u64,
@@ -607,13 +608,51 @@ pub struct Figure4Args {
     #[arg(long, default_value_t = LearnSettings::default().iterations)]
     pub iterations: usize,
     /// Models to run (comma-separated).
-    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [ModelArg::Msgp, ModelArg::GpNarx, ModelArg::LinearKf])]
-    pub models: Vec<ModelArg>,
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [Figure4Model::Msgp, Figure4Model::MsgpFilter, Figure4Model::GpNarx, Figure4Model::LinearKf])]
+    pub models: Vec<Figure4Model>,
     /// No progress lines on stderr.
     #[arg(long)]
     pub quiet: bool,
     #[command(flatten)]
     pub budget: BudgetArgs,
+    #[command(flatten)]
+    pub plant: PlantArgs,
+}
+
+/// A model of `msgp reproduce figure4`: a `learn-policy --model`, MSGP with either likelihood.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Figure4Model {
+    /// MSGP trained on the free-run likelihood (the paper's): `--model msgp --likelihood
+    /// free-run`.
+    Msgp,
+    /// MSGP trained on the filter likelihood: `--model msgp --likelihood filter`.
+    MsgpFilter,
+    /// One-step GP-NARX (standard PILCO).
+    GpNarx,
+    /// The linear-Gaussian window model by the Kalman-filter likelihood.
+    LinearKf,
+}
+
+impl Figure4Model {
+    /// The `learn-policy` model and MSGP likelihood.
+    pub fn model(self) -> (ModelArg, Option<LikelihoodArg>) {
+        match self {
+            Figure4Model::Msgp => (ModelArg::Msgp, Some(LikelihoodArg::FreeRun)),
+            Figure4Model::MsgpFilter => (ModelArg::Msgp, Some(LikelihoodArg::Filter)),
+            Figure4Model::GpNarx => (ModelArg::GpNarx, None),
+            Figure4Model::LinearKf => (ModelArg::LinearKf, None),
+        }
+    }
+
+    /// Name in tables, folders and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Figure4Model::Msgp => "msgp",
+            Figure4Model::MsgpFilter => "msgp-filter",
+            Figure4Model::GpNarx => "gp-narx",
+            Figure4Model::LinearKf => "linear-kf",
+        }
+    }
 }
 
 /// Options of `msgp demo`.

@@ -211,16 +211,30 @@ fn figure4_writes_its_section_and_keeps_the_others() {
         "<!-- msgp:table1:begin -->\nTABLE ONE\n<!-- msgp:table1:end -->\n",
     )
     .expect("write");
-    let o = run(&dir, &figure4_args("msgp,gp-narx", &["--quiet"]));
+    let o = run(
+        &dir,
+        &figure4_args("msgp,msgp-filter,gp-narx", &["--quiet"]),
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let md = std::fs::read_to_string(dir.join("RESULTS.md")).expect("results");
     assert!(md.contains("TABLE ONE"), "table 1 kept");
-    assert!(md.contains("msgp:figure4:begin") && md.contains("| msgp | 0 |"));
-    assert!(md.contains("| gp-narx | 0 |"));
+    assert!(md.contains("msgp:figure4-noisy:begin") && md.contains("| msgp | 0 |"));
+    assert!(md.contains("| msgp-filter | 0 |") && md.contains("| gp-narx | 0 |"));
+    // the filtered MSGP's runs are MSGP trained on the filter likelihood
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("fig/msgp-filter-seed0/summary.json")).expect("summary"),
+    )
+    .expect("JSON");
+    assert_eq!(summary["model"], "msgp");
+    assert_eq!(
+        summary["settings"]["fit"]["likelihood"], "filter",
+        "{summary}"
+    );
+    assert_eq!(summary["plant"]["sigma_theta"], 5e-3);
     // the section names the command that made it, budget flags included
     let command = format!(
         "- Command: `cargo run --release --locked --bin msgp -- {}`",
-        figure4_args("msgp,gp-narx", &["--quiet"]).join(" ")
+        figure4_args("msgp,msgp-filter,gp-narx", &["--quiet"]).join(" ")
     );
     assert!(md.contains(&command), "{command}\n{md}");
     assert!(
@@ -251,6 +265,8 @@ fn figure4_reuses_a_run_only_when_every_setting_matches() {
     assert!(!reused(
         &[&base[..], &["--experimental", "fit-optimizer=lbfgs"]].concat()
     ));
+    // … or another plant
+    assert!(!reused(&[&base[..], &["--plant", "apollo"]].concat()));
     assert!(!reused(&[&base[..], &["--warm-start", "5"]].concat()));
     // a run recorded before the solver and warm-start settings existed used their defaults
     assert!(!reused(&base), "the warm-start run took the run's place");

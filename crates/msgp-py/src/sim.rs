@@ -3,6 +3,8 @@
 
 use msgp_core::data::{NoiseScale, SyntheticSystem};
 use msgp_core::fit::FitSettings;
+use msgp_core::loss::Likelihood;
+use msgp_core::model::Method;
 use msgp_core::numeric::parallel::Threads;
 use msgp_sim::learn::{LearnEvent, LearnSettings, episode_trajectory, learn_policy_observed};
 use msgp_sim::{
@@ -60,15 +62,23 @@ pub fn synthetic_system<'py>(
 /// model's defaults, as `learn_policy(method)` uses them), "fit" (model fit; `method` picks
 /// the method's own settings, as `Msgp(method=...)` uses them).
 #[pyfunction]
-#[pyo3(signature = (what, *, method = None))]
+#[pyo3(signature = (what, *, method = None, likelihood = None))]
 pub fn defaults<'py>(
     py: Python<'py>,
     what: &str,
     method: Option<&str>,
+    likelihood: Option<&str>,
 ) -> PyResult<Bound<'py, PyAny>> {
     if method.is_some() && what != "learn" && what != "fit" {
         return Err(input(format!(
             "defaults({what:?}): method applies to the \"learn\" and \"fit\" defaults only"
+        ))
+        .into());
+    }
+    if likelihood.is_some() && what != "learn" {
+        return Err(input(format!(
+            "defaults({what:?}): likelihood applies to the \"learn\" defaults only (a fit's \
+             is settings={{\"likelihood\": ...}})"
         ))
         .into());
     }
@@ -77,7 +87,8 @@ pub fn defaults<'py>(
         "stability" => to_python(py, &StabilityCriteria::default()),
         "learn" => {
             let m = crate::model::method(method.unwrap_or("msgp"))?;
-            to_python(py, &LearnSettings::for_method(m))
+            let l = loop_likelihood(m, likelihood)?;
+            to_python(py, &LearnSettings::for_model(m, l))
         }
         "fit" => {
             let m = crate::model::method(method.unwrap_or("msgp"))?;
@@ -88,6 +99,27 @@ pub fn defaults<'py>(
         ))
         .into()),
     }
+}
+
+/// The likelihood an MSGP loop's fits train on (`None`: the loop's default); other methods
+/// have their own and refuse one.
+fn loop_likelihood(m: Method, name: Option<&str>) -> Result<Option<Likelihood>> {
+    let Some(name) = name else { return Ok(None) };
+    if m != Method::Msgp {
+        return Err(input(format!(
+            "likelihood={name:?}: the likelihood of an MSGP fit; method {:?} has its own",
+            m.name()
+        )));
+    }
+    [Likelihood::FreeRun, Likelihood::Filter]
+        .into_iter()
+        .find(|l| l.name() == name)
+        .map(Some)
+        .ok_or_else(|| {
+            input(format!(
+                "unknown likelihood {name:?}: expected \"free-run\" or \"filter\""
+            ))
+        })
 }
 
 fn plant(params: Option<&Bound<'_, PyAny>>) -> Result<PendulumParams> {
@@ -258,18 +290,21 @@ pub fn stability_test<'py>(
 /// called with each iteration's dict as it completes. Ctrl-C (or an exception raised by
 /// `progress`) stops the loop within one model fit and raises.
 #[pyfunction]
-#[pyo3(signature = (method = "msgp", iterations = 8, seed = 0, *, params = None, settings = None, progress = None))]
+#[pyo3(signature = (method = "msgp", iterations = 8, seed = 0, *, likelihood = None, params = None, settings = None, progress = None))]
+#[allow(clippy::too_many_arguments)]
 pub fn learn_policy<'py>(
     py: Python<'py>,
     method: &str,
     iterations: i128,
     seed: i128,
+    likelihood: Option<&str>,
     params: Option<&Bound<'py, PyAny>>,
     settings: Option<&Bound<'py, PyAny>>,
     progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyList>> {
     let progress = callable(progress, "one iteration's dict")?;
     let m = crate::model::method(method)?;
+    let l = loop_likelihood(m, likelihood)?;
     let iterations = count(iterations, "iterations")?;
     let seed = uint(seed, "seed")?;
     let p = plant(params)?;
@@ -293,7 +328,8 @@ pub fn learn_policy<'py>(
             .into());
         }
     }
-    let base: LearnSettings = with_overrides(&LearnSettings::for_method(m), settings, "settings")?;
+    let base: LearnSettings =
+        with_overrides(&LearnSettings::for_model(m, l), settings, "settings")?;
     let mut s = LearnSettings {
         iterations,
         seed,

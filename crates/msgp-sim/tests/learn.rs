@@ -61,6 +61,25 @@ fn one_small_iteration_runs_and_is_reproducible() {
         .map(|e| (e.samples.len() - 1) as f64 / params.control_rate_hz)
         .sum();
     assert!((r.interaction_seconds - expected).abs() < 1e-9);
+    // the measured cost: the saturating cost of the policy episode's measured outputs after the
+    // model's window, and nothing else (steps after an early stop would count 1 each)
+    let ep = &a.episodes[2];
+    let warm = settings.fit.ly.max(settings.fit.lu);
+    let full = (settings.episode_seconds * params.control_rate_hz).round() as usize + 1;
+    let [w_theta, w_x] = settings.cost_widths;
+    let by_hand: f64 = ep.samples[warm..]
+        .iter()
+        .map(|s| {
+            let z = (s.measurement.theta / w_theta).powi(2) + (s.measurement.x / w_x).powi(2);
+            1.0 - (-0.5 * z).exp()
+        })
+        .sum::<f64>()
+        + (full - ep.samples.len()) as f64;
+    assert!(
+        (r.actual_cost - by_hand).abs() < 1e-9,
+        "{} vs {by_hand}",
+        r.actual_cost
+    );
     let b = learn_policy(&params, &settings, &mut |_| {}).expect("learn");
     // same seed, same numbers: everything but the wall-clock timings
     let untimed = |v: &[msgp_sim::learn::IterationReport]| {
@@ -252,6 +271,57 @@ fn linear_kf_defaults_declare_the_end_effector_kinematic_and_run() {
     assert!(a.iterations.iter().all(|r| r.predicted_cost.is_finite()));
     assert_eq!(a.final_gains, b.final_gains);
     assert_eq!(a.iterations[1].actual_cost, b.iterations[1].actual_cost);
+}
+
+/// The filtered MSGP loop's defaults: linear-kf's loop (end effector kinematic, 10 s horizon)
+/// with MSGP trained on the filter likelihood from the linear-kf start, warm-started; a small
+/// loop of it runs and is reproducible, and an MSGP loop with the free-run likelihood keeps
+/// the MSGP defaults.
+#[test]
+fn filtered_msgp_defaults_start_from_the_kalman_fit_and_run() {
+    use msgp_core::fit::MsgpStart;
+    use msgp_core::gp::MeanFunction;
+    use msgp_core::loss::Likelihood;
+    use msgp_core::model::Method;
+    use msgp_sim::learn::{FILTERED_MSGP_ITERATIONS, LINEAR_KF_POLICY_HORIZON_SECONDS};
+    let f = LearnSettings::for_model(Method::Msgp, Some(Likelihood::Filter));
+    assert_eq!(f, LearnSettings::filtered_msgp());
+    let m = f.fit.msgp().expect("an MSGP fit");
+    assert_eq!(m.likelihood, Likelihood::Filter);
+    assert_eq!(m.start, MsgpStart::LinearKf);
+    assert_eq!(m.mean, MeanFunction::Linear);
+    assert_eq!(
+        f.fit.integrators,
+        LearnSettings::for_method(Method::LinearKf).fit.integrators
+    );
+    assert_eq!(f.policy_horizon_seconds, LINEAR_KF_POLICY_HORIZON_SECONDS);
+    assert_eq!(f.warm_start, Some(FILTERED_MSGP_ITERATIONS));
+    let free = LearnSettings::for_model(Method::Msgp, Some(Likelihood::FreeRun));
+    assert_eq!(free, LearnSettings::for_method(Method::Msgp));
+    let settings = LearnSettings {
+        iterations: 2,
+        random_rollouts: 2,
+        episode_seconds: 1.0,
+        fit: f.fit.clone().with_inducing(10).with_solver_iterations(5),
+        search: PolicySearchSettings {
+            iterations: 3,
+            restarts: 0,
+            candidates: 4,
+            ..f.search
+        },
+        ..f
+    };
+    let params = PendulumParams::default();
+    let a = learn_policy(&params, &settings, &mut |_| {}).expect("loop runs");
+    let b = learn_policy(&params, &settings, &mut |_| {}).expect("loop runs");
+    assert_eq!(a.iterations.len(), 2);
+    assert!(a.iterations.iter().all(|r| r.predicted_cost.is_finite()));
+    assert_eq!(a.final_gains, b.final_gains);
+    assert_eq!(a.iterations[1].actual_cost, b.iterations[1].actual_cost);
+    assert_eq!(
+        a.iterations[1].predicted_cost,
+        b.iterations[1].predicted_cost
+    );
 }
 
 /// `fit 2`, `step 2.7`, `search 2`, `done 2`: what a [`LearnEvent`] is, for comparisons.

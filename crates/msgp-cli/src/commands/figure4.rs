@@ -7,14 +7,14 @@ use msgp_core::fit::FitOptimizer;
 use msgp_sim::PendulumParams;
 use msgp_sim::learn::{IterationReport, LearnSettings};
 
-use crate::args::{Figure4Args, ModelArg};
+use crate::args::{BudgetArgs, Figure4Args, Figure4Model, ModelArg};
 use crate::commands::learn::{learn, model_name, settings, summary_json, write_outputs};
 use crate::render::cost_plot::plot_cost_bands;
 use crate::render::results_file::{machine, today};
 
 /// One finished run.
 struct Run {
-    model: ModelArg,
+    model: Figure4Model,
     seed: u64,
     iterations: Vec<IterationReport>,
     seconds: f64,
@@ -27,24 +27,28 @@ impl Run {
 }
 
 /// A run already in `dir` (its `summary.json`, written last, as `msgp learn-policy --out DIR`
-/// writes it) made with the same model and exactly the same settings (seed, budget, fit and
-/// search settings, integrators, all of them); runs can so be split over several processes and
+/// writes it) made with the same model on the same plant and exactly the same settings (seed,
+/// budget, fit and search settings, integrators, all of them); runs can so be split over
+/// several processes and
 /// collected afterwards. The stored settings are read back as [`LearnSettings`], so a setting
 /// added after the run was made takes its default, which is what the run used; a summary
 /// without any settings (older runs) is not reused.
 fn finished_run(
     dir: &std::path::Path,
-    model: ModelArg,
+    model: Figure4Model,
     seed: u64,
     settings: &LearnSettings,
+    params: &PendulumParams,
 ) -> Option<Run> {
     let text = std::fs::read_to_string(dir.join("summary.json")).ok()?;
     let v: serde_json::Value = serde_json::from_str(&text).ok()?;
     let iterations: Vec<IterationReport> =
         serde_json::from_value(v.get("iterations")?.clone()).ok()?;
     let stored: LearnSettings = serde_json::from_value(v.get("settings")?.clone()).ok()?;
-    let same = v["model"] == model_name(model)
+    let stored_plant: PendulumParams = serde_json::from_value(v.get("plant")?.clone()).ok()?;
+    let same = v["model"] == model_name(model.model().0)
         && stored == *settings
+        && stored_plant == *params
         && iterations.len() == settings.iterations;
     same.then(|| Run {
         model,
@@ -56,36 +60,57 @@ fn finished_run(
 
 /// Runs `msgp reproduce figure4`.
 pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
-    let params = PendulumParams::default();
+    if let Some(l) = args.budget.likelihood {
+        anyhow::bail!(
+            "--likelihood {}: figure4 runs MSGP with each likelihood as its own model \
+             (--models msgp,msgp-filter)",
+            msgp_core::loss::Likelihood::from(l).name()
+        );
+    }
+    let params = args.plant.resolve()?;
+    let tier = msgp_sim::PlantTier::from(args.plant.plant).name();
+    let dir = args
+        .dir
+        .clone()
+        .unwrap_or_else(|| std::path::PathBuf::from(format!("results/figure4-{tier}")));
     let mut runs = Vec::new();
     for &model in &args.models {
+        let (arg, likelihood) = model.model();
         for seed in 0..args.seeds {
-            let settings = settings(model, seed, args.iterations, &args.budget)?;
-            let dir = args.dir.join(format!("{}-seed{seed}", model_name(model)));
-            if let Some(done) = finished_run(&dir, model, seed, &settings) {
+            let settings = settings(
+                arg,
+                seed,
+                args.iterations,
+                &BudgetArgs {
+                    likelihood,
+                    ..args.budget.clone()
+                },
+            )?;
+            let run_dir = dir.join(format!("{}-seed{seed}", model.name()));
+            if let Some(done) = finished_run(&run_dir, model, seed, &settings, &params) {
                 if !args.quiet {
                     eprintln!(
                         "== {} seed {seed}: reusing {}",
-                        model_name(model),
-                        dir.join("summary.json").display()
+                        model.name(),
+                        run_dir.join("summary.json").display()
                     );
                 }
                 runs.push(done);
                 continue;
             }
             if !args.quiet {
-                eprintln!("== {} seed {seed}", model_name(model));
+                eprintln!("== {} seed {seed}", model.name());
             }
             let (outcome, seconds) = learn(&params, &settings, args.quiet)?;
-            let summary = summary_json(&outcome, &settings, model, seconds);
+            let summary = summary_json(&outcome, &settings, arg, &params, seconds);
             write_outputs(
-                &dir,
+                &run_dir,
                 &outcome,
                 &settings,
                 &summary,
-                &format!("{} seed {seed}", model_name(model)),
+                &format!("{} seed {seed}", model.name()),
             )
-            .with_context(|| format!("writing {}", dir.display()))?;
+            .with_context(|| format!("writing {}", run_dir.display()))?;
             runs.push(Run {
                 model,
                 seed,
@@ -94,13 +119,13 @@ pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
             });
         }
     }
-    let plot = args.dir.join("figure4.png");
+    let plot = dir.join("figure4.png");
     let bands: Vec<(String, Vec<Vec<IterationReport>>)> = args
         .models
         .iter()
         .map(|&m| {
             (
-                model_name(m).to_string(),
+                m.name().to_string(),
                 runs.iter()
                     .filter(|r| r.model == m)
                     .map(|r| r.iterations.clone())
@@ -115,8 +140,8 @@ pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
         .filter(|s| s.is_finite())
         .sum();
     let learned = settings(ModelArg::Msgp, 0, args.iterations, &args.budget)?;
-    let markdown = render(args, &learned, &runs, total, &plot);
-    crate::render::results_file::update_section(&args.out, "figure4", &markdown)?;
+    let markdown = render(args, &dir, &params, &learned, &runs, total, &plot);
+    crate::render::results_file::update_section(&args.out, &format!("figure4-{tier}"), &markdown)?;
     crate::render::output::out(&markdown)
 }
 
@@ -144,16 +169,25 @@ fn invocation() -> String {
 /// and the experiment switches resolved to).
 fn render(
     args: &Figure4Args,
+    dir: &std::path::Path,
+    params: &PendulumParams,
     learned: &LearnSettings,
     runs: &[Run],
     seconds: f64,
     plot: &std::path::Path,
 ) -> String {
     let d = &args.budget;
-    let models: Vec<&str> = args.models.iter().map(|&m| model_name(m)).collect();
-    let mut s = String::from("# PILCO on the simulated pendulum (the paper's Figure 4)\n\n");
+    let models: Vec<&str> = args.models.iter().map(|&m| m.name()).collect();
+    let tier = msgp_sim::PlantTier::from(args.plant.plant).name();
+    let mut s =
+        format!("# PILCO on the simulated pendulum (the paper's Figure 4), {tier} plant\n\n");
     s.push_str(&format!(
-        "Learning to balance the pole on the robot's end effector (`msgp-sim`, default plant: noise, one-step delay, 30 ms lag) from scratch: {} rollouts, then per iteration fit the model on all data, optimise the PID + PD gains on it, run them for one {} s episode. After every iteration the simulator's stability test (5 starts × 3 noise draws, 10 s each; not interaction, not training data) judges the gains. Interaction seconds count every episode so far, random rollouts included. Models: {}; seeds 0–{}; {} iterations per run.\n\n",
+        "Learning to balance the pole on the robot's end effector (`msgp-sim`, `--plant {tier}`: σθ {} rad, σx {} m, {}-step delay, {} s lag, {} Hz control) from scratch: {} rollouts, then per iteration fit the model on all data, optimise the PID + PD gains on it, run them for one {} s episode. After every iteration the simulator's stability test (5 starts × 3 noise draws, 10 s each; not interaction, not training data) judges the gains. Interaction seconds count every episode so far, random rollouts included. Models: {}; seeds 0–{}; {} iterations per run.\n\n",
+        params.sigma_theta,
+        params.sigma_x,
+        params.command_delay_steps,
+        params.lag_time_constant,
+        params.control_rate_hz,
         match learned.random_policies {
             0 => format!("{} random-excitation", d.random_rollouts),
             k => format!(
@@ -179,7 +213,7 @@ fn render(
         None | Some(0) => String::new(),
         Some(n) => format!(", from the second iteration on warm-started for {n} iterations"),
     };
-    let kf = match (args.models.contains(&ModelArg::LinearKf), d.warm_start) {
+    let kf = match (args.models.contains(&Figure4Model::LinearKf), d.warm_start) {
         (false, _) => String::new(),
         (true, None) => format!(
             " (linear-kf: no GP, at most that many L-BFGS iterations on the filter likelihood from each of two starts at iteration 1, then at most {} from the previous model)",
@@ -194,13 +228,25 @@ fn render(
                 .to_string()
         }
     };
+    let kf = match args.models.contains(&Figure4Model::MsgpFilter) {
+        false => kf,
+        true => format!(
+            "{kf} (msgp-filter: {} L-BFGS iterations on the filter likelihood, at iteration 1 from the linear-kf model of the data under a GP that starts at zero, then from the previous model unless --warm-start 0)",
+            d.fit_iters
+                .unwrap_or(msgp_sim::learn::FILTERED_MSGP_ITERATIONS)
+        ),
+    };
     let horizon = match d.policy_horizon {
         Some(h) => format!("{h} s"),
-        None if args.models.contains(&ModelArg::LinearKf) => format!(
-            "{} s (linear-kf: {} s)",
-            LearnSettings::default().policy_horizon_seconds,
-            msgp_sim::learn::LINEAR_KF_POLICY_HORIZON_SECONDS
-        ),
+        None if args.models.contains(&Figure4Model::LinearKf)
+            || args.models.contains(&Figure4Model::MsgpFilter) =>
+        {
+            format!(
+                "{} s (linear-kf and msgp-filter: {} s)",
+                LearnSettings::default().policy_horizon_seconds,
+                msgp_sim::learn::LINEAR_KF_POLICY_HORIZON_SECONDS
+            )
+        }
         None => format!("{} s", LearnSettings::default().policy_horizon_seconds),
     };
     s.push_str(&format!(
@@ -213,7 +259,7 @@ fn render(
     s.push_str(&format!(
         "- Wall time: {seconds:.0} s ({:.1} min) summed over the runs (runs may be split over processes: `msgp learn-policy --out {}/<model>-seed<k>` writes a run this command then collects), msgp {} on {}\n- Date (UTC): {}\n\n",
         seconds / 60.0,
-        args.dir.display(),
+        dir.display(),
         env!("CARGO_PKG_VERSION"),
         machine(),
         today()
@@ -240,7 +286,7 @@ fn render(
         };
         s.push_str(&format!(
             "| {} | {ok}/{} | {} | {median} |\n",
-            model_name(m),
+            m.name(),
             mine.len(),
             per_seed.join(", ")
         ));
@@ -262,7 +308,7 @@ fn render(
         let last = r.iterations.last().map_or(f64::NAN, |i| i.actual_cost);
         s.push_str(&format!(
             "| {} | {} | {} | {} | {} | {lowest:.2} | {last:.2} | {:.0} |\n",
-            model_name(r.model),
+            r.model.name(),
             r.seed,
             first.map_or_else(|| "—".to_string(), |i| i.iteration.to_string()),
             first.map_or_else(
@@ -280,7 +326,7 @@ fn render(
     s.push_str(&format!(
         "\nCost over each {} s episode (a step after an early stop counts 1): mean ± 1 standard deviation over the seeds, predicted by the model (left) and measured on the simulator (right). Per-run artefacts (policy, iterations.csv, episodes as MCAP, cost.png) are in `{}/<model>-seed<k>/`.\n\n![cost curves]({})\n",
         d.episode_seconds,
-        args.dir.display(),
+        dir.display(),
         plot.display()
     ));
     s

@@ -47,6 +47,7 @@ pub fn summary_json(
     outcome: &LearnOutcome,
     settings: &LearnSettings,
     model: ModelArg,
+    params: &PendulumParams,
     seconds: f64,
 ) -> Value {
     let first = outcome.first_stable_iteration();
@@ -67,6 +68,7 @@ pub fn summary_json(
             "stable": stable,
         })).collect::<Vec<_>>(),
         "episode_seconds": settings.episode_seconds,
+        "plant": params,
         "settings": settings,
         "iterations": outcome.iterations.iter().map(iteration_json).collect::<Vec<_>>(),
         "first_stable_iteration": first,
@@ -206,7 +208,7 @@ pub fn settings(
             method.name()
         );
     }
-    let d = LearnSettings::for_method(method);
+    let d = LearnSettings::for_model(method, args.likelihood.map(Into::into));
     let threads = Threads::from_env()?;
     // the experiment switches, each at the loop's default unless set
     let msgp_defaults = d.fit.msgp().cloned().unwrap_or_default();
@@ -434,7 +436,7 @@ pub fn run(args: &LearnArgs) -> anyhow::Result<()> {
         );
     }
     let (outcome, seconds) = learn(&params, &settings, quiet)?;
-    let summary = summary_json(&outcome, &settings, args.model, seconds);
+    let summary = summary_json(&outcome, &settings, args.model, &params, seconds);
     write_outputs(&dir, &outcome, &settings, &summary, model_name(args.model))?;
     if args.json {
         return out_json(&summary);

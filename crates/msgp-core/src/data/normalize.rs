@@ -63,6 +63,16 @@ impl Normalizer {
         })
     }
 
+    /// The identity map of `dy` outputs and `du` inputs (data already in model units).
+    pub fn identity(dy: usize, du: usize) -> Self {
+        Self {
+            u_mean: vec![0.0; du],
+            u_std: vec![1.0; du],
+            y_mean: vec![0.0; dy],
+            y_std: vec![1.0; dy],
+        }
+    }
+
     /// Original → normalised units.
     pub fn apply(&self, t: &Trajectory) -> Trajectory {
         let mut u = t.u.clone();

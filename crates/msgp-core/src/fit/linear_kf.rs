@@ -662,4 +662,69 @@ mod tests {
             "least squares: {ls_persistence:?}"
         );
     }
+
+    /// MSGP's linear-kf start ([`crate::fit::MsgpStart::LinearKf`]) is this fit under a GP that
+    /// starts at zero: before any MSGP iteration the model's linear mean and noise levels are
+    /// the Kalman fit's on the same (scaled, uncentred) data and its pseudo-targets are zero;
+    /// the filter training from there keeps the unstable pole (own-lag sum near the plant's
+    /// 1.005), and the start refuses a zero prior mean.
+    #[test]
+    fn msgp_linear_kf_start_is_the_kalman_fit_under_a_zero_gp() {
+        use crate::fit::{FitSettings, LinearKfSettings, MsgpSettings, MsgpStart, fit};
+        use crate::loss::Likelihood;
+        let trajs = unstable_plant(4, 16, 0.002, 0.05);
+        let base = FitSettings {
+            ly: 2,
+            lu: 2,
+            ..FitSettings::default()
+        };
+        let kf_settings = FitSettings {
+            method: LinearKfSettings { iterations: 300 }.into(),
+            ..base.clone()
+        };
+        let (kf, _) = fit(&trajs, &kf_settings, &mut |_| {}).expect("linear-kf fit");
+        let msgp = |iterations: usize, mean: MeanFunction| FitSettings {
+            method: MsgpSettings {
+                inducing: 20,
+                iterations,
+                likelihood: Likelihood::Filter,
+                validation_fraction: 0.0,
+                noise_floor: 1e-9,
+                mean,
+                start: MsgpStart::LinearKf,
+                alternative: None,
+                ..MsgpSettings::default()
+            }
+            .into(),
+            ..base.clone()
+        };
+        let (start, _) = fit(&trajs, &msgp(0, MeanFunction::Linear), &mut |_| {}).expect("start");
+        assert_eq!(start.normalizer.y_mean, vec![0.0]);
+        assert_eq!(start.normalizer.y_std, kf.normalizer.y_std);
+        let (a, b) = (&start.params.linear_mean, &kf.params.linear_mean);
+        assert!((a - b).amax() < 1e-9, "start A {a} vs linear-kf A {b}");
+        assert!(start.params.pseudo_targets.iter().all(|v| *v == 0.0));
+        let obs = |m: &Model| m.params.log_obs_noise[0].exp() + m.config.noise_floor;
+        assert!(
+            (obs(&start) / obs(&kf) - 1.0).abs() < 1e-9,
+            "sensor variance {} vs {}",
+            obs(&start),
+            obs(&kf)
+        );
+        let (trained, _) =
+            fit(&trajs, &msgp(40, MeanFunction::Linear), &mut |_| {}).expect("trained");
+        let a = &trained.params.linear_mean;
+        assert!(
+            (a[(0, 0)] + a[(0, 1)] - 1.005).abs() < 0.06,
+            "trained A = {a}"
+        );
+        let refused = fit(&trajs, &msgp(40, MeanFunction::Zero), &mut |_| {});
+        assert!(
+            matches!(
+                refused,
+                Err(MsgpError::InvalidSetting { name: "start", .. })
+            ),
+            "{refused:?}"
+        );
+    }
 }

@@ -18,8 +18,8 @@ mod settings;
 pub use divergence::{DIVERGENCE_RANGES, check_divergence};
 pub use settings::{
     DEFAULT_MAX_INDUCING, DEFAULT_ONE_STEP_ITERATIONS, FIT_LBFGS, FitOptimizer, FitOptions,
-    FitSettings, LINEAR_RECIPE, LinearKfSettings, MethodSettings, MsgpSettings, NoiseStart,
-    OneStepFitSettings, OneStepSolver, Recipe,
+    FitSettings, LINEAR_RECIPE, LinearKfSettings, MethodSettings, MsgpSettings, MsgpStart,
+    NoiseStart, OneStepFitSettings, OneStepSolver, Recipe,
 };
 
 use std::ops::ControlFlow;
@@ -302,6 +302,15 @@ fn fit_unchecked(
             return Ok((model, report));
         }
         MethodSettings::Msgp(msgp) => {
+            // the linear-kf start is the linear model's units: scaled, not centred
+            let normalizer = match (msgp.start, previous) {
+                (MsgpStart::LinearKf, None) => Normalizer {
+                    u_mean: vec![0.0; spec.du],
+                    y_mean: vec![0.0; spec.dy],
+                    ..normalizer
+                },
+                _ => normalizer,
+            };
             let norm: Vec<Trajectory> = refs.iter().map(|t| normalizer.apply(t)).collect();
             let one_step = OneStepSettings {
                 iterations: msgp.one_step_iterations,

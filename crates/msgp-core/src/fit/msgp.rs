@@ -18,14 +18,17 @@ use std::ops::ControlFlow;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use super::one_step::{OneStepSettings, fit_one_step, one_step_pairs};
+use super::linear_kf::{KF_NOISE_FLOOR, fit_linear_kf};
+use super::one_step::{OneStepSettings, column_std, fit_one_step, one_step_pairs};
 use super::{
-    FIT_LBFGS, FitOptimizer, FitProgress, FitReport, FitSettings, MsgpSettings, NoiseStart,
-    RecipeOutcome, TrainingEpisode,
+    FIT_LBFGS, FitOptimizer, FitProgress, FitReport, FitSettings, MsgpSettings, MsgpStart,
+    NoiseStart, RecipeOutcome, TrainingEpisode,
 };
 use crate::data::{Normalizer, Trajectory};
 use crate::error::{MsgpError, Result};
 use crate::gp::integrator::Structure;
+use crate::gp::integrator::{IGNORED_LENGTHSCALE, NO_GP_SIGNAL_VAR};
+use crate::gp::kmeans::kmeans;
 use crate::gp::{GpConfig, GpParams, GpShape, MeanFunction, ParamGroup};
 use crate::loss::{
     Complexity, Likelihood, filter_loss, filter_loss_and_gradient, loss_and_gradient, msgp_loss,
@@ -36,6 +39,7 @@ use crate::numeric::linalg::JitterLog;
 use crate::numeric::parallel::Threads;
 use crate::optim::{Adam, Flow, Objective, Solver, minimize};
 use crate::rollout::{Episode, Excitation};
+use nalgebra::{DMatrix, DVector};
 
 /// The MSGP fit of normalised trajectories `norm` (the `episodes`' own, in order), from the
 /// one-step start or from `previous`'s parameters.
@@ -214,6 +218,10 @@ pub(super) fn fit_msgp(
     Ok((model, report))
 }
 
+/// Most L-BFGS iterations of the Kalman-filter fit behind [`MsgpStart::LinearKf`] (it stops by
+/// itself when converged, after 10–60 on the pendulum loop's data).
+const KALMAN_START_ITERATIONS: usize = 300;
+
 /// A recipe's trained parameters, the iteration they are from and their validation NLL per step
 /// (`+∞` without a validation tail).
 type Trained = (GpParams<f64>, usize, f64);
@@ -231,17 +239,19 @@ fn train_recipe(
     tails: &[Episode],
     stage_number: u8,
 ) -> Result<Trained> {
-    let init = match previous {
-        Some(p) => p.params.clone(),
-        None => stage.initial(head_eps, one_step)?,
+    let init = match (previous, stage.msgp.start) {
+        (Some(p), _) => p.params.clone(),
+        (None, MsgpStart::OneStep) => stage.initial(head_eps, one_step)?,
+        (None, MsgpStart::LinearKf) => stage.initial_from_kalman(head_eps)?,
     };
     let (mut chosen, best_iteration, validation) =
         stage.train(init, head_eps, tails, stage.msgp.iterations, stage_number)?;
     if stage.msgp.refit && !tails.is_empty() {
         // the same number of iterations on the whole training data
-        let init = match previous {
-            Some(p) => p.params.clone(),
-            None => stage.initial(all_eps, one_step)?,
+        let init = match (previous, stage.msgp.start) {
+            (Some(p), _) => p.params.clone(),
+            (None, MsgpStart::OneStep) => stage.initial(all_eps, one_step)?,
+            (None, MsgpStart::LinearKf) => stage.initial_from_kalman(all_eps)?,
         };
         chosen = if best_iteration == 0 {
             init
@@ -381,6 +391,69 @@ impl Stage<'_, '_> {
             });
         }
         Ok(init)
+    }
+
+    /// The linear-kf start ([`MsgpStart::LinearKf`]): the Kalman-filter fit of the linear window
+    /// model on `episodes` (inputs as logged, feedback episodes included) gives the linear mean
+    /// and both noise levels; the GP starts at zero on top of it: `m` pseudo-inputs by k-means
+    /// over the training windows, pseudo-targets 0 (so the predictive mean is the filter's),
+    /// length-scales at the windows' spread, and a signal variance equal to the filter's
+    /// process noise (so the predictive variance at most doubles it). Outputs without a GP and
+    /// ignored window coordinates get their [`Structure`] values.
+    fn initial_from_kalman(&mut self, episodes: &[Episode]) -> Result<GpParams<f64>> {
+        let trajs: Vec<Trajectory> = episodes.iter().map(|e| e.traj.clone()).collect();
+        let structure = Structure::new(&self.settings.integrators, &self.spec);
+        let (linear, kf) = fit_linear_kf(
+            &trajs,
+            self.spec,
+            &structure,
+            Normalizer::identity(self.spec.dy, self.spec.du),
+            KALMAN_START_ITERATIONS,
+            None,
+        )?;
+        self.report.jitter.merge(&kf.jitter);
+        let refs: Vec<&Trajectory> = trajs.iter().collect();
+        let data = one_step_pairs(&self.spec, &refs)?;
+        let (n, d) = data.x.shape();
+        let mut gx = data.x.clone();
+        for &k in &structure.ignored {
+            gx.column_mut(k).fill(0.0);
+        }
+        let pseudo = if self.msgp.inducing >= n {
+            gx.clone()
+        } else {
+            kmeans(&gx, self.msgp.inducing, 30, self.settings.seed)?
+        };
+        let e = self.spec.dy;
+        let floor = self.config.noise_floor;
+        // the filter's noise variances (its floor is far below any setting's) as `floor + e^θ`
+        let above_floor = |log_var: f64| {
+            (log_var.exp() + KF_NOISE_FLOOR - floor)
+                .max(1e-3 * floor)
+                .ln()
+        };
+        let lengthscales: Vec<f64> = (0..d)
+            .map(|k| match structure.ignored.contains(&k) {
+                true => IGNORED_LENGTHSCALE.ln(),
+                false => column_std(&gx, k).max(1e-6).ln(),
+            })
+            .collect();
+        let lp = &linear.params;
+        let mut params = GpParams {
+            pseudo_targets: DMatrix::zeros(pseudo.nrows(), e),
+            pseudo_inputs: pseudo,
+            log_lengthscales: DMatrix::from_fn(e, d, |_, k| lengthscales[k]),
+            log_signal_var: DVector::from_fn(e, |a, _| {
+                (lp.log_process_noise[a].exp() + KF_NOISE_FLOOR).ln()
+            }),
+            log_process_noise: lp.log_process_noise.map(above_floor),
+            log_obs_noise: lp.log_obs_noise.map(above_floor),
+            linear_mean: lp.linear_mean.clone(),
+        };
+        for &a in &structure.without_gp {
+            params.log_signal_var[a] = NO_GP_SIGNAL_VAR.ln();
+        }
+        Ok(params)
     }
 
     /// The solver from `init` for up to `iterations` steps. With validation episodes, checks them

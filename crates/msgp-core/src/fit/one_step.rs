@@ -327,7 +327,7 @@ impl Default for OneStepSettings {
     }
 }
 
-fn column_std(x: &DMatrix<f64>, d: usize) -> f64 {
+pub(crate) fn column_std(x: &DMatrix<f64>, d: usize) -> f64 {
     let n = x.nrows() as f64;
     let mean = x.column(d).sum() / n;
     let var = x.column(d).iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);

@@ -101,6 +101,10 @@ pub struct MsgpSettings {
     /// How the one-step fit's noise variance starts the process and observation noises.
     #[serde(default)]
     pub noise_start: NoiseStart,
+    /// Where the training starts: the one-step GP-NARX fit, or the linear-Gaussian window model
+    /// of the Kalman-filter likelihood with a GP that starts at zero ([`MsgpStart`]).
+    #[serde(default)]
+    pub start: MsgpStart,
     /// A second recipe trained beside these settings (the same settings with the recipe's four
     /// choices in place of theirs); the fit returns whichever reaches the lower validation NLL
     /// on the held-out tail. Without a validation tail only these settings train.
@@ -158,6 +162,26 @@ impl MsgpSettings {
     }
 }
 
+/// Where an MSGP training run starts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MsgpStart {
+    /// The one-step sparse GP-NARX fit ([`super::one_step::fit_one_step`]): its hyperparameters
+    /// and DTC pseudo-targets, its noise split by [`MsgpSettings::noise_start`]. The data are
+    /// centred and scaled.
+    #[default]
+    OneStep,
+    /// The linear-Gaussian window model fitted by the exact Kalman-filter likelihood
+    /// ([`super::linear_kf::fit_linear_kf`]): its linear mean `A` and both noise levels, under a
+    /// GP that starts at zero (pseudo-inputs by k-means, pseudo-targets 0, length-scales at the
+    /// inputs' spread, signal variance the filter's process noise), so the training starts from
+    /// the model that the filter likelihood itself prefers without a GP and the GP grows only
+    /// where the data ask for it. Needs the linear prior mean; the data are scaled, not centred
+    /// (the linear mean has no intercept: centring turns the data's mean command into a constant
+    /// drive of the plant).
+    LinearKf,
+}
+
 /// How the one-step marginal likelihood is minimised.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -211,6 +235,7 @@ impl Default for MsgpSettings {
             refit: false,
             start_window: StartWindow::Measured,
             noise_start: NoiseStart::Split,
+            start: MsgpStart::OneStep,
             alternative: Some(LINEAR_RECIPE),
         }
     }
@@ -404,6 +429,18 @@ impl FitSettings {
         let warmup = spec.warmup();
         if let Some(s) = self.msgp() {
             s.start_window.validate(warmup)?;
+            if s.start == MsgpStart::LinearKf
+                && (s.mean != MeanFunction::Linear
+                    || s.alternative
+                        .is_some_and(|r| r.mean != MeanFunction::Linear))
+            {
+                return Err(MsgpError::InvalidSetting {
+                    name: "start",
+                    reason: "the linear-kf start is a linear prior mean: every recipe needs \
+                             `mean: linear`"
+                        .into(),
+                });
+            }
             if s.likelihood == Likelihood::Filter && s.start_window != StartWindow::Measured {
                 return Err(MsgpError::InvalidSetting {
                     name: "start_window",

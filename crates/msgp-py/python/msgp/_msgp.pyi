@@ -136,10 +136,14 @@ def synthetic_system(k: int, seed: int = 0, noise: str = "std") -> Dict[str, Any
     """Synthetic system k (1–5) of the paper's Table 2: u_train, y_train, u_test, y_test
     (1-D arrays) and history (l_y, l_u)."""
 
-def defaults(what: str, *, method: Optional[str] = None) -> Dict[str, Any]:
+def defaults(
+    what: str, *, method: Optional[str] = None, likelihood: Optional[str] = None
+) -> Dict[str, Any]:
     """Defaults of "pendulum", "stability", "learn" or "fit" settings; for "learn" and "fit",
     those of the model `method` ("msgp" when None; a "linear-kf" loop warm-starts and searches
-    over 10 s; a method's fit settings are the shared ones and its own)."""
+    over 10 s; a method's fit settings are the shared ones and its own); for "learn" with
+    method "msgp", `likelihood` ("free-run" or "filter") picks that loop's defaults (the
+    filtered loop starts every fit from the linear-kf model)."""
 
 def run_episode(
     controller: Optional[Gains] = None,
@@ -168,11 +172,14 @@ def learn_policy(
     iterations: int = 8,
     seed: int = 0,
     *,
+    likelihood: Optional[str] = None,
     params: Optional[Dict[str, Any]] = None,
     settings: Optional[Dict[str, Any]] = None,
     progress: Optional[Callable[[Dict[str, Any]], Any]] = None,
 ) -> List[Dict[str, Any]]:
     """PILCO with MSGP, GP-NARX or linear-kf models on the simulated pendulum; one report per
-    iteration. Releases the GIL; takes minutes with the defaults. `progress` is called with
+    iteration; `likelihood` ("free-run" or "filter", MSGP only) picks the MSGP fits' training
+    objective and that loop's defaults (`defaults("learn", likelihood=...)`). Releases the GIL;
+    takes minutes with the defaults. `progress` is called with
     each iteration's report as it completes; Ctrl-C or an exception it raises stops the loop
     within one model fit and raises."""

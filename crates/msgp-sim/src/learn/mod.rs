@@ -24,8 +24,9 @@ use problem::gains_from;
 pub use problem::{episode_cost, modelled_policy, pendulum_problem};
 pub use report::{IterationReport, LearnOutcome};
 pub use settings::{
-    END_EFFECTOR_INTEGRATOR, END_EFFECTOR_KINEMATIC, LEARN_INDUCING,
-    LINEAR_KF_POLICY_HORIZON_SECONDS, LINEAR_KF_WARM_START, LearnSettings, learn_excitation,
+    END_EFFECTOR_INTEGRATOR, END_EFFECTOR_KINEMATIC, FILTER_NOISE_FLOOR, FILTERED_MSGP_ITERATIONS,
+    LEARN_INDUCING, LINEAR_KF_POLICY_HORIZON_SECONDS, LINEAR_KF_WARM_START, LearnSettings,
+    learn_excitation,
 };
 
 use std::ops::ControlFlow;
@@ -143,9 +144,13 @@ pub fn learn_policy_observed(
     }
     let cost = SaturatingCost::with_widths(DVector::from_element(2, 0.0), &settings.cost_widths)?;
     let horizon = (settings.episode_seconds * params.control_rate_hz).round() as usize;
+    // an episode's samples after the model's window, the steps its cost is scored on (predicted
+    // and measured alike); a full episode has `horizon + 1` samples
+    let window = settings.fit.ly.max(settings.fit.lu);
+    let scored = (horizon + 1).saturating_sub(window);
     let policy_horizon =
         (settings.policy_horizon_seconds * params.control_rate_hz).round() as usize;
-    if policy_horizon == 0 || horizon == 0 {
+    if policy_horizon == 0 || horizon == 0 || scored == 0 {
         return Err(SimError::invalid(
             "policy_horizon_seconds",
             settings
@@ -259,7 +264,7 @@ pub fn learn_policy_observed(
                 gains = gains_from(&result.policy);
                 // reported over the episode's length, comparable with the cost measured on the
                 // system
-                let episode_steps = &result.steps[..horizon.min(result.steps.len())];
+                let episode_steps = &result.steps[..scored.min(result.steps.len())];
                 let predicted: f64 = episode_steps.iter().map(|(m, _)| m).sum();
                 let var: f64 = episode_steps.iter().map(|(_, v)| v).sum();
                 (predicted, var, None)
@@ -269,7 +274,7 @@ pub fn learn_policy_observed(
             Err(
                 e @ (msgp_core::MsgpError::NonFinite(_)
                 | msgp_core::MsgpError::NotPositiveDefinite { .. }),
-            ) => (horizon as f64, 0.0, Some(e.to_string())),
+            ) => (scored as f64, 0.0, Some(e.to_string())),
             Err(msgp_core::MsgpError::Stopped { .. }) => return Err(stopped),
             Err(e) => return Err(e.into()),
         };
@@ -279,8 +284,7 @@ pub fn learn_policy_observed(
             .wrapping_mul(1000)
             .wrapping_add(500 + it as u64);
         let (ep, entries) = feedback_episode(params, &gains, settings, seed, &mut seconds)?;
-        let warm = settings.fit.ly.max(settings.fit.lu);
-        let actual = episode_cost(&ep, &cost, warm, horizon);
+        let actual = episode_cost(&ep, &cost, window, scored);
         training.extend(entries);
         episodes.push(ep);
         let stable =
