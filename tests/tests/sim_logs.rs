@@ -11,8 +11,8 @@ use msgp_core::model::Method;
 use msgp_core::numeric::parallel::Threads;
 use msgp_sim::learn::episode_trajectory;
 use msgp_sim::{
-    Episode, EpisodeConfig, ExcitationConfig, PendulumParams, RandomExcitation, run_episode,
-    write_run,
+    Episode, EpisodeConfig, ExcitationConfig, PendulumParams, PlantTier, RandomExcitation,
+    run_episode, write_run,
 };
 
 /// A hanging pole (gravity reversed: stable) under seeded smooth random excitation, with the
@@ -23,7 +23,7 @@ fn episode(seed: u64, seconds: f64) -> Episode {
         gravity: -9.81,
         stop_theta: 3.0,
         stop_x: 1e3,
-        ..PendulumParams::default()
+        ..PendulumParams::tier(PlantTier::Noisy)
     };
     // small swings: the pole stays near its linear regime
     let small = ExcitationConfig {

@@ -806,9 +806,9 @@ pub enum Preset {
 #[command(next_help_heading = "Plant")]
 pub struct PlantArgs {
     /// Measurement-noise tier: apollo (σθ 5.2e-5 rad as in the Apollo code's simulator, σx
-    /// 0.1 mm) or noisy (σθ 5e-3 rad, σx 2 mm: the stress tier); the other flags and --params
-    /// override it.
-    #[arg(long, value_enum, default_value_t = PlantArg::Noisy)]
+    /// 0.1 mm: the default) or noisy (σθ 5e-3 rad, σx 2 mm: the stress tier); the other flags
+    /// and --params override it.
+    #[arg(long, value_enum, default_value_t = PlantArg::Apollo)]
     pub plant: PlantArg,
     /// JSON file with plant parameters (missing fields keep the tier's values).
     #[arg(long, value_name = "PARAMS.json")]

@@ -922,10 +922,11 @@ fn the_plant_tier_sets_the_measurement_noise() {
         serde_json::from_str(&stdout(&o)).expect("stdout is the JSON report")
     };
     let passed = |v: &Value| v["passed"].as_bool().expect("passed");
-    let noisy = report(&[]);
-    assert_eq!(report(&["--plant", "noisy"]), noisy, "noisy is the default");
+    let noisy = report(&["--plant", "noisy"]);
     assert!(!passed(&noisy), "{noisy}");
+    assert_eq!(noisy["params"]["sigma_theta"], 5e-3);
     let apollo = report(&["--plant", "apollo"]);
+    assert_eq!(report(&[]), apollo, "apollo is the default");
     assert!(passed(&apollo), "{apollo}");
     assert_eq!(apollo["params"]["sigma_theta"], 5.1985e-5);
     assert_eq!(apollo["params"]["sigma_x"], 1e-4);

@@ -12,7 +12,9 @@ pub const MAX_SUBSTEPS: u32 = 100_000;
 
 /// Physical and interface parameters of the simulated robot + pole.
 ///
-/// Defaults follow the public Apollo-robot pole and the paper's robot setup (section 4.2).
+/// Defaults follow the public Apollo-robot pole and the paper's robot setup (section 4.2), with
+/// the measurement noise of the [`PlantTier::Apollo`] tier; [`PendulumParams::tier`] gives the
+/// other.
 /// All fields are SI units. Construct with [`Default`] and override fields, then call
 /// [`PendulumParams::validate`] (every simulator entry point validates again).
 ///
@@ -80,8 +82,8 @@ impl Default for PendulumParams {
             physics_rate_hz: 1000.0,
             command_delay_steps: 1,
             lag_time_constant: 0.03,
-            sigma_theta: 5e-3,
-            sigma_x: 2e-3,
+            sigma_theta: APOLLO_SIGMA_THETA,
+            sigma_x: APOLLO_SIGMA_X,
             initial_theta_std: 0.02,
             stop_theta: 0.5,
             stop_x: 0.5,
@@ -93,13 +95,13 @@ impl Default for PendulumParams {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum PlantTier {
-    /// As precise as the paper's robot: the angle noise of the Apollo code's own simulator
-    /// ([`APOLLO_SIGMA_THETA`]), the end-effector position as joint encoders give it
+    /// As precise as the paper's robot (the default): the angle noise of the Apollo code's own
+    /// simulator ([`APOLLO_SIGMA_THETA`]), the end-effector position as joint encoders give it
     /// ([`APOLLO_SIGMA_X`]).
-    Apollo,
-    /// The stress tier (and, for now, the default): `σθ` = 5 mrad, `σx` = 2 mm, about 100×
-    /// the robot's angle noise.
     #[default]
+    Apollo,
+    /// The stress tier: `σθ` = [`NOISY_SIGMA_THETA`] = 5 mrad, `σx` = [`NOISY_SIGMA_X`] = 2 mm,
+    /// about 100× the robot's angle noise (the project's first plant).
     Noisy,
 }
 
@@ -124,14 +126,20 @@ pub const APOLLO_SIGMA_THETA: f64 = 5.1985e-5;
 /// robot's own figure), twice the coarse end of that range.
 pub const APOLLO_SIGMA_X: f64 = 1e-4;
 
+/// Angle noise of the noisy tier \[rad\].
+pub const NOISY_SIGMA_THETA: f64 = 5e-3;
+
+/// End-effector position noise of the noisy tier \[m\].
+pub const NOISY_SIGMA_X: f64 = 2e-3;
+
 impl PendulumParams {
     /// The default plant with the measurement noise of `tier`.
     pub fn tier(tier: PlantTier) -> Self {
         match tier {
-            PlantTier::Noisy => Self::default(),
-            PlantTier::Apollo => Self {
-                sigma_theta: APOLLO_SIGMA_THETA,
-                sigma_x: APOLLO_SIGMA_X,
+            PlantTier::Apollo => Self::default(),
+            PlantTier::Noisy => Self {
+                sigma_theta: NOISY_SIGMA_THETA,
+                sigma_x: NOISY_SIGMA_X,
                 ..Self::default()
             },
         }
@@ -223,6 +231,14 @@ mod tests {
             .validate()
             .expect("defaults validate");
         assert_eq!(PendulumParams::default().substeps(), 20);
+        assert_eq!(
+            PendulumParams::default(),
+            PendulumParams::tier(PlantTier::default())
+        );
+        assert_eq!(PlantTier::default(), PlantTier::Apollo);
+        let noisy = PendulumParams::tier(PlantTier::Noisy);
+        assert_eq!((noisy.sigma_theta, noisy.sigma_x), (5e-3, 2e-3));
+        noisy.validate().expect("the noisy tier validates");
     }
 
     #[test]

@@ -5,7 +5,8 @@ use std::path::PathBuf;
 use msgp_sim::log::mcap_file::{TOPIC_COMMAND, TOPIC_LATENT, TOPIC_MEASUREMENT};
 use msgp_sim::{
     Episode, EpisodeConfig, ExcitationConfig, LogFormat, PendulumParams, PidPdGains, PidPdPolicy,
-    RandomExcitation, SimError, Termination, encode_run, read_run, run_episode, write_run,
+    PlantTier, RandomExcitation, SimError, Termination, encode_run, read_run, run_episode,
+    write_run,
 };
 
 fn scratch_dir(tag: &str) -> PathBuf {
@@ -15,7 +16,7 @@ fn scratch_dir(tag: &str) -> PathBuf {
 }
 
 fn policy_episode(seed: u64, seconds: f64) -> Episode {
-    let params = PendulumParams::default();
+    let params = PendulumParams::tier(PlantTier::Noisy);
     let mut policy = PidPdPolicy::new(PidPdGains::hand_tuned(), &params).expect("valid gains");
     run_episode(
         &params,
@@ -30,7 +31,7 @@ fn policy_episode(seed: u64, seconds: f64) -> Episode {
 }
 
 fn random_episode(seed: u64, seconds: f64) -> Episode {
-    let params = PendulumParams::default();
+    let params = PendulumParams::tier(PlantTier::Noisy);
     let mut excitation =
         RandomExcitation::new(seed, &ExcitationConfig::default()).expect("valid config");
     run_episode(
@@ -153,7 +154,7 @@ fn mcap_has_documented_topics_and_json_schemas() {
 
 #[test]
 fn episode_structure_delay_and_noise() {
-    let params = PendulumParams::default();
+    let params = PendulumParams::tier(PlantTier::Noisy);
     let episode = policy_episode(21, 20.0);
     assert_eq!(episode.info.termination, Termination::Completed);
     assert_eq!(episode.samples.len(), 1001);
@@ -187,7 +188,7 @@ fn episode_structure_delay_and_noise() {
 
 #[test]
 fn random_excitation_is_clipped_and_stops_early() {
-    let params = PendulumParams::default();
+    let params = PendulumParams::tier(PlantTier::Noisy);
     let mut stopped = 0;
     for seed in 0..4 {
         let episode = random_episode(seed, 30.0);
@@ -213,7 +214,7 @@ fn random_excitation_is_clipped_and_stops_early() {
 
 #[test]
 fn initial_angle_distribution() {
-    let params = PendulumParams::default();
+    let params = PendulumParams::tier(PlantTier::Noisy);
     let mut policy = PidPdPolicy::new(PidPdGains::default(), &params).expect("valid");
     let angles: Vec<f64> = (0..400)
         .map(|seed| {
@@ -257,7 +258,7 @@ fn bad_inputs_are_errors_not_panics() {
         Err(SimError::MalformedLog { .. })
     ));
     assert!(write_run(&dir.join("no-such-dir").join("run.csv"), &episode).is_err());
-    let params = PendulumParams::default();
+    let params = PendulumParams::tier(PlantTier::Noisy);
     let mut policy = PidPdPolicy::new(PidPdGains::default(), &params).expect("valid");
     for seconds in [-1.0, f64::NAN, 1e9] {
         let config = EpisodeConfig {

@@ -6,7 +6,7 @@ use msgp_core::policy_search::PolicySearchSettings;
 use std::ops::ControlFlow;
 
 use msgp_sim::learn::{LearnEvent, LearnSettings, learn_policy, learn_policy_observed};
-use msgp_sim::{PendulumParams, SimError};
+use msgp_sim::{PendulumParams, PlantTier, SimError};
 
 /// `iterations` of a loop small enough for a test: two 1 s random rollouts, m = 20, 10 fit
 /// and 3 search iterations.
@@ -39,7 +39,7 @@ fn small(iterations: usize) -> LearnSettings {
 #[test]
 fn one_small_iteration_runs_and_is_reproducible() {
     let settings = small(1);
-    let params = PendulumParams::default();
+    let params = PendulumParams::tier(PlantTier::Noisy);
     let mut seen = 0;
     let a = learn_policy(&params, &settings, &mut |_| seen += 1).expect("learn");
     assert_eq!(seen, 1);
@@ -105,7 +105,7 @@ fn one_small_iteration_runs_and_is_reproducible() {
 fn a_warm_started_loop_continues_its_previous_model() {
     let settings = small(2);
     assert_eq!(settings.warm_start, None, "off by default");
-    let params = PendulumParams::default();
+    let params = PendulumParams::tier(PlantTier::Noisy);
     let cold = learn_policy(&params, &settings, &mut |_| {}).expect("cold");
     let warm_settings = LearnSettings {
         warm_start: Some(3),
@@ -128,7 +128,7 @@ fn a_warm_started_loop_continues_its_previous_model() {
 /// excitation; the draws follow the seed, and more policies than random episodes is an error.
 #[test]
 fn random_policy_rollouts_run_drawn_gains_and_record_them() {
-    let params = PendulumParams::default();
+    let params = PendulumParams::tier(PlantTier::Noisy);
     let settings = LearnSettings {
         random_policies: 1,
         ..small(1)
@@ -192,7 +192,7 @@ fn random_policy_rollouts_run_drawn_gains_and_record_them() {
 /// the one fitted to whole episodes) and leaves one-step fits alone (they see every pair once).
 #[test]
 fn feedback_segments_change_msgp_fits_only() {
-    let params = PendulumParams::default();
+    let params = PendulumParams::tier(PlantTier::Noisy);
     let run = |method: msgp_core::model::Method, fb_segment: Option<usize>| {
         let small = small(2);
         let fit = match method {
@@ -264,7 +264,7 @@ fn linear_kf_defaults_declare_the_end_effector_kinematic_and_run() {
         },
         ..kf
     };
-    let params = PendulumParams::default();
+    let params = PendulumParams::tier(PlantTier::Noisy);
     let a = learn_policy(&params, &settings, &mut |_| {}).expect("loop runs");
     let b = learn_policy(&params, &settings, &mut |_| {}).expect("loop runs");
     assert_eq!(a.iterations.len(), 2);
@@ -311,7 +311,7 @@ fn filtered_msgp_defaults_start_from_the_kalman_fit_and_run() {
         },
         ..f
     };
-    let params = PendulumParams::default();
+    let params = PendulumParams::tier(PlantTier::Noisy);
     let a = learn_policy(&params, &settings, &mut |_| {}).expect("loop runs");
     let b = learn_policy(&params, &settings, &mut |_| {}).expect("loop runs");
     assert_eq!(a.iterations.len(), 2);
@@ -343,7 +343,7 @@ fn event_name(e: &LearnEvent<'_>) -> String {
 #[test]
 fn the_observed_loop_reports_fits_searches_and_iterations_in_order() {
     let settings = small(2);
-    let params = PendulumParams::default();
+    let params = PendulumParams::tier(PlantTier::Noisy);
     let mut events = Vec::new();
     let observed = learn_policy_observed(&params, &settings, &mut |e| {
         events.push(event_name(&e));

@@ -1,7 +1,8 @@
 //! The stability test on the default (noisy, delayed, lagged) plant.
 
 use msgp_sim::{
-    PendulumParams, PidPdGains, Saturation, StabilityCriteria, StabilityReport, stability_test,
+    PendulumParams, PidPdGains, PlantTier, Saturation, StabilityCriteria, StabilityReport,
+    stability_test,
 };
 
 fn print(name: &str, report: &StabilityReport) {
@@ -24,7 +25,7 @@ fn print(name: &str, report: &StabilityReport) {
 /// measurement noise, delay and lag included, for several noise seeds.
 #[test]
 fn hand_tuned_gains_pass_on_default_plant() {
-    let params = PendulumParams::default();
+    let params = PendulumParams::tier(PlantTier::Noisy);
     let criteria = StabilityCriteria::default();
     for seed in [0, 1, 2] {
         let report = stability_test(&params, &PidPdGains::hand_tuned(), seed, &criteria)
@@ -50,7 +51,7 @@ fn hand_tuned_gains_pass_on_default_plant() {
 fn apollo_lqr_gains_pass() {
     let params = PendulumParams {
         sigma_theta: 3e-3,
-        ..PendulumParams::default()
+        ..PendulumParams::tier(PlantTier::Noisy)
     };
     let criteria = StabilityCriteria::default();
     for seed in [0, 1, 2] {
@@ -77,7 +78,7 @@ fn apollo_lqr_gains_pass() {
 #[test]
 fn zero_gains_fail() {
     let report = stability_test(
-        &PendulumParams::default(),
+        &PendulumParams::tier(PlantTier::Noisy),
         &PidPdGains::default(),
         0,
         &StabilityCriteria::default(),
@@ -86,7 +87,7 @@ fn zero_gains_fail() {
     print("zero gains", &report);
     // Also on the noiseless plant, where nothing but the physics can make the pole fall.
     let noiseless = stability_test(
-        &PendulumParams::default().noiseless(),
+        &PendulumParams::tier(PlantTier::Noisy).noiseless(),
         &PidPdGains::default(),
         0,
         &StabilityCriteria::default(),
@@ -112,7 +113,7 @@ fn wrong_sign_angle_gains_fail() {
     gains.kp_theta = -gains.kp_theta;
     gains.kd_theta = -gains.kd_theta;
     let report = stability_test(
-        &PendulumParams::default(),
+        &PendulumParams::tier(PlantTier::Noisy),
         &gains,
         0,
         &StabilityCriteria::default(),
@@ -130,7 +131,7 @@ fn invalid_inputs_are_errors() {
     };
     assert!(
         stability_test(
-            &PendulumParams::default(),
+            &PendulumParams::tier(PlantTier::Noisy),
             &bad_gains,
             0,
             &StabilityCriteria::default()
@@ -143,7 +144,7 @@ fn invalid_inputs_are_errors() {
     };
     assert!(
         stability_test(
-            &PendulumParams::default(),
+            &PendulumParams::tier(PlantTier::Noisy),
             &PidPdGains::apollo_lqr(),
             0,
             &no_starts
@@ -158,7 +159,7 @@ fn invalid_inputs_are_errors() {
 /// position loop, pass with three draws for every seed tried.
 #[test]
 fn repeated_noise_draws_catch_a_policy_without_a_position_loop() {
-    let params = PendulumParams::default();
+    let params = PendulumParams::tier(PlantTier::Noisy);
     let angle_only = PidPdGains {
         kp_x: 0.0,
         ki_x: 0.0,

@@ -551,6 +551,7 @@ fn settings_serialise_with_the_methods_own_keys() {
     msgp_1_2.push("noise_start");
     msgp_1_2.push("one_step_solver");
     msgp_1_2.push("alternative");
+    msgp_1_2.push("start");
     assert_eq!(keys(&FitSettings::new(Method::Msgp)), with(&msgp_1_2));
     for m in [Method::GpNarx, Method::PilcoNarx] {
         assert_eq!(
@@ -575,6 +576,12 @@ fn settings_serialise_with_the_methods_own_keys() {
         assert_eq!(back, s);
         assert_eq!(back.method(), m);
     }
+    // settings written before the start was a setting read back with the one-step start
+    let mut v = serde_json::to_value(FitSettings::new(Method::Msgp)).expect("json");
+    assert_eq!(v["start"], "one-step");
+    v.as_object_mut().expect("object").remove("start");
+    let back: FitSettings = serde_json::from_value(v).expect("reads back");
+    assert_eq!(back.msgp().map(|s| s.start), Some(MsgpStart::OneStep));
 }
 
 /// An MSGP fit on the filter likelihood lowers the filter loss of its training data from the
