@@ -345,7 +345,9 @@ impl From<ModelArg> for Method {
 #[command(next_help_heading = "Budget")]
 pub struct BudgetArgs {
     /// Likelihood of the MSGP fits (free-run or filter; see `msgp fit --likelihood`)
-    /// [default: free-run].
+    /// [default: filter, with the filtered loop's defaults: every fit starts from the
+    /// linear-kf model of the data, 100 L-BFGS iterations, warm starts, 10 s policy horizon;
+    /// free-run: the paper's loss with the MSGP defaults].
     #[arg(long, value_enum)]
     pub likelihood: Option<LikelihoodArg>,
     /// Random episodes before the first policy (random excitation, or random policies: see
@@ -355,14 +357,15 @@ pub struct BudgetArgs {
     /// Length of every interaction episode [s].
     #[arg(long, default_value_t = LearnSettings::default().episode_seconds)]
     pub episode_seconds: f64,
-    /// Solver iterations of each model fit [default: 300 for msgp; the one-step fit's 300 Adam
-    /// iterations for gp-narx; at most 300 L-BFGS iterations from each of two starts for
-    /// linear-kf].
+    /// Solver iterations of each model fit [default: 100 L-BFGS for msgp on the filter
+    /// likelihood, 300 Adam on the free-run one; the one-step fit's 300 Adam iterations for
+    /// gp-narx; at most 300 L-BFGS iterations from each of two starts for linear-kf].
     #[arg(long, value_name = "N")]
     pub fit_iters: Option<usize>,
     /// From the second iteration on, continue the previous MSGP or linear-kf model for N solver
     /// iterations (same normaliser and pseudo-inputs) instead of fitting from scratch; 0: always
-    /// from scratch [default: 0 for msgp and gp-narx, 300 for linear-kf].
+    /// from scratch [default: 100 for msgp on the filter likelihood, 0 for msgp on the free-run
+    /// one and for gp-narx, 300 for linear-kf].
     #[arg(long, value_name = "N")]
     pub warm_start: Option<usize>,
     /// Pseudo-inputs of the model.

@@ -218,7 +218,7 @@ fn figure4_writes_its_section_and_keeps_the_others() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let md = std::fs::read_to_string(dir.join("RESULTS.md")).expect("results");
     assert!(md.contains("TABLE ONE"), "table 1 kept");
-    assert!(md.contains("msgp:figure4-noisy:begin") && md.contains("| msgp | 0 |"));
+    assert!(md.contains("msgp:figure4-apollo:begin") && md.contains("| msgp | 0 |"));
     assert!(md.contains("| msgp-filter | 0 |") && md.contains("| gp-narx | 0 |"));
     // the filtered MSGP's runs are MSGP trained on the filter likelihood
     let summary: serde_json::Value = serde_json::from_str(
@@ -230,7 +230,10 @@ fn figure4_writes_its_section_and_keeps_the_others() {
         summary["settings"]["fit"]["likelihood"], "filter",
         "{summary}"
     );
-    assert_eq!(summary["plant"]["sigma_theta"], 5e-3);
+    assert_eq!(
+        summary["plant"]["sigma_theta"], 5.1985e-5,
+        "the default tier"
+    );
     // the section names the command that made it, budget flags included
     let command = format!(
         "- Command: `cargo run --release --locked --bin msgp -- {}`",
@@ -415,10 +418,22 @@ fn learn_policy_runs_the_linear_kf_model() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// A loop that finds no stable policy says so, and points an MSGP user at linear-kf.
+/// The loop's MSGP trains on the filter likelihood by default, with the filtered loop's
+/// settings (linear-kf start, warm starts, 10 s horizon); a free-run MSGP loop that finds no
+/// stable policy says so, and points at the filtered MSGP and linear-kf.
 #[test]
 fn an_unstable_msgp_loop_points_at_linear_kf() {
     let dir = scratch("msgp-hint");
+    let default = learn_json(&dir, "f", &["--iterations", "1"]);
+    let s = &default["settings"];
+    assert_eq!(s["fit"]["likelihood"], "filter", "{s}");
+    assert_eq!(s["fit"]["start"], "linear-kf", "{s}");
+    assert_eq!(s["warm_start"], 100);
+    assert_eq!(s["policy_horizon_seconds"], 10.0);
+    assert_eq!(
+        default["plant"]["sigma_theta"], 5.1985e-5,
+        "apollo by default"
+    );
     let args = [
         "learn-policy",
         "--sim",
@@ -427,6 +442,10 @@ fn an_unstable_msgp_loop_points_at_linear_kf() {
         "m",
         "--iterations",
         "1",
+        "--likelihood",
+        "free-run",
+        "--plant",
+        "noisy",
     ];
     let o = run(&dir, &[&args[..], &TINY[..]].concat());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -445,6 +464,9 @@ fn an_unstable_msgp_loop_points_at_linear_kf() {
         out.contains("no iteration passed the stability test"),
         "{out}"
     );
-    assert!(out.contains("try --model linear-kf"), "{out}");
+    assert!(
+        out.contains("try --model msgp (the filter likelihood, the default) or --model linear-kf"),
+        "{out}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -120,12 +120,25 @@ def test_learn_policy_reports_progress_and_stops_on_its_exception():
 
 
 def test_learn_defaults_per_model():
-    """`defaults("learn", method=...)` are the loop's defaults for that model: linear-kf
-    warm-starts its fits and searches over the stability test's 10 s; the others do not."""
+    """`defaults("learn", method=...)` are the loop's defaults for that model: linear-kf and
+    the filtered MSGP (the default MSGP loop) warm-start their fits and search over the
+    stability test's 10 s; the free-run MSGP loop does not."""
     msgp_defaults = msgp.defaults("learn")
     assert msgp_defaults == msgp.defaults("learn", method="msgp")
-    assert msgp_defaults["warm_start"] is None
-    assert msgp_defaults["policy_horizon_seconds"] == 5.0
+    assert msgp_defaults == msgp.defaults("learn", method="msgp", likelihood="filter")
+    assert msgp_defaults["warm_start"] == 100
+    assert msgp_defaults["policy_horizon_seconds"] == 10.0
+    assert msgp_defaults["fit"]["likelihood"] == "filter"
+    assert msgp_defaults["fit"]["start"] == "linear-kf"
+    free = msgp.defaults("learn", likelihood="free-run")
+    assert free["warm_start"] is None and free["policy_horizon_seconds"] == 5.0
+    assert free["fit"]["likelihood"] == "free-run" and free["fit"]["start"] == "one-step"
+    with pytest.raises(ValueError, match="likelihood"):
+        msgp.defaults("learn", method="linear-kf", likelihood="filter")
+    with pytest.raises(ValueError, match="free-run"):
+        msgp.defaults("learn", likelihood="joint")
+    with pytest.raises(ValueError, match="likelihood"):
+        msgp.learn_policy(method="gp-narx", likelihood="filter")
     kf = msgp.defaults("learn", method="linear-kf")
     assert kf["warm_start"] == 300
     assert kf["policy_horizon_seconds"] == 10.0

@@ -264,7 +264,7 @@ fn render(
         machine(),
         today()
     ));
-    s.push_str("## Summary\n\n| model | stable within the budget | iterations to first stable policy (per seed) | interaction s to stable (median) |\n|---|---:|---|---:|\n");
+    s.push_str("## Summary\n\n| model | stable within the budget | iterations to first stable policy (per seed) | interaction s to stable (median) | kept: later iterations stable | calibrated: iterations ≥ 3 with the measured cost within 2× of the predicted | fit + search s per iteration (median) |\n|---|---:|---|---:|---:|---:|---:|\n");
     for &m in &args.models {
         let mine: Vec<&Run> = runs.iter().filter(|r| r.model == m).collect();
         let firsts: Vec<Option<&IterationReport>> = mine.iter().map(|r| r.first_stable()).collect();
@@ -284,11 +284,50 @@ fn render(
         } else {
             format!("{:.1}", secs[secs.len() / 2])
         };
+        let (kept, later) = mine.iter().fold((0, 0), |(k, n), r| {
+            let after: Vec<&IterationReport> = match r.first_stable() {
+                Some(f) => r
+                    .iterations
+                    .iter()
+                    .filter(|i| i.iteration > f.iteration)
+                    .collect(),
+                None => Vec::new(),
+            };
+            (
+                k + after.iter().filter(|i| i.stable).count(),
+                n + after.len(),
+            )
+        });
+        let (calibrated, scored) = mine
+            .iter()
+            .flat_map(|r| r.iterations.iter().filter(|i| i.iteration >= 3))
+            .fold((0, 0), |(c, n), i| {
+                let ratio = i.actual_cost / i.predicted_cost;
+                (c + usize::from((0.5..=2.0).contains(&ratio)), n + 1)
+            });
+        let mut per_iteration: Vec<f64> = mine
+            .iter()
+            .flat_map(|r| {
+                r.iterations
+                    .iter()
+                    .map(|i| i.fit_seconds + i.search_seconds)
+            })
+            .collect();
+        per_iteration.sort_by(f64::total_cmp);
+        let fraction = |k: usize, n: usize| match n {
+            0 => "—".to_string(),
+            n => format!("{k}/{n} ({:.0} %)", 100.0 * k as f64 / n as f64),
+        };
         s.push_str(&format!(
-            "| {} | {ok}/{} | {} | {median} |\n",
+            "| {} | {ok}/{} | {} | {median} | {} | {} | {} |\n",
             m.name(),
             mine.len(),
-            per_seed.join(", ")
+            per_seed.join(", "),
+            fraction(kept, later),
+            fraction(calibrated, scored),
+            per_iteration
+                .get(per_iteration.len() / 2)
+                .map_or_else(|| "—".to_string(), |t| format!("{t:.1}"))
         ));
     }
     s.push_str("\n## Runs\n\n| model | seed | first stable iteration | interaction s to stable | stable iterations | lowest actual cost | last actual cost | wall s |\n|---|---:|---:|---:|---|---:|---:|---:|\n");

@@ -171,12 +171,14 @@ impl LearnSettings {
 }
 
 impl LearnSettings {
-    /// The defaults for `method` and, for MSGP, `likelihood` (`None`: the MSGP default,
-    /// [`LearnSettings::for_method`]). An MSGP model trained by the filter likelihood gets the
-    /// defaults of [`LearnSettings::filtered_msgp`].
+    /// The loop's defaults for `method` and, for MSGP, `likelihood`. An MSGP model trained by
+    /// the filter likelihood — the loop's default for MSGP (`None`): it balanced the pendulum
+    /// where the free-run MSGP did not, `RESULTS.md` — gets [`LearnSettings::filtered_msgp`];
+    /// one trained by the free-run likelihood (the paper's) the MSGP defaults of
+    /// [`LearnSettings::for_method`].
     pub fn for_model(method: Method, likelihood: Option<Likelihood>) -> Self {
         match (method, likelihood) {
-            (Method::Msgp, Some(Likelihood::Filter)) => Self::filtered_msgp(),
+            (Method::Msgp, None | Some(Likelihood::Filter)) => Self::filtered_msgp(),
             (Method::Msgp, Some(l)) => {
                 let mut s = Self::for_method(method);
                 if let Some(m) = s.fit.msgp_mut() {
