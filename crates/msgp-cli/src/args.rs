@@ -264,6 +264,11 @@ pub struct EvalArgs {
     /// Write a PNG of the free simulation.
     #[arg(long, value_name = "OUT.png")]
     pub plot: Option<PathBuf>,
+    /// Also score one-step-ahead filtered predictions (each step's prediction given the
+    /// measured outputs before it, by the moment-matched filter of `--likelihood filter`),
+    /// beside the free simulation.
+    #[arg(long)]
+    pub filtered: bool,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
@@ -287,6 +292,10 @@ pub struct SimulateArgs {
     /// `episode` column first when there are several trajectories).
     #[arg(long, value_name = "PRED.csv")]
     pub out: PathBuf,
+    /// Add the one-step-ahead filtered predictions as `<output>_filtered_mean,
+    /// <output>_filtered_std` columns (see `msgp eval --filtered`).
+    #[arg(long)]
+    pub filtered: bool,
     /// Print a JSON summary instead of text.
     #[arg(long)]
     pub json: bool,

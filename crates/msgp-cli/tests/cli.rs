@@ -336,6 +336,73 @@ fn eval_and_simulate_offer_the_mean_feedback_rollout() {
         ],
         &["--rollout"],
     );
+    // one-step-ahead filtered predictions beside the free simulation: they have seen every
+    // measured output before their step, so they are closer than the free run
+    let both = ok_json(&dir, &args(&base, &["--filtered"]));
+    assert_eq!(both["rmse"], mm["rmse"], "the free simulation is unchanged");
+    let f = &both["filtered"];
+    let (free, one_step) = (
+        mm["rmse"].as_f64().expect("rmse"),
+        f["rmse"].as_f64().expect("filtered rmse"),
+    );
+    assert!(one_step < free, "filtered {one_step} vs free {free}");
+    assert_eq!(f["test_steps"], mm["test_steps"]);
+    let c = f["coverage_2sigma"].as_f64().expect("coverage");
+    assert!((0.8..=1.0).contains(&c), "{f}");
+    let text = ok(
+        &dir,
+        &[
+            "eval",
+            "--model",
+            "m.json",
+            "--data",
+            "s.csv",
+            "--from",
+            "80",
+            "--filtered",
+        ],
+    );
+    assert!(text.contains("one-step-ahead filtered ("), "{text}");
+    ok(
+        &dir,
+        &[
+            "simulate",
+            "--model",
+            "m.json",
+            "--data",
+            "s.csv",
+            "--from",
+            "80",
+            "--filtered",
+            "--out",
+            "f.csv",
+        ],
+    );
+    let csv = std::fs::read_to_string(dir.path("f.csv")).expect("prediction CSV");
+    let header: Vec<&str> = csv.lines().next().expect("header").split(',').collect();
+    assert_eq!(
+        header,
+        [
+            "t",
+            "y_mean",
+            "y_std",
+            "y",
+            "y_filtered_mean",
+            "y_filtered_std"
+        ],
+        "{csv}"
+    );
+    // the filtered mean's error is the smaller one on this file too
+    let (mut se_free, mut se_filtered) = (0.0, 0.0);
+    for line in csv.lines().skip(1) {
+        let v: Vec<f64> = line
+            .split(',')
+            .map(|x| x.parse().expect("number"))
+            .collect();
+        se_free += (v[1] - v[3]).powi(2);
+        se_filtered += (v[4] - v[3]).powi(2);
+    }
+    assert!(se_filtered < se_free, "{se_filtered} vs {se_free}");
 }
 
 #[test]

@@ -586,3 +586,66 @@ fn first_step_is_the_free_run_and_the_filter_beats_it_on_an_unstable_plant() {
     println!("mean normalised innovation, process noise /10: {wrong_nis:.3}");
     assert!(wrong_nis > 1.5, "a wrong model's NIS {wrong_nis}");
 }
+
+// ---------------------------------------------------------------------------------------------
+// 5. the model's one-step-ahead filtered predictions (`msgp eval --filtered`)
+
+/// `Model::filtered` in original units: its first prediction is the free simulation's first
+/// step (nothing measured after the start window yet), and the Gaussian log density of the
+/// measured outputs under its predictions is the filter likelihood in normalised units plus
+/// the normalisation's Jacobian `ln σ_y` per step (a centred and scaled MSGP model, SISO).
+#[test]
+fn filtered_predictions_are_the_filter_in_original_units() {
+    use msgp_core::fit::{FitSettings, MsgpSettings, fit};
+    use msgp_core::loss::Likelihood;
+    let mut r = rng(31);
+    let spec = NarxSpec::siso(2, 2);
+    let plant = LinearPlant::new(&mut r, spec, &[(1.02, 0.95)], 0.01, 0.05);
+    let traj = plant.simulate(&mut r, 200);
+    let settings = FitSettings {
+        ly: 2,
+        lu: 2,
+        method: MsgpSettings {
+            inducing: 10,
+            iterations: 5,
+            likelihood: Likelihood::Filter,
+            validation_fraction: 0.0,
+            alternative: None,
+            ..MsgpSettings::default()
+        }
+        .into(),
+        ..FitSettings::default()
+    };
+    let (model, _) = fit(std::slice::from_ref(&traj), &settings, &mut |_| {}).expect("fit");
+    assert!(
+        model.normalizer.y_mean[0] != 0.0,
+        "centred, so the test sees the shift"
+    );
+    let filtered = model.filtered(&traj).expect("filtered");
+    let free = model.simulate(&traj).expect("free run");
+    assert_eq!(filtered.start, 2);
+    assert_eq!(filtered.mean.nrows(), traj.len() - 2);
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-10 * b.abs().max(1e-12);
+    assert!(close(filtered.mean[(0, 0)], free.mean[(0, 0)]));
+    assert!(close(filtered.var[(0, 0)], free.var[(0, 0)]));
+    assert!(
+        filtered.var[(5, 0)] < free.var[(5, 0)],
+        "later steps have seen the outputs"
+    );
+    let by_hand: f64 = (0..filtered.mean.nrows())
+        .map(|i| {
+            let (m, v) = (filtered.mean[(i, 0)], filtered.var[(i, 0)]);
+            let e = traj.y[(i + 2, 0)] - m;
+            0.5 * (e * e / v + v.ln() + (2.0 * std::f64::consts::PI).ln())
+        })
+        .sum();
+    let mut log = JitterLog::default();
+    let gp = PreparedGp::new(&model.params, &model.config, &mut log).expect("gp");
+    let norm = model.normalizer.apply(&traj);
+    let f = filter_nll(&gp, &spec, &norm, &mut log).expect("filter");
+    let reference = f.nll + f.steps as f64 * model.normalizer.y_std[0].ln();
+    assert!(
+        (by_hand - reference).abs() <= 1e-9 * reference.abs(),
+        "{by_hand} vs {reference}"
+    );
+}

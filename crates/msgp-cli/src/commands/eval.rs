@@ -1,4 +1,5 @@
-//! `msgp eval` and `msgp simulate`: free simulation of data files with a saved model.
+//! `msgp eval` and `msgp simulate`: free simulation of data files with a saved model (and,
+//! with `--filtered`, one-step-ahead filtered predictions beside it).
 
 use std::fmt::Write as _;
 
@@ -93,6 +94,16 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
             &sims,
         )?;
     }
+    let filtered = match args.filtered {
+        true => {
+            let f = l.model.filtered_parts(&l.parts)?;
+            pool(
+                &f.iter().map(|s| s.metrics).collect::<Vec<_>>(),
+                l.model.spec.dy,
+            )
+        }
+        false => None,
+    };
     let n: usize = l.parts.iter().map(|p| p.traj.len()).sum();
     if args.json {
         let mut v = json!({
@@ -109,6 +120,11 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
             "plot": args.plot.as_ref().map(|p| p.display().to_string()),
         });
         metrics_json(&mut v, metrics.as_ref());
+        if args.filtered {
+            let mut f = json!({});
+            metrics_json(&mut f, filtered.as_ref());
+            v["filtered"] = f;
+        }
         return out_json(&v);
     }
     let mut text = format!(
@@ -122,6 +138,10 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
         &format!("free simulation{}", rollout_note(rollout)),
         metrics.as_ref(),
     ));
+    if args.filtered {
+        text.push('\n');
+        text.push_str(&metrics_line("one-step-ahead filtered", filtered.as_ref()));
+    }
     if let Some(p) = &args.plot {
         text.push_str(&format!("\nplot written to {}", p.display()));
     }
@@ -136,8 +156,13 @@ fn rollout_note(rollout: Rollout) -> &'static str {
     }
 }
 
-/// The prediction CSV.
-fn prediction_csv(outputs: &[String], sims: &[Simulated]) -> String {
+/// The prediction CSV; with `filtered` (one per simulation, the same steps) two more columns
+/// per output.
+fn prediction_csv(
+    outputs: &[String],
+    sims: &[Simulated],
+    filtered: Option<&[Simulated]>,
+) -> String {
     let several = sims.len() > 1;
     let mut s = String::new();
     if several {
@@ -147,6 +172,9 @@ fn prediction_csv(outputs: &[String], sims: &[Simulated]) -> String {
     for name in outputs {
         // writing to a String cannot fail
         let _ = write!(s, ",{name}_mean,{name}_std,{name}");
+        if filtered.is_some() {
+            let _ = write!(s, ",{name}_filtered_mean,{name}_filtered_std");
+        }
     }
     s.push('\n');
     for (k, sim) in sims.iter().enumerate() {
@@ -167,6 +195,9 @@ fn prediction_csv(outputs: &[String], sims: &[Simulated]) -> String {
                     sim.sim.var[(i, j)].max(0.0).sqrt(),
                     sim.part.traj.y[(start + i, j)]
                 );
+                if let Some(f) = filtered.map(|f| &f[k].sim) {
+                    let _ = write!(s, ",{},{}", f.mean[(i, j)], f.var[(i, j)].max(0.0).sqrt());
+                }
             }
             s.push('\n');
         }
@@ -179,7 +210,11 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let l = load(&args.model, &args.data, args.from)?;
     let rollout = Rollout::from(args.rollout);
     let sims = l.model.simulate_parts_as(&l.parts, rollout)?;
-    let csv = prediction_csv(&l.data.outputs, &sims);
+    let filtered = match args.filtered {
+        true => Some(l.model.filtered_parts(&l.parts)?),
+        false => None,
+    };
+    let csv = prediction_csv(&l.data.outputs, &sims, filtered.as_deref());
     write_atomically(&args.out, csv.as_bytes())
         .with_context(|| format!("cannot write predictions to {}", args.out.display()))?;
     let rows: usize = sims.iter().map(|s| s.sim.mean.nrows()).sum();
@@ -198,6 +233,15 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
             "trajectories": sims.len(),
         });
         metrics_json(&mut v, metrics.as_ref());
+        if let Some(f) = &filtered {
+            let pooled = pool(
+                &f.iter().map(|s| s.metrics).collect::<Vec<_>>(),
+                l.model.spec.dy,
+            );
+            let mut fj = json!({});
+            metrics_json(&mut fj, pooled.as_ref());
+            v["filtered"] = fj;
+        }
         return out_json(&v);
     }
     out(&format!(

@@ -176,17 +176,62 @@ impl Model {
         self.simulate_parts_as(parts, Rollout::MomentMatching)
     }
 
+    /// One-step-ahead filtered predictions of `traj` (original units): for every `t ≥ max(l_y,
+    /// l_u)` the predictive distribution of `y_t` given the measured `y_{<t}` and the inputs,
+    /// by the moment-matched filter of the filter likelihood ([`crate::loss::filter_steps`]:
+    /// predict the window, score `y_t`, condition the window on it). The variance is the
+    /// innovation's (observation noise included), as in [`Simulation::var`]. Not a free
+    /// simulation: every step has seen the measured outputs before it.
+    pub fn filtered(&self, traj: &Trajectory) -> Result<Simulation> {
+        traj.check(&self.spec)?;
+        let norm = self.normalizer.apply(traj);
+        let mut log = JitterLog::default();
+        let gp = PreparedGp::new(&self.params, &self.config, &mut log)?;
+        let (dy, t0) = (self.spec.dy, self.spec.warmup());
+        let n = traj.len().saturating_sub(t0);
+        let mut mean = DMatrix::zeros(n, dy);
+        let mut var = DMatrix::zeros(n, dy);
+        crate::loss::filter_steps(&gp, &self.spec, &norm, &mut log, |step| {
+            let i = step.t - t0;
+            for j in 0..dy {
+                mean[(i, j)] = self.normalizer.y_to_original(j, step.x_mean[j]);
+                var[(i, j)] = self
+                    .normalizer
+                    .y_var_to_original(j, step.innovation_cov[(j, j)]);
+            }
+            Ok(())
+        })?;
+        Ok(Simulation {
+            start: t0,
+            mean,
+            var,
+        })
+    }
+
+    /// [`filtered`](Self::filtered) predictions of every part, with their metrics.
+    pub fn filtered_parts(&self, parts: &[Part]) -> Result<Vec<Simulated>> {
+        self.parts_by(parts, "filtering", |traj| self.filtered(traj))
+    }
+
     /// [`simulate_parts`](Self::simulate_parts) by `rollout`.
     pub fn simulate_parts_as(&self, parts: &[Part], rollout: Rollout) -> Result<Vec<Simulated>> {
+        self.parts_by(parts, "simulating", |traj| self.simulate_as(traj, rollout))
+    }
+
+    /// `predict` of every part, scored.
+    fn parts_by(
+        &self,
+        parts: &[Part],
+        doing: &str,
+        predict: impl Fn(&Trajectory) -> Result<Simulation>,
+    ) -> Result<Vec<Simulated>> {
         parts
             .iter()
             .map(|p| {
                 let named = |what: &str, e: MsgpError| {
                     MsgpError::Data(format!("{what} {}: {e}", p.label()))
                 };
-                let sim = self
-                    .simulate_as(&p.traj, rollout)
-                    .map_err(|e| named("simulating", e))?;
+                let sim = predict(&p.traj).map_err(|e| named(doing, e))?;
                 let metrics = score(&sim, &p.traj).map_err(|e| named("scoring", e))?;
                 Ok(Simulated {
                     part: p.clone(),
