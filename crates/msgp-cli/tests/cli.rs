@@ -721,6 +721,13 @@ fn bad_inputs_fail_with_clear_messages() {
         &["--data", "nan.csv"],
         &["nan.csv:3:3:", "non-finite value `NaN`"],
     );
+    // a time column that goes back (or repeats) within a trajectory
+    let backwards = system_csv(120, None).replacen("\n2,", "\n0.5,", 1);
+    dir.write("back.csv", &backwards);
+    fit(
+        &["--data", "back.csv"],
+        &["back.csv:4:1:", "time `t` = 0.5 does not increase"],
+    );
     dir.write("inf.csv", "t,u,y\n0,1,2\n1,-inf,1\n");
     fit(
         &["--data", "inf.csv"],

@@ -275,6 +275,7 @@ fn load_file(
         mcap_table(path, &bytes, sel, names)
     } else {
         let table = Table::parse_csv(&bytes, path)?;
+        table.check_time_order()?;
         if names.is_none() {
             *names = Some(csv_names(&table, sel)?);
         }

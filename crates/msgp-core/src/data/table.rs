@@ -175,6 +175,35 @@ impl Table {
         })
     }
 
+    /// Checks that the time column, if there is one, increases strictly within every
+    /// trajectory ([`Table::episodes`]): a time that repeats or goes back is an error naming
+    /// its line (data fitted as if ordered would be silently wrong).
+    pub fn check_time_order(&self) -> Result<()> {
+        let Some(j) = self.time_column() else {
+            return Ok(());
+        };
+        for range in self.episodes() {
+            for i in range.start + 1..range.end {
+                let (before, now) = (self.rows[i - 1][j], self.rows[i][j]);
+                if now <= before {
+                    return Err(at(
+                        &self.path,
+                        self.lines[i],
+                        j + 1,
+                        format!(
+                            "time `{}` = {now} does not increase (the sample before, line {}, \
+                             is at {before}); times must increase strictly within a trajectory \
+                             (an `{EPISODE_COLUMN}` column separates trajectories)",
+                            self.columns[j],
+                            self.lines[i - 1]
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// Row ranges of the trajectories: one per contiguous run of equal values in the
     /// [`EPISODE_COLUMN`], or the whole table when there is no such column.
     pub fn episodes(&self) -> Vec<Range<usize>> {
@@ -351,5 +380,33 @@ mod tests {
         let t = parse("t,u\n0,1\n").expect("valid");
         let e = t.column("y").expect_err("missing").to_string();
         assert!(e.contains("no column `y` (columns: t, u)"), "{e}");
+    }
+
+    /// The time column must increase strictly within a trajectory: a step back or a repeat is
+    /// an error at its line; a new episode may start over; no time column, no check.
+    #[test]
+    fn the_time_column_must_increase_within_a_trajectory() {
+        let check = |csv: &str| parse(csv).expect("parses").check_time_order();
+        let back = check("t,u,y\n0,1,2\n2,1,2\n1,1,2\n3,1,2\n")
+            .expect_err("goes back")
+            .to_string();
+        assert!(
+            back.starts_with("x.csv:4:1: time `t` = 1 does not increase"),
+            "{back}"
+        );
+        assert!(back.contains("line 3, is at 2"), "{back}");
+        let repeat = check("time,u,y\n0,1,2\n0.5,1,2\n0.5,1,2\n")
+            .expect_err("repeats")
+            .to_string();
+        assert!(
+            repeat.starts_with("x.csv:4:1: time `time` = 0.5"),
+            "{repeat}"
+        );
+        check("t,u,y,episode\n0,1,2,0\n1,1,2,0\n0,1,2,1\n1,1,2,1\n").expect("per episode");
+        check("u,y\n1,2\n1,2\n").expect("no time column");
+        let in_episode = check("t,u,y,episode\n0,1,2,0\n1,1,2,0\n0,1,2,1\n0,1,2,1\n")
+            .expect_err("repeat inside episode 1")
+            .to_string();
+        assert!(in_episode.starts_with("x.csv:5:1:"), "{in_episode}");
     }
 }
