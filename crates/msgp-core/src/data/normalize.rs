@@ -73,6 +73,17 @@ impl Normalizer {
         }
     }
 
+    /// The same scales without the shifts (means 0): for models with a linear prior mean and
+    /// no intercept, where centring would turn the data's mean command into a constant drive
+    /// of the plant.
+    pub fn uncentred(self) -> Self {
+        Self {
+            u_mean: vec![0.0; self.u_mean.len()],
+            y_mean: vec![0.0; self.y_mean.len()],
+            ..self
+        }
+    }
+
     /// Original → normalised units.
     pub fn apply(&self, t: &Trajectory) -> Trajectory {
         let mut u = t.u.clone();

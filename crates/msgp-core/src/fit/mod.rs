@@ -276,11 +276,7 @@ fn fit_unchecked(
         MethodSettings::LinearKf(kf) => {
             // scaled, not centred: the linear model has no intercept, and centring would turn
             // the data's mean command into a constant acceleration of the plant
-            let scaled = Normalizer {
-                u_mean: vec![0.0; spec.du],
-                y_mean: vec![0.0; spec.dy],
-                ..normalizer
-            };
+            let scaled = normalizer.uncentred();
             let norm: Vec<Trajectory> = refs.iter().map(|t| scaled.apply(t)).collect();
             let warm = previous.map(|p| linear_kf::KalmanParams {
                 a: p.params.linear_mean.clone(),
@@ -304,11 +300,7 @@ fn fit_unchecked(
         MethodSettings::Msgp(msgp) => {
             // the linear-kf start is the linear model's units: scaled, not centred
             let normalizer = match (msgp.start, previous) {
-                (MsgpStart::LinearKf, None) => Normalizer {
-                    u_mean: vec![0.0; spec.du],
-                    y_mean: vec![0.0; spec.dy],
-                    ..normalizer
-                },
+                (MsgpStart::LinearKf, None) => normalizer.uncentred(),
                 _ => normalizer,
             };
             let norm: Vec<Trajectory> = refs.iter().map(|t| normalizer.apply(t)).collect();
