@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use msgp_core::data::Trajectory;
 use msgp_core::data::dataset::{Dataset, Selection};
+use msgp_core::data::table::TimeSource;
 use msgp_core::fit::{FitOptimizer, FitOptions, fit};
 use msgp_core::gp::MeanFunction;
 use msgp_core::model::Method;
@@ -51,6 +52,7 @@ fn defaults() -> Selection<'static> {
         inputs: &[],
         outputs: &[],
         topic: None,
+        time: TimeSource::Log,
     }
 }
 
@@ -114,6 +116,7 @@ fn a_model_fitted_on_a_simulator_log_predicts_another_excitation() {
         inputs: &inputs,
         outputs: &outputs,
         topic: None,
+        time: TimeSource::Log,
     };
     let data = Dataset::load(std::slice::from_ref(&path), &angle).expect("load log");
     let train: Vec<Trajectory> = data.parts.iter().map(|p| p.traj.clone()).collect();

@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use msgp_core::data::table::TimeSource;
 use msgp_core::fit::FitOptimizer;
 use msgp_core::gp::MeanFunction;
 use msgp_core::gp::integrator::Integrator;
@@ -55,6 +56,28 @@ pub struct DataArgs {
     /// MCAP: topic of bare field names in --input/--output.
     #[arg(long, value_name = "TOPIC")]
     pub topic: Option<String>,
+    /// MCAP: the time of a message: its log time, or the `header.stamp` inside it (ROS
+    /// messages with a header; every selected topic must have one).
+    #[arg(long, value_name = "SOURCE", default_value = "log")]
+    pub time: TimeArg,
+}
+
+/// Where MCAP message times come from, on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum TimeArg {
+    /// The MCAP log time.
+    Log,
+    /// The message's `header.stamp`.
+    Header,
+}
+
+impl From<TimeArg> for TimeSource {
+    fn from(t: TimeArg) -> Self {
+        match t {
+            TimeArg::Log => TimeSource::Log,
+            TimeArg::Header => TimeSource::Header,
+        }
+    }
 }
 
 /// Default training fraction of each trajectory.

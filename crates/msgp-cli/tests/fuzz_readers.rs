@@ -11,7 +11,7 @@ use std::sync::OnceLock;
 
 use msgp_core::data::Trajectory;
 use msgp_core::data::mcap::{McapLog, Signal};
-use msgp_core::data::table::Table;
+use msgp_core::data::table::{Table, TimeSource};
 use msgp_core::data::{NoiseScale, SyntheticSystem};
 use msgp_core::fit::{FitSettings, MethodSettings, OneStepFitSettings, fit};
 use msgp_core::model_file::{FitRecord, ModelFile};
@@ -33,7 +33,33 @@ fn config() -> ProptestConfig {
     }
 }
 
-/// A valid MCAP log: two JSON topics (one nested), one CDR topic.
+/// The schema of the ROS 2 topic `/c`: a header, a sequence of doubles, a string.
+const ROS2_SCHEMA: &str = "std_msgs/Header header\nfloat64[] v\nstring s\n===\n\
+    MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n";
+
+/// One `/c` message in little-endian CDR (header, `v = [x, 2x]`, `s = "ok"`).
+fn ros2_message(k: u64, x: f64) -> Vec<u8> {
+    let mut m = vec![0u8, 1, 0, 0];
+    let pad = |m: &mut Vec<u8>, n: usize| {
+        while !(m.len() - 4).is_multiple_of(n) {
+            m.push(0);
+        }
+    };
+    m.extend_from_slice(&(k as i32).to_le_bytes());
+    m.extend_from_slice(&0u32.to_le_bytes());
+    m.extend_from_slice(&5u32.to_le_bytes());
+    m.extend_from_slice(b"base\0");
+    pad(&mut m, 4);
+    m.extend_from_slice(&2u32.to_le_bytes());
+    pad(&mut m, 8);
+    m.extend_from_slice(&x.to_le_bytes());
+    m.extend_from_slice(&(2.0 * x).to_le_bytes());
+    m.extend_from_slice(&3u32.to_le_bytes());
+    m.extend_from_slice(b"ok\0");
+    m
+}
+
+/// A valid MCAP log: two JSON topics (one nested), one ROS 2 CDR topic.
 fn valid_mcap() -> Vec<u8> {
     let mut buf = std::io::Cursor::new(Vec::new());
     {
@@ -44,7 +70,10 @@ fn valid_mcap() -> Vec<u8> {
             .expect("schema");
         let a = w.add_channel(schema, "/a", "json", &meta).expect("a");
         let b = w.add_channel(0, "/b", "json", &meta).expect("b");
-        let c = w.add_channel(0, "/c", "cdr", &meta).expect("c");
+        let ros2 = w
+            .add_schema("pkg/msg/C", "ros2msg", ROS2_SCHEMA.as_bytes())
+            .expect("ros2 schema");
+        let c = w.add_channel(ros2, "/c", "cdr", &meta).expect("c");
         for k in 0..20u64 {
             let header = |ch| mcap::records::MessageHeader {
                 channel_id: ch,
@@ -58,7 +87,7 @@ fn valid_mcap() -> Vec<u8> {
                 .expect("a");
             w.write_to_known_channel(&header(b), format!(r#"{{"u": {}}}"#, -x).as_bytes())
                 .expect("b");
-            w.write_to_known_channel(&header(c), &[0, 1, 0, 0, 1, 2])
+            w.write_to_known_channel(&header(c), &ros2_message(k, x))
                 .expect("c");
         }
         w.finish().expect("finish");
@@ -75,19 +104,22 @@ fn use_log(log: &McapLog) {
     for spec in [
         vec!["/b:u", "/a:x"],
         vec!["/a:p.q[0]", "/a:p.q.1"],
-        vec!["/c:x", "/a:x"],
+        vec!["/c:v.1", "/a:x"],
+        vec!["/a:x", "/c:header.stamp.sec"],
         vec!["/a:nope", "/b:u"],
     ] {
         let signals: Vec<Signal> = spec
             .iter()
             .filter_map(|s| Signal::parse(s, None).ok())
             .collect();
-        if let Some(last) = signals.last()
-            && let Ok(table) = log.table(&signals, &last.topic)
-        {
-            let names: Vec<String> = signals.iter().map(Signal::name).collect();
-            let n: Vec<&str> = names.iter().map(String::as_str).collect();
-            let _ = table.trajectories(&n[..1], &n[1..]);
+        for time in [TimeSource::Log, TimeSource::Header] {
+            if let Some(last) = signals.last()
+                && let Ok(table) = log.table(&signals, &last.topic, time)
+            {
+                let names: Vec<String> = signals.iter().map(Signal::name).collect();
+                let n: Vec<&str> = names.iter().map(String::as_str).collect();
+                let _ = table.trajectories(&n[..1], &n[1..]);
+            }
         }
     }
 }
@@ -307,7 +339,26 @@ fn the_seed_files_are_valid() {
         Signal::parse("/b:u", None).expect("signal"),
         Signal::parse("/a:x", None).expect("signal"),
     ];
-    assert_eq!(log.table(&signals, "/a").expect("table").len(), 20);
+    assert_eq!(
+        log.table(&signals, "/a", TimeSource::Log)
+            .expect("table")
+            .len(),
+        20
+    );
+    // the ROS 2 topic decodes, by log time and by header stamp (sec = k, log time = k ms)
+    let ros2 = [
+        Signal::parse("/c:v.1", None).expect("signal"),
+        Signal::parse("/c:header.stamp.sec", None).expect("signal"),
+    ];
+    for time in [TimeSource::Log, TimeSource::Header] {
+        let t = log.table(&ros2, "/c", time).expect("ros2 table");
+        assert_eq!(t.len(), 20);
+        let scale = if time == TimeSource::Log { 1e-3 } else { 1.0 };
+        assert_eq!(
+            t.rows[7],
+            vec![7.0 * scale, 2.0 * (7.0f64 * 0.3).sin(), 7.0]
+        );
+    }
     let (v, test) = valid_model();
     let file = ModelFile::from_json(v.to_string().as_bytes(), Path::new("m.json")).expect("model");
     file.to_model()

@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use msgp_core::data::dataset::{Dataset, Selection};
+use msgp_core::data::table::TimeSource;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyString};
 
@@ -50,6 +51,7 @@ pub fn load<'py>(
         inputs: &inputs,
         outputs: &outputs,
         topic: topic.as_deref(),
+        time: TimeSource::Log,
     };
     let data = detached(py, || {
         Dataset::load(&files, &selection).map_err(|e| input(e.to_string()))

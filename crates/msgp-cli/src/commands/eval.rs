@@ -55,6 +55,7 @@ fn load(model_path: &std::path::Path, args: &DataArgs, from: usize) -> anyhow::R
             inputs,
             outputs,
             topic: args.topic.as_deref(),
+            time: args.time.into(),
         },
     )?;
     let mut parts = Vec::new();

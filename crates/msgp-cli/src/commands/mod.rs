@@ -41,6 +41,7 @@ impl DataArgs {
             inputs: &self.input,
             outputs: &self.output,
             topic: self.topic.as_deref(),
+            time: self.time.into(),
         }
     }
 }

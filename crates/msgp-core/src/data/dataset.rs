@@ -7,9 +7,9 @@
 //!   `index`. A `msgp sim` run log (`command`, `meas_theta`, `meas_x`) uses `command` →
 //!   `meas_theta,meas_x`; otherwise the first candidate is the input and the last the output.
 //! - MCAP: a `msgp sim` log uses `/pendulum/command:acceleration` →
-//!   `/pendulum/measurement:theta,/pendulum/measurement:x`; a log with one JSON topic (or with a
-//!   default topic) uses that topic's numeric fields (without `t`, `time`, `step`, `episode`)
-//!   like the CSV columns.
+//!   `/pendulum/measurement:theta,/pendulum/measurement:x`; a log with one readable topic (JSON
+//!   or ROS 2 CDR), or a default topic, uses that topic's numeric fields (without `t`, `time`,
+//!   `step`, `episode` and a ROS `header`) like the CSV columns.
 //!
 //! Several files, or an `episode` column, give several trajectories.
 
@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 #[cfg(feature = "mcap")]
 use super::mcap::{McapLog, Signal};
-use super::table::{EPISODE_COLUMN, Table};
+use super::table::{EPISODE_COLUMN, Table, TimeSource};
 use super::trajectory::Trajectory;
 use crate::error::{MsgpError, Result};
 
@@ -74,6 +74,8 @@ pub struct Selection<'a> {
     pub outputs: &'a [String],
     /// Default MCAP topic.
     pub topic: Option<&'a str>,
+    /// MCAP: where the message times come from.
+    pub time: TimeSource,
 }
 
 const SKIP: [&str; 5] = ["t", "time", "step", EPISODE_COLUMN, "index"];
@@ -195,7 +197,7 @@ fn mcap_names(log: &McapLog, sel: &Selection<'_>) -> Result<(Vec<String>, Vec<St
             let json: Vec<_> = log
                 .topics
                 .iter()
-                .filter(|t| t.encoding == "json" && !t.latent)
+                .filter(|t| t.readable() && !t.latent)
                 .collect();
             match json.as_slice() {
                 [one] => one.topic.clone(),
@@ -215,7 +217,7 @@ fn mcap_names(log: &McapLog, sel: &Selection<'_>) -> Result<(Vec<String>, Vec<St
     let fields = log.numeric_fields(&topic)?;
     let candidates: Vec<String> = fields
         .iter()
-        .filter(|f| !SKIP.iter().any(|s| f.eq_ignore_ascii_case(s)))
+        .filter(|f| !SKIP.iter().any(|s| f.eq_ignore_ascii_case(s)) && !f.starts_with("header."))
         .map(|f| format!("{topic}:{f}"))
         .collect();
     default_columns(&candidates, &inputs, &outputs).map_err(|e| match e {
@@ -247,7 +249,7 @@ fn mcap_table(
             .map(|s| Signal::parse(s, sel.topic).map_err(|e| in_file(path, e)))
             .collect::<Result<_>>()?;
         let base = signals[inputs.len()].topic.clone();
-        let table = log.table(&signals, &base)?;
+        let table = log.table(&signals, &base, sel.time)?;
         *names = Some((inputs, outputs));
         Ok(table)
     }

@@ -12,8 +12,14 @@
 //!   dropped. Logs that stamp all messages of one step with the same log time — such as the
 //!   `msgp sim` logs — are thus joined step by step.
 //!
-//! Only the `json` message encoding is read; a topic with another encoding (ROS 2 `cdr`,
-//! protobuf, ...) is reported as an error when selected. Corrupt or truncated files, unknown
+//! Two message encodings are read: `json`, and ROS 2's `cdr` with a `ros2msg` schema (decoded
+//! from the schema text by [`super::ros2`] into the same JSON values, so the paths are the same:
+//! `/joint_states:position.2`). A topic with another encoding (protobuf, ...) is reported as
+//! an error when selected.
+//!
+//! The time of a message is its log time, or with [`TimeSource::Header`] the
+//! `header.stamp` (`sec` + `nanosec`) inside it, as ROS messages with a header carry it; every
+//! selected topic must then have one. Corrupt or truncated files, unknown
 //! topics, unknown fields and non-numeric values are errors that name the file, the topic, the
 //! message and the field; nothing here panics on bad input, and a corrupt length field cannot
 //! make it allocate more than 64 × the file size (at most 1 GiB) per record.
@@ -24,7 +30,8 @@ use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
-use super::table::Table;
+use super::ros2::{self, Ros2Decoder};
+use super::table::{Table, TimeSource};
 use crate::error::{MsgpError, Result};
 
 /// One channel of the log.
@@ -36,10 +43,23 @@ pub struct TopicInfo {
     pub encoding: String,
     /// Schema name, if the channel has a schema.
     pub schema: Option<String>,
+    /// Schema encoding (`ros2msg`, `jsonschema`, ...; empty without a schema).
+    pub schema_encoding: String,
+    /// Schema text (empty without a schema).
+    pub schema_data: Vec<u8>,
     /// Number of messages.
     pub messages: usize,
     /// The channel metadata says `latent = true` (a simulator's hidden state).
     pub latent: bool,
+}
+
+impl TopicInfo {
+    /// Whether its messages can be decoded (JSON, or ROS 2 CDR with its `ros2msg` schema).
+    pub fn readable(&self) -> bool {
+        self.encoding == "json"
+            || (self.encoding == ros2::MESSAGE_ENCODING
+                && self.schema_encoding == ros2::SCHEMA_ENCODING)
+    }
 }
 
 /// `TOPIC:FIELD`: one numeric field of the messages on one topic.
@@ -192,6 +212,16 @@ impl McapLog {
                         topic: ch.topic.clone(),
                         encoding: ch.message_encoding.clone(),
                         schema: ch.schema.as_ref().map(|s| s.name.clone()),
+                        schema_encoding: ch
+                            .schema
+                            .as_ref()
+                            .map(|s| s.encoding.clone())
+                            .unwrap_or_default(),
+                        schema_data: ch
+                            .schema
+                            .as_ref()
+                            .map(|s| s.data.to_vec())
+                            .unwrap_or_default(),
                         messages: 0,
                         latent: ch.metadata.get("latent").is_some_and(|v| v == "true"),
                     });
@@ -243,70 +273,98 @@ impl McapLog {
         Ok(&self.topics[self.topic_index(topic)?])
     }
 
-    /// Refuses a channel whose messages are not JSON.
-    fn require_json(&self, info: &TopicInfo) -> Result<()> {
-        if info.encoding != "json" {
-            return Err(file_err(
+    /// The decoder of topic `k`'s messages, or an error if its encoding is not read.
+    fn decoder(&self, k: usize) -> Result<Decoder> {
+        let info = &self.topics[k];
+        match (info.encoding.as_str(), info.schema_encoding.as_str()) {
+            ("json", _) => Ok(Decoder::Json),
+            (ros2::MESSAGE_ENCODING, ros2::SCHEMA_ENCODING) => {
+                let name = info.schema.as_deref().unwrap_or_default();
+                Ros2Decoder::new(name, &info.schema_data)
+                    .map(Decoder::Ros2)
+                    .map_err(|e| file_err(&self.path, format!("topic {}: {e}", info.topic)))
+            }
+            (encoding, schema) => Err(file_err(
                 &self.path,
                 format!(
-                    "topic {} uses message encoding `{}`; only `json` messages are supported",
-                    info.topic, info.encoding
+                    "topic {} uses message encoding `{encoding}`{}; supported are `json` and ROS 2 \
+                     `cdr` with a `ros2msg` schema",
+                    info.topic,
+                    if schema.is_empty() {
+                        " without a schema".to_string()
+                    } else {
+                        format!(" with a `{schema}` schema")
+                    }
                 ),
-            ));
+            )),
         }
-        Ok(())
     }
 
-    /// Messages of topic `k` as parsed JSON, in log-time order, with their log times.
-    fn decoded(&self, k: usize) -> Result<Vec<(u64, Value)>> {
+    /// Messages of topic `k` decoded into JSON values, in log-time order, with their times
+    /// (nanoseconds, from `time`); with [`TimeSource::Header`] ordered by that time.
+    fn decoded(&self, k: usize, time: TimeSource) -> Result<Vec<(u64, Value)>> {
         let info = &self.topics[k];
-        self.require_json(info)?;
-        self.messages
+        let decoder = self.decoder(k)?;
+        let mut out = self
+            .messages
             .iter()
             .filter(|m| m.topic == k)
             .enumerate()
             .map(|(i, m)| {
-                serde_json::from_slice::<Value>(&m.data)
-                    .map(|v| (m.log_time, v))
-                    .map_err(|e| {
+                let here = || {
+                    format!(
+                        "topic {} message {} (log time {} ns)",
+                        info.topic,
+                        i + 1,
+                        m.log_time
+                    )
+                };
+                let v = decoder
+                    .decode(&m.data)
+                    .map_err(|e| file_err(&self.path, format!("{}: {e}", here())))?;
+                let t = match time {
+                    TimeSource::Log => m.log_time,
+                    TimeSource::Header => header_stamp(&v).ok_or_else(|| {
                         file_err(
                             &self.path,
                             format!(
-                                "topic {} message {} (log time {} ns): invalid JSON: {e}",
-                                info.topic,
-                                i + 1,
-                                m.log_time
+                                "{}: no `header.stamp` (sec, nanosec) to take the time from; \
+                                 use the log time (--time log)",
+                                here()
                             ),
                         )
-                    })
+                    })?,
+                };
+                Ok((t, v))
             })
-            .collect()
+            .collect::<Result<Vec<_>>>()?;
+        if time == TimeSource::Header {
+            // stable: equal stamps keep log order
+            out.sort_by_key(|(t, _)| *t);
+        }
+        Ok(out)
     }
 
     /// Dotted paths of the numeric fields of the first message on `topic`.
     pub fn numeric_fields(&self, topic: &str) -> Result<Vec<String>> {
         let k = self.topic_index(topic)?;
-        let info = &self.topics[k];
         let first = self
             .messages
             .iter()
             .find(|m| m.topic == k)
             .ok_or_else(|| file_err(&self.path, format!("topic {} has no messages", topic)))?;
-        self.require_json(info)?;
-        let v: Value = serde_json::from_slice(&first.data).map_err(|e| {
-            file_err(
-                &self.path,
-                format!("topic {topic} message 1: invalid JSON: {e}"),
-            )
-        })?;
+        let v = self
+            .decoder(k)?
+            .decode(&first.data)
+            .map_err(|e| file_err(&self.path, format!("topic {topic} message 1: {e}")))?;
         let mut out = Vec::new();
         numeric_leaves(&v, String::new(), &mut out);
         Ok(out)
     }
 
     /// Aligns `signals` onto the messages of `base_topic` (see the module docs): columns `t`
-    /// (log time in seconds) and one per signal, named `TOPIC:FIELD`.
-    pub fn table(&self, signals: &[Signal], base_topic: &str) -> Result<Table> {
+    /// (the message time from `time`, in seconds) and one per signal, named `TOPIC:FIELD`.
+    pub fn table(&self, signals: &[Signal], base_topic: &str, time: TimeSource) -> Result<Table> {
         let base = self.topic_index(base_topic)?;
         // topics in use, base first
         let mut used = vec![base];
@@ -319,7 +377,7 @@ impl McapLog {
         // per used topic: (log times, one value column per signal on that topic)
         let mut series: Vec<(Vec<u64>, Vec<Vec<f64>>)> = Vec::with_capacity(used.len());
         for &k in &used {
-            let msgs = self.decoded(k)?;
+            let msgs = self.decoded(k, time)?;
             let topic = &self.topics[k].topic;
             let fields: Vec<&Signal> = signals.iter().filter(|s| &s.topic == topic).collect();
             let mut cols = vec![Vec::with_capacity(msgs.len()); fields.len()];
@@ -430,9 +488,34 @@ impl McapLog {
     }
 }
 
+/// How a message's JSON value is made from its bytes.
+#[derive(Debug)]
+enum Decoder {
+    Json,
+    Ros2(Ros2Decoder),
+}
+
+impl Decoder {
+    fn decode(&self, data: &[u8]) -> std::result::Result<Value, String> {
+        match self {
+            Self::Json => serde_json::from_slice(data).map_err(|e| format!("invalid JSON: {e}")),
+            Self::Ros2(d) => d.decode(data),
+        }
+    }
+}
+
+/// `header.stamp` in nanoseconds (`sec` may be negative only as far as the sum is not).
+fn header_stamp(v: &Value) -> Option<u64> {
+    let stamp = v.get("header")?.get("stamp")?;
+    let sec = stamp.get("sec")?.as_i64()?;
+    let nanosec = stamp.get("nanosec")?.as_u64()?;
+    let ns = i128::from(sec) * 1_000_000_000 + i128::from(nanosec);
+    u64::try_from(ns).ok()
+}
+
 fn describe(v: &Value) -> String {
     match v {
-        Value::Null => "null".into(),
+        Value::Null => "null (JSON null, or NaN/inf in a binary message)".into(),
         Value::Bool(b) => format!("the boolean {b}"),
         Value::Number(n) => format!("the number {n}"),
         Value::String(s) => format!("the string {s:?}"),
@@ -549,6 +632,7 @@ mod tests {
             .table(
                 &[sig("/b:u"), sig("/a:x"), sig("/a:p.q"), sig("/a:arr[1]")],
                 "/a",
+                TimeSource::Log,
             )
             .expect("table");
         assert_eq!(t.columns, vec!["t", "/b:u", "/a:x", "/a:p.q", "/a:arr.1"]);
@@ -561,7 +645,9 @@ mod tests {
             ]
         );
         // with /b as the base, /a has no message at or before t = 0: that row is dropped
-        let t = log.table(&[sig("/a:x"), sig("/b:u")], "/b").expect("table");
+        let t = log
+            .table(&[sig("/a:x"), sig("/b:u")], "/b", TimeSource::Log)
+            .expect("table");
         assert_eq!(t.rows, vec![vec![0.002, 2.0, -2.0]]);
     }
 
@@ -569,17 +655,25 @@ mod tests {
     fn errors_are_clear() {
         let log = log();
         let sig = |s: &str| Signal::parse(s, None).expect("signal");
-        let e = log.table(&[sig("/nope:x")], "/a").expect_err("topic");
+        let e = log
+            .table(&[sig("/nope:x")], "/a", TimeSource::Log)
+            .expect_err("topic");
         assert!(
             e.to_string()
                 .contains("no topic `/nope` (topics: /a, /b, /c)"),
             "{e}"
         );
-        let e = log.table(&[sig("/a:y")], "/a").expect_err("field");
+        let e = log
+            .table(&[sig("/a:y")], "/a", TimeSource::Log)
+            .expect_err("field");
         assert!(e.to_string().contains("no field `y`"), "{e}");
-        let e = log.table(&[sig("/a:s")], "/a").expect_err("string");
+        let e = log
+            .table(&[sig("/a:s")], "/a", TimeSource::Log)
+            .expect_err("string");
         assert!(e.to_string().contains("the string \"k\""), "{e}");
-        let e = log.table(&[sig("/c:x")], "/c").expect_err("cdr");
+        let e = log
+            .table(&[sig("/c:x")], "/c", TimeSource::Log)
+            .expect_err("cdr");
         assert!(e.to_string().contains("message encoding `cdr`"), "{e}");
         let bytes = sample();
         let e =

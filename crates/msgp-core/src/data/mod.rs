@@ -6,6 +6,8 @@ pub mod dataset;
 pub mod mcap;
 pub mod normalize;
 pub mod real;
+#[cfg(feature = "mcap")]
+pub mod ros2;
 pub mod synthetic;
 pub mod table;
 pub mod trajectory;

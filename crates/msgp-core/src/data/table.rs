@@ -24,6 +24,16 @@ pub const EPISODE_COLUMN: &str = "episode";
 /// Names accepted for a time column (matched case-insensitively), in order of preference.
 pub const TIME_COLUMNS: [&str; 2] = ["t", "time"];
 
+/// Where the time column of a table read from an MCAP log comes from (`data::mcap`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TimeSource {
+    /// The MCAP log time (when the recorder received it).
+    #[default]
+    Log,
+    /// The message's own `header.stamp` (`sec` + `nanosec`), as ROS messages carry it.
+    Header,
+}
+
 /// A numeric table: column names and row-major values.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Table {
