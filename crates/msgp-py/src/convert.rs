@@ -27,9 +27,41 @@ fn shape_text(shape: &[usize]) -> String {
     }
 }
 
-/// One array argument (anything numpy turns into a float array) as an `n × d` matrix; a 1-D
-/// array is one column. `what` names the argument in messages.
+/// Refuses what numpy would turn into floats by losing or inventing information: complex
+/// numbers (the imaginary part dropped), strings (`"1"` parsed), dates and times. Booleans and
+/// integers of any width are real numbers and are taken as such; any memory layout is read.
+fn check_real(obj: &Bound<'_, PyAny>, what: &str) -> Result<()> {
+    let py = obj.py();
+    let array = py
+        .import("numpy")
+        .and_then(|np| np.call_method1("asarray", (obj,)))
+        .map_err(|e| input(format!("{what} must be an array of numbers: {e}")))?;
+    let kind: String = array
+        .getattr("dtype")
+        .and_then(|d| d.getattr("kind"))
+        .and_then(|k| k.extract())
+        .map_err(|e| input(format!("{what} must be an array of numbers: {e}")))?;
+    let refused = match kind.as_str() {
+        "c" => "complex numbers",
+        "U" | "S" => "strings",
+        "M" | "m" => "dates or times",
+        "V" => "structured records",
+        _ => return Ok(()),
+    };
+    let dtype = array
+        .getattr("dtype")
+        .and_then(|d| d.str().map(|s| s.to_string()))
+        .unwrap_or_default();
+    Err(input(format!(
+        "{what} must be an array of real numbers, got {refused} (dtype {dtype})"
+    )))
+}
+
+/// One array argument (anything numpy turns into a real array: floats, integers, booleans, in
+/// any memory layout) as an `n × d` matrix; a 1-D array is one column. `what` names the
+/// argument in messages.
 pub fn matrix(obj: &Bound<'_, PyAny>, what: &str) -> Result<DMatrix<f64>> {
+    check_real(obj, what)?;
     let array = obj
         .extract::<PyArrayLikeDyn<'_, f64, AllowTypeChange>>()
         .map_err(|e| input(format!("{what} must be an array of numbers: {e}")))?;

@@ -29,7 +29,10 @@ def test_exception_hierarchy():
         (U, np.where(U > 0, np.inf, Y), r"y has a non-finite value \(inf\) at sample 30"),
         (U[:2], Y[:2], "has 2 samples; the history \\(l_y=2, l_u=2\\) needs more than 2"),
         (np.zeros(0), np.zeros(0), "u has no samples"),
-        (["a", "b"], Y[:2], "u must be an array of numbers"),
+        (["a", "b"], Y[:2], r"u must be an array of real numbers, got strings \(dtype <U1\)"),
+        (U + 1j, Y, r"u must be an array of real numbers, got complex numbers \(dtype complex128\)"),
+        (U, np.array([str(v) for v in Y]), r"y must be an array of real numbers, got strings"),
+        (U.astype("datetime64[s]"), Y, r"u must be an array of real numbers, got dates or times"),
         ([U, U], Y, "u is a list of 2 arrays .* but y is not"),
         ([U, U], [Y], "u holds 2 trajectories but y holds 1"),
         ([U, U.reshape(-1, 1).repeat(2, axis=1)], [Y, Y], "trajectory 1 has 2 input and 1 output columns; trajectory 0 has 1 and 1"),
@@ -38,6 +41,27 @@ def test_exception_hierarchy():
 def test_bad_fit_data(u, y, message):
     with pytest.raises(ValueError, match=message):
         msgp.Msgp(inducing=5, iterations=1).fit(u, y)
+
+
+def test_integer_and_strided_arrays_are_read_as_their_values():
+    """Integers, booleans and arrays in any memory layout are real numbers: the same fit as the
+    equal float64 C-contiguous arrays, bit for bit."""
+    steps = np.rint(U * 10).astype(np.int32)
+
+    def rmse(u, y):
+        model = msgp.Msgp(inducing=5, iterations=3, seed=0).fit(u, y)
+        return model.score(U, Y)["rmse"]
+
+    assert rmse(steps, Y) == rmse(steps.astype(float), Y)
+    assert rmse(U > 0, Y) == rmse((U > 0).astype(float), Y)
+    wide = np.repeat(np.stack([U, Y], axis=1), 2, axis=0)
+    strided_u, strided_y = wide[::2, 0], wide[::2, 1]
+    assert not strided_u.flags.c_contiguous
+    assert rmse(strided_u, strided_y) == rmse(U.copy(), Y.copy())
+    both = np.asfortranarray(np.stack([U, U**2], axis=1))
+    fitted = msgp.Msgp(inducing=5, iterations=3, seed=0).fit(both, Y)
+    again = msgp.Msgp(inducing=5, iterations=3, seed=0).fit(np.ascontiguousarray(both), Y)
+    assert fitted.score(both, Y) == again.score(np.ascontiguousarray(both), Y)
 
 
 @pytest.mark.parametrize(
