@@ -311,9 +311,11 @@ pub struct SimulateArgs {
     /// How the simulation propagates predictions (see `msgp eval --rollout`).
     #[arg(long, value_enum, default_value_t = RolloutArg::Mm)]
     pub rollout: RolloutArg,
-    /// Output CSV: `t, <output>_mean, <output>_std, <output>` per simulated step (and an
-    /// `episode` column first when there are several trajectories).
-    #[arg(long, value_name = "PRED.csv")]
+    /// Output file; the extension chooses the format. CSV: `t, <output>_mean, <output>_std,
+    /// <output>` per simulated step (and an `episode` column first when there are several
+    /// trajectories). MCAP: one JSON message per step on `/msgp/prediction` with the measured
+    /// value, mean, std and mean ± 2 std of every output, for Foxglove's plot panel.
+    #[arg(long, value_name = "PRED.csv|PRED.mcap")]
     pub out: PathBuf,
     /// Add the one-step-ahead filtered predictions as `<output>_filtered_mean,
     /// <output>_filtered_std` columns (see `msgp eval --filtered`).

@@ -67,6 +67,17 @@ pub enum SimError {
         #[source]
         source: mcap::McapError,
     },
+    /// A Foxglove scene message could not be encoded (a schema missing from the `foxglove`
+    /// crate or a protobuf encoding failure: a bug, reported rather than written half).
+    #[error("cannot encode the Foxglove {what} for {path}: {message}")]
+    Scene {
+        /// The file concerned.
+        path: PathBuf,
+        /// Which message.
+        what: &'static str,
+        /// What went wrong.
+        message: String,
+    },
     /// The observer of [`crate::learn::learn_policy_observed`] asked the loop to stop.
     #[error("policy learning stopped by its observer at iteration {iteration}")]
     Stopped {

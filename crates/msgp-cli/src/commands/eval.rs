@@ -1,8 +1,6 @@
 //! `msgp eval` and `msgp simulate`: free simulation of data files with a saved model (and,
 //! with `--filtered`, one-step-ahead filtered predictions beside it).
 
-use std::fmt::Write as _;
-
 use anyhow::{Context, bail};
 use msgp_core::model::{Model, Rollout};
 use msgp_core::model_file::{ModelFile, write_atomically};
@@ -11,9 +9,10 @@ use serde_json::json;
 use crate::args::{DataArgs, EvalArgs, SimulateArgs};
 use crate::render::output::{out, out_json};
 use crate::render::plot::plot;
+use crate::render::prediction;
 use crate::render::report::{metrics_json, metrics_line, trajectories};
 use msgp_core::data::dataset::{Dataset, Part, Selection, check_lengths};
-use msgp_core::model::{Simulated, pool};
+use msgp_core::model::pool;
 
 /// The model, its file and the data sliced from `from`.
 struct Loaded {
@@ -157,57 +156,9 @@ fn rollout_note(rollout: Rollout) -> &'static str {
     }
 }
 
-/// The prediction CSV; with `filtered` (one per simulation, the same steps) two more columns
-/// per output.
-fn prediction_csv(
-    outputs: &[String],
-    sims: &[Simulated],
-    filtered: Option<&[Simulated]>,
-) -> String {
-    let several = sims.len() > 1;
-    let mut s = String::new();
-    if several {
-        s.push_str("episode,");
-    }
-    s.push('t');
-    for name in outputs {
-        // writing to a String cannot fail
-        let _ = write!(s, ",{name}_mean,{name}_std,{name}");
-        if filtered.is_some() {
-            let _ = write!(s, ",{name}_filtered_mean,{name}_filtered_std");
-        }
-    }
-    s.push('\n');
-    for (k, sim) in sims.iter().enumerate() {
-        let start = sim.sim.start;
-        for i in 0..sim.sim.mean.nrows() {
-            if several {
-                let _ = match sim.part.episode {
-                    Some(e) => write!(s, "{e},"),
-                    None => write!(s, "{k},"),
-                };
-            }
-            let _ = write!(s, "{}", sim.part.times[start + i]);
-            for j in 0..outputs.len() {
-                let _ = write!(
-                    s,
-                    ",{},{},{}",
-                    sim.sim.mean[(i, j)],
-                    sim.sim.var[(i, j)].max(0.0).sqrt(),
-                    sim.part.traj.y[(start + i, j)]
-                );
-                if let Some(f) = filtered.map(|f| &f[k].sim) {
-                    let _ = write!(s, ",{},{}", f.mean[(i, j)], f.var[(i, j)].max(0.0).sqrt());
-                }
-            }
-            s.push('\n');
-        }
-    }
-    s
-}
-
 /// Runs `msgp simulate`.
 pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
+    let format = prediction::Format::of(&args.out)?;
     let l = load(&args.model, &args.data, args.from)?;
     let rollout = Rollout::from(args.rollout);
     let sims = l.model.simulate_parts_as(&l.parts, rollout)?;
@@ -215,8 +166,8 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         true => Some(l.model.filtered_parts(&l.parts)?),
         false => None,
     };
-    let csv = prediction_csv(&l.data.outputs, &sims, filtered.as_deref());
-    write_atomically(&args.out, csv.as_bytes())
+    let bytes = prediction::encode(format, &l.data.outputs, &sims, filtered.as_deref())?;
+    write_atomically(&args.out, &bytes)
         .with_context(|| format!("cannot write predictions to {}", args.out.display()))?;
     let rows: usize = sims.iter().map(|s| s.sim.mean.nrows()).sum();
     let metrics = pool(

@@ -5,6 +5,7 @@
 pub mod cost_plot;
 pub mod output;
 pub mod plot;
+pub mod prediction;
 pub mod progress;
 pub mod report;
 pub mod results_file;

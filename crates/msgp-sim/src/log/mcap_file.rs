@@ -1,6 +1,6 @@
-//! MCAP run logs with JSON-encoded messages (opens in Foxglove).
+//! MCAP run logs with JSON-encoded messages and a 3D scene (opens in Foxglove).
 //!
-//! Every channel uses message encoding `json` and a schema with encoding `jsonschema`.
+//! The signal channels use message encoding `json` and a schema with encoding `jsonschema`.
 //! Each control step `k` produces one message on each topic, all with
 //! `log_time = publish_time = round(t·10⁹)` ns and `sequence = k`:
 //!
@@ -9,6 +9,12 @@
 //! | `/pendulum/measurement` | `msgp.pendulum.Measurement` | `step`, `t` \[s\], `theta` \[rad\], `x` \[m\] (noisy; what the controller sees) |
 //! | `/pendulum/command` | `msgp.pendulum.Command` | `step`, `t` \[s\], `acceleration` \[m/s²\] (issued, clipped) |
 //! | `/pendulum/latent` | `msgp.pendulum.Latent` | `step`, `t` \[s\], `theta` \[rad\], `theta_dot` \[rad/s\], `x` \[m\], `x_dot` \[m/s\], `lag_acceleration` \[m/s²\], `delayed_command` \[m/s²\] (**true latent state**, not measurable) |
+//!
+//! Two more channels carry the 3D scene in Foxglove's well-known schemas (protobuf encoded;
+//! [`super::scene`]): `/pendulum/tf` (`foxglove.FrameTransforms`, every step: the end
+//! effector and the pole from the true state) and `/pendulum/scene` (`foxglove.SceneUpdate`,
+//! once at the first step: rail, end effector, pole and its centre of mass), so Foxglove's 3D
+//! panel shows the pole move.
 //!
 //! The latent channel also carries the channel metadata `latent = true`. A metadata record
 //! named `msgp.pendulum.episode` holds `format_version` (`"1"`) and `episode`: the
@@ -19,11 +25,13 @@ use std::collections::{BTreeMap, HashMap};
 use std::io::{Seek, Write};
 use std::path::Path;
 
+use foxglove::Encode;
 use serde::{Deserialize, Serialize};
 
 use crate::episode::{Episode, EpisodeInfo, Sample};
 use crate::error::SimError;
 use crate::log::RunLog;
+use crate::log::scene;
 use crate::plant::{LatentState, Measurement};
 
 /// Topic of the noisy measurements.
@@ -115,6 +123,38 @@ fn write_to<W: Write + Seek>(w: W, episode: &Episode, path: &Path) -> Result<(),
         false,
     )?;
     let ch_lat = channel("msgp.pendulum.Latent", LATENT_SCHEMA, TOPIC_LATENT, true)?;
+    let scene_err = |what: &'static str, message: String| SimError::Scene {
+        path: path.to_owned(),
+        what,
+        message,
+    };
+    let mut foxglove_channel =
+        |topic: &str, what: &'static str, schema: Option<foxglove::Schema>, encoding: String| {
+            let schema = schema.ok_or_else(|| scene_err(what, "the schema is missing".into()))?;
+            let schema_id = writer
+                .add_schema(&schema.name, &schema.encoding, &schema.data)
+                .map_err(mcap_err)?;
+            writer
+                .add_channel(schema_id, topic, &encoding, &BTreeMap::new())
+                .map_err(mcap_err)
+        };
+    let ch_tf = foxglove_channel(
+        scene::TOPIC_TRANSFORMS,
+        "FrameTransforms",
+        foxglove::messages::FrameTransforms::get_schema(),
+        foxglove::messages::FrameTransforms::get_message_encoding(),
+    )?;
+    let ch_scene = foxglove_channel(
+        scene::TOPIC_SCENE,
+        "SceneUpdate",
+        foxglove::messages::SceneUpdate::get_schema(),
+        foxglove::messages::SceneUpdate::get_message_encoding(),
+    )?;
+    let protobuf = |what: &'static str, msg: &dyn Fn(&mut Vec<u8>) -> Result<(), String>| {
+        let mut buf = Vec::new();
+        msg(&mut buf).map_err(|e| scene_err(what, e))?;
+        Ok::<_, SimError>(buf)
+    };
 
     let mut metadata = BTreeMap::new();
     metadata.insert("format_version".to_owned(), FORMAT_VERSION.to_owned());
@@ -167,6 +207,22 @@ fn write_to<W: Write + Seek>(w: W, episode: &Episode, path: &Path) -> Result<(),
         writer
             .write_to_known_channel(&header(ch_lat), &lat)
             .map_err(mcap_err)?;
+        let tf = scene::transforms(s.t, &s.latent);
+        let tf = protobuf("FrameTransforms", &|b| {
+            tf.encode(b).map_err(|e| e.to_string())
+        })?;
+        writer
+            .write_to_known_channel(&header(ch_tf), &tf)
+            .map_err(mcap_err)?;
+        if s.step == episode.samples[0].step {
+            let update = scene::scene(&episode.info.params, s.t);
+            let update = protobuf("SceneUpdate", &|b| {
+                update.encode(b).map_err(|e| e.to_string())
+            })?;
+            writer
+                .write_to_known_channel(&header(ch_scene), &update)
+                .map_err(mcap_err)?;
+        }
     }
     writer.finish().map_err(mcap_err)?;
     Ok(())

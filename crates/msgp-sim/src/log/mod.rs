@@ -6,6 +6,7 @@
 
 pub mod csv_file;
 pub mod mcap_file;
+pub mod scene;
 
 use std::path::Path;
 
