@@ -41,6 +41,7 @@ pub mod numeric;
 pub mod optim;
 pub mod policy;
 pub mod policy_search;
+pub mod reproduce;
 pub mod rollout;
 
 pub use error::{MsgpError, Result};

@@ -5,6 +5,7 @@
 //! - [`sim`]: the synthetic systems, the pendulum simulator, its stability test and the
 //!   policy-learning loop;
 //! - [`data`]: data files loaded as `msgp fit` loads them;
+//! - [`reproduce`]: the paper's Table 1 as independent units, for sweeps (`msgp.sweep`);
 //! - [`convert`]: numpy arrays ↔ matrices, Python containers ↔ JSON settings;
 //! - [`error`]: the exception hierarchy; no panic reaches Python.
 //!
@@ -14,6 +15,7 @@ pub mod convert;
 pub mod data;
 pub mod error;
 pub mod model;
+pub mod reproduce;
 pub mod sim;
 
 use pyo3::prelude::*;
@@ -35,5 +37,9 @@ fn _msgp(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sim::run_episode, m)?)?;
     m.add_function(wrap_pyfunction!(sim::stability_test, m)?)?;
     m.add_function(wrap_pyfunction!(sim::learn_policy, m)?)?;
+    m.add_function(wrap_pyfunction!(reproduce::table1_plan, m)?)?;
+    m.add_function(wrap_pyfunction!(reproduce::table1_unit, m)?)?;
+    m.add_function(wrap_pyfunction!(reproduce::table1_report, m)?)?;
+    m.add_function(wrap_pyfunction!(reproduce::update_results_section, m)?)?;
     Ok(())
 }

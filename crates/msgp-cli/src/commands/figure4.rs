@@ -10,7 +10,7 @@ use msgp_sim::learn::{IterationReport, LearnSettings};
 use crate::args::{BudgetArgs, Figure4Args, Figure4Model, ModelArg};
 use crate::commands::learn::{learn, model_name, settings, summary_json, write_outputs};
 use crate::render::cost_plot::plot_cost_bands;
-use crate::render::results_file::{machine, today};
+use msgp_core::reproduce::results::{machine, today};
 
 /// One finished run.
 struct Run {
@@ -141,7 +141,11 @@ pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
         .sum();
     let learned = settings(ModelArg::Msgp, 0, args.iterations, &args.budget)?;
     let markdown = render(args, &dir, &params, &learned, &runs, total, &plot);
-    crate::render::results_file::update_section(&args.out, &format!("figure4-{tier}"), &markdown)?;
+    msgp_core::reproduce::results::update_section(
+        &args.out,
+        &format!("figure4-{tier}"),
+        &markdown,
+    )?;
     crate::render::output::out(&markdown)
 }
 

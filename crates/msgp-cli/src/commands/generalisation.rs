@@ -20,7 +20,7 @@ use serde_json::json;
 use crate::args::GeneralisationArgs;
 use crate::render::output::{out, out_json};
 use crate::render::progress::FitBar;
-use crate::render::results_file::{machine, today};
+use msgp_core::reproduce::results::{machine, today};
 
 const METHODS: [Method; 2] = [Method::Msgp, Method::GpNarx];
 
@@ -173,7 +173,7 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
     }
     let seconds = started.elapsed().as_secs_f64();
     let markdown = render(args, &cases, seconds);
-    crate::render::results_file::update_section(&args.common.out, "generalisation", &markdown)?;
+    msgp_core::reproduce::results::update_section(&args.common.out, "generalisation", &markdown)?;
     if args.common.json {
         let rows: Vec<_> = cases
             .iter()

@@ -1,5 +1,5 @@
 //! What `msgp` shows: text and JSON lines on stdout ([`output`], [`report`]), markdown results
-//! files ([`results_file`]), PNG plots of simulations and cost curves ([`plot`], [`cost_plot`])
+//! files (`msgp_core::reproduce::results`), PNG plots of simulations and cost curves ([`plot`], [`cost_plot`])
 //! and progress bars on stderr ([`progress`]).
 
 pub mod cost_plot;
@@ -8,4 +8,3 @@ pub mod plot;
 pub mod prediction;
 pub mod progress;
 pub mod report;
-pub mod results_file;

@@ -29,6 +29,7 @@ from ._msgp import (
     stability_test,
     synthetic_system,
 )
+from . import sweep
 
 __all__ = [
     "InvalidInputError",
@@ -43,5 +44,6 @@ __all__ = [
     "load",
     "run_episode",
     "stability_test",
+    "sweep",
     "synthetic_system",
 ]

@@ -183,3 +183,35 @@ def learn_policy(
     takes minutes with the defaults. `progress` is called with
     each iteration's report as it completes; Ctrl-C or an exception it raises stops the loop
     within one model fit and raises."""
+
+def table1_plan(
+    seeds: Sequence[int],
+    *,
+    data_dir: Optional[PathLike] = None,
+    only: Optional[Sequence[str]] = None,
+    methods: Optional[Sequence[str]] = None,
+    likelihoods: Optional[Sequence[str]] = None,
+    inducing: int = 100,
+    iters: Optional[int] = None,
+    optimizer: str = "adam",
+) -> Dict[str, Any]:
+    """The validated plan of a Table 1 reproduction (as `msgp reproduce table1` takes its
+    options): {"plan", "units", "section"}; each unit is one benchmark × seed × column, in the
+    serial run's order. Used by `msgp.sweep`."""
+
+def table1_unit(plan: Dict[str, Any], unit: Dict[str, Any]) -> Dict[str, Any]:
+    """Fits one unit of a plan and returns its cell (metrics of the moment-matching and the
+    mean-feedback simulation, train seconds, iterations). Releases the GIL."""
+
+def table1_report(
+    plan: Dict[str, Any],
+    results: Sequence[Tuple[Dict[str, Any], Dict[str, Any]]],
+    command: str,
+    seconds: float,
+    machine: Optional[str] = None,
+) -> Dict[str, Any]:
+    """{"section", "markdown", "rows"} of a finished plan from its (unit, cell) pairs in any
+    order: the section `msgp reproduce table1` writes and the rows of its --json."""
+
+def update_results_section(path: PathLike, name: str, body: str) -> None:
+    """Replaces section `name` of the markdown file `path` (created when missing), atomically."""

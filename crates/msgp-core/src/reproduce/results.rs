@@ -1,10 +1,10 @@
-//! `RESULTS.md` holds several reproductions; each command owns one section between
+//! Results files: `RESULTS.md` holds several reproductions; each command owns one section between
 //! `<!-- msgp:NAME:begin -->` and `<!-- msgp:NAME:end -->` and replaces only that.
 
 use std::path::Path;
 
-use anyhow::Context;
-use msgp_core::model_file::write_atomically;
+use crate::error::{MsgpError, Result};
+use crate::model_file::write_atomically;
 
 fn markers(name: &str) -> (String, String) {
     (
@@ -31,14 +31,18 @@ pub fn with_section(text: &str, name: &str, body: &str) -> String {
 }
 
 /// Replaces section `name` of the markdown file at `path` (created when missing), atomically.
-pub fn update_section(path: &Path, name: &str, body: &str) -> anyhow::Result<()> {
+pub fn update_section(path: &Path, name: &str, body: &str) -> Result<()> {
     let old = match std::fs::read_to_string(path) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
-        Err(e) => return Err(e).with_context(|| format!("cannot read {}", path.display())),
+        Err(e) => {
+            return Err(MsgpError::File {
+                path: path.to_path_buf(),
+                message: format!("cannot read: {e}"),
+            });
+        }
     };
     write_atomically(path, with_section(&old, name, body).as_bytes())
-        .with_context(|| format!("cannot write {}", path.display()))
 }
 
 /// "2 CPUs (AMD EPYC …)" from the OS, best effort.

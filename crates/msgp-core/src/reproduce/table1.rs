@@ -1,0 +1,844 @@
+//! The paper's Table 1: free-simulation test RMSE of GP-NARX, PILCO's GP-NARX and MSGP on five
+//! synthetic and five real benchmarks, over several seeds, beside the paper's numbers, with
+//! MSGP trained on both likelihoods, the baselines simulated both by moment matching and by
+//! mean feedback, NLL and 2σ coverage.
+//!
+//! The reproduction is split so that any front end can spread it over workers and still write
+//! the same table: a [`Plan`] (validated settings) lists its independent [`Unit`]s (one
+//! benchmark × seed × column each), [`fit_unit`] computes one [`Cell`] (a seeded fit and its
+//! two test simulations; the same numbers on any machine and thread count), and
+//! [`assemble`] + [`render`] turn the cells into rows and the markdown section. `msgp
+//! reproduce table1` runs the units one after another; the Python `msgp.sweep.table1` runs them
+//! in processes or as Ray tasks.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::data::real::RealSeries;
+use crate::data::{Benchmark, NoiseScale, SyntheticSystem};
+use crate::error::{MsgpError, Result};
+use crate::fit::{FitOptimizer, FitProgress, FitSettings, MsgpSettings, fit};
+use crate::loss::Likelihood;
+use crate::model::{Method, Metrics, Rollout};
+use crate::numeric::parallel::Threads;
+
+/// One benchmark of Table 1 and the paper's RMSE for (GP-NARX, PILCO, MSGP).
+#[derive(Clone, Copy, Debug)]
+pub struct Task {
+    /// Short name (`synthetic4`, `dryer`, …), as `--only` takes it.
+    pub key: &'static str,
+    /// Row label of the table.
+    pub label: &'static str,
+    /// The paper's RMSE: GP-NARX, PILCO's GP-NARX, MSGP.
+    pub paper: [f64; 3],
+    /// Where the data come from.
+    pub source: Source,
+}
+
+/// Where a benchmark's data come from.
+#[derive(Clone, Copy, Debug)]
+pub enum Source {
+    /// Synthetic system `k` of Table 2, generated with the unit's seed.
+    Synthetic(u8),
+    /// A real series, read from the data folder.
+    Real(RealSeries),
+}
+
+/// The methods Table 1 compares.
+pub const METHODS: [Method; 3] = [Method::GpNarx, Method::PilcoNarx, Method::Msgp];
+
+/// The ten benchmarks, in the paper's order.
+pub fn tasks() -> Vec<Task> {
+    let syn = |k: u8, key, label, paper| Task {
+        key,
+        label,
+        paper,
+        source: Source::Synthetic(k),
+    };
+    let real = |s, key, label, paper| Task {
+        key,
+        label,
+        paper,
+        source: Source::Real(s),
+    };
+    vec![
+        syn(
+            1,
+            "synthetic1",
+            "Synthetic system 1",
+            [0.2265, 0.3511, 0.3805],
+        ),
+        syn(
+            2,
+            "synthetic2",
+            "Synthetic system 2",
+            [0.3535, 0.3467, 0.3424],
+        ),
+        syn(
+            3,
+            "synthetic3",
+            "Synthetic system 3",
+            [0.1572, 0.1487, 0.1341],
+        ),
+        syn(
+            4,
+            "synthetic4",
+            "Synthetic system 4",
+            [0.5711, 0.6016, 0.3287],
+        ),
+        syn(
+            5,
+            "synthetic5",
+            "Synthetic system 5",
+            [0.0164, 0.0150, 0.0143],
+        ),
+        real(
+            RealSeries::Actuator,
+            "actuator",
+            "Actuator",
+            [0.6376, 1.3767, 0.7124],
+        ),
+        real(
+            RealSeries::Ballbeam,
+            "ballbeam",
+            "Balancing (ballbeam)",
+            [0.0773, 0.0881, 0.0599],
+        ),
+        real(
+            RealSeries::Drives,
+            "drives",
+            "Drives",
+            [0.6888, 0.7024, 0.4217],
+        ),
+        real(
+            RealSeries::Furnace,
+            "furnace",
+            "Furnace",
+            [1.1996, 1.2012, 1.2013],
+        ),
+        real(
+            RealSeries::Dryer,
+            "dryer",
+            "Dryer",
+            [0.2856, 0.2956, 0.1523],
+        ),
+    ]
+}
+
+/// A column of the table: a method and, for MSGP, its likelihood.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Column {
+    /// GP-NARX, one-step marginal likelihood.
+    GpNarx,
+    /// PILCO's GP-NARX (one-step, with its hyperparameter penalties).
+    PilcoNarx,
+    /// MSGP on the paper's free-run likelihood.
+    Msgp,
+    /// MSGP on the filter likelihood.
+    MsgpFilter,
+}
+
+/// Every column, in table order.
+pub const COLUMNS: [Column; 4] = [
+    Column::GpNarx,
+    Column::PilcoNarx,
+    Column::Msgp,
+    Column::MsgpFilter,
+];
+
+impl Column {
+    /// The method fitted.
+    pub fn method(self) -> Method {
+        match self {
+            Column::GpNarx => Method::GpNarx,
+            Column::PilcoNarx => Method::PilcoNarx,
+            Column::Msgp | Column::MsgpFilter => Method::Msgp,
+        }
+    }
+
+    /// The paper's column of Table 1, if it has one.
+    pub fn paper(self) -> Option<usize> {
+        match self {
+            Column::GpNarx => Some(0),
+            Column::PilcoNarx => Some(1),
+            Column::Msgp => Some(2),
+            Column::MsgpFilter => None,
+        }
+    }
+
+    /// Short name (`msgp-filter`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            Column::GpNarx => "gp-narx",
+            Column::PilcoNarx => "pilco-narx",
+            Column::Msgp => "msgp",
+            Column::MsgpFilter => "msgp-filter",
+        }
+    }
+
+    /// Column heading.
+    pub fn label(self) -> &'static str {
+        match self {
+            Column::GpNarx => "GP-NARX",
+            Column::PilcoNarx => "PILCO GP-NARX",
+            Column::Msgp => "MSGP",
+            Column::MsgpFilter => "MSGP (filter)",
+        }
+    }
+
+    /// The rollout the column is judged by: the baselines' mean feedback is reported beside
+    /// their moment matching, MSGP is the paper's moment matching.
+    pub fn is_baseline(self) -> bool {
+        matches!(self, Column::GpNarx | Column::PilcoNarx)
+    }
+
+    /// Position in [`COLUMNS`].
+    pub fn index(self) -> usize {
+        COLUMNS.iter().position(|c| *c == self).unwrap_or(0)
+    }
+}
+
+/// One fitted cell: a column on one benchmark with one seed.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Cell {
+    /// Test metrics of the moment-matching and the mean-feedback simulation
+    /// ([`Rollout::ALL`] order).
+    pub metrics: [Metrics; 2],
+    /// Training wall time \[s\].
+    pub train_seconds: f64,
+    /// Solver iterations run.
+    pub iterations_run: usize,
+    /// The iteration whose parameters were kept.
+    pub best_iteration: usize,
+}
+
+/// One benchmark's results: per column, one cell per seed.
+#[derive(Debug)]
+pub struct Row {
+    /// The benchmark.
+    pub task: Task,
+    /// The first seed's data (sizes and history for the table).
+    pub bench: Benchmark,
+    /// Per column of [`COLUMNS`], the cells in seed order.
+    pub cells: Vec<Vec<Cell>>,
+}
+
+/// Mean and sample standard deviation.
+pub fn mean_std(v: &[f64]) -> Option<(f64, f64)> {
+    if v.is_empty() {
+        return None;
+    }
+    let n = v.len() as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    let var = if v.len() > 1 {
+        v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)
+    } else {
+        0.0
+    };
+    Some((mean, var.sqrt()))
+}
+
+/// `mean ± std` of `f` over a column's cells (just the value for one seed; `—` for none).
+fn stat(cells: &[Cell], digits: usize, f: impl Fn(&Cell) -> f64) -> String {
+    let v: Vec<f64> = cells.iter().map(f).collect();
+    match mean_std(&v) {
+        None => "—".into(),
+        Some((m, _)) if v.len() == 1 => format!("{m:.digits$}"),
+        Some((m, sd)) => format!("{m:.digits$} ± {sd:.digits$}"),
+    }
+}
+
+fn mean_of(cells: &[Cell], f: impl Fn(&Cell) -> f64) -> Option<f64> {
+    mean_std(&cells.iter().map(f).collect::<Vec<_>>()).map(|(m, _)| m)
+}
+
+const MM: usize = 0;
+const MEAN: usize = 1;
+
+/// The validated settings of one reproduction.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Plan {
+    /// Seeds of data generation (synthetic systems) and of the fits.
+    pub seeds: Vec<u64>,
+    /// Benchmark keys, in table order.
+    pub benchmarks: Vec<String>,
+    /// Columns, in table order.
+    pub columns: Vec<Column>,
+    /// Pseudo-inputs of every fit.
+    pub inducing: usize,
+    /// Most solver iterations on the MSGP loss (per recipe); `None`: the fit default.
+    pub iters: Option<usize>,
+    /// Solver of the MSGP loss.
+    pub optimizer: FitOptimizer,
+    /// Folder of the real series.
+    pub data_dir: PathBuf,
+}
+
+impl Plan {
+    /// Checks and orders the settings: `only` (benchmark keys; empty: all ten), `methods`
+    /// (empty: all three), `likelihoods` of the MSGP columns (empty: both), at least one seed.
+    pub fn new(
+        seeds: &[u64],
+        only: &[String],
+        methods: &[Method],
+        likelihoods: &[Likelihood],
+        inducing: usize,
+        iters: Option<usize>,
+        optimizer: FitOptimizer,
+        data_dir: &Path,
+    ) -> Result<Self> {
+        let invalid = |name, reason: String| MsgpError::InvalidSetting { name, reason };
+        if seeds.is_empty() {
+            return Err(invalid("seeds", "give at least one seed".into()));
+        }
+        if inducing == 0 {
+            return Err(invalid("inducing", "must be at least 1".into()));
+        }
+        if iters == Some(0) {
+            return Err(invalid("iters", "must be at least 1".into()));
+        }
+        let all = tasks();
+        if let Some(name) = only
+            .iter()
+            .find(|n| !all.iter().any(|t| t.key == n.as_str()))
+        {
+            return Err(invalid(
+                "only",
+                format!(
+                    "unknown benchmark `{name}` (choose from {})",
+                    all.iter().map(|t| t.key).collect::<Vec<_>>().join(", ")
+                ),
+            ));
+        }
+        if let Some(other) = methods.iter().find(|m| !METHODS.contains(m)) {
+            return Err(invalid(
+                "methods",
+                format!(
+                    "{}: table 1 compares the paper's methods (msgp, gp-narx, pilco-narx)",
+                    other.name()
+                ),
+            ));
+        }
+        let likelihoods = if likelihoods.is_empty() {
+            &[Likelihood::FreeRun, Likelihood::Filter][..]
+        } else {
+            likelihoods
+        };
+        let columns = COLUMNS
+            .into_iter()
+            .filter(|c| methods.is_empty() || methods.contains(&c.method()))
+            .filter(|c| match c {
+                Column::Msgp => likelihoods.contains(&Likelihood::FreeRun),
+                Column::MsgpFilter => likelihoods.contains(&Likelihood::Filter),
+                _ => true,
+            })
+            .collect();
+        Ok(Self {
+            seeds: seeds.to_vec(),
+            benchmarks: all
+                .iter()
+                .filter(|t| only.is_empty() || only.iter().any(|n| n == t.key))
+                .map(|t| t.key.to_string())
+                .collect(),
+            columns,
+            inducing,
+            iters,
+            optimizer,
+            data_dir: data_dir.to_path_buf(),
+        })
+    }
+
+    /// The independent units, in the order a serial run does them (benchmark, seed, column).
+    pub fn units(&self) -> Vec<Unit> {
+        let mut out = Vec::new();
+        for b in &self.benchmarks {
+            for &seed in &self.seeds {
+                for &column in &self.columns {
+                    out.push(Unit {
+                        benchmark: b.clone(),
+                        seed,
+                        column,
+                    });
+                }
+            }
+        }
+        out
+    }
+
+    /// The `RESULTS.md` section this plan writes: `table1`, or `table1-lbfgs` for L-BFGS.
+    pub fn section(&self) -> &'static str {
+        match self.optimizer {
+            FitOptimizer::Adam => "table1",
+            FitOptimizer::Lbfgs => "table1-lbfgs",
+        }
+    }
+}
+
+/// One independent piece of work: a column fitted on one benchmark with one seed.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Unit {
+    /// Benchmark key.
+    pub benchmark: String,
+    /// Seed of the data (synthetic) and of the fit.
+    pub seed: u64,
+    /// What is fitted.
+    pub column: Column,
+}
+
+impl Unit {
+    /// `msgp on dryer (seed 0)`.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} on {} (seed {})",
+            self.column.name(),
+            self.benchmark,
+            self.seed
+        )
+    }
+}
+
+/// The benchmark `key`.
+pub fn task(key: &str) -> Result<Task> {
+    tasks()
+        .into_iter()
+        .find(|t| t.key == key)
+        .ok_or_else(|| MsgpError::InvalidSetting {
+            name: "benchmark",
+            reason: format!("unknown benchmark `{key}`"),
+        })
+}
+
+/// The data of `task` for `seed` (synthetic: generated; real: read from `data_dir`).
+pub fn benchmark(task: &Task, seed: u64, data_dir: &Path) -> Result<Benchmark> {
+    match task.source {
+        Source::Synthetic(k) => SyntheticSystem::new(k)?.generate(seed, NoiseScale::StdDev),
+        Source::Real(s) => s.load(data_dir).map_err(|e| match e {
+            MsgpError::File { path, message } => MsgpError::File {
+                path,
+                message: format!(
+                    "{message} (the real series {} of Table 1; set the data folder or \
+                     MSGP_DATA_DIR)",
+                    s.name()
+                ),
+            },
+            other => other,
+        }),
+    }
+}
+
+/// Fits `unit` of `plan` and simulates the test part both ways; `progress` sees the fit.
+pub fn fit_unit(
+    plan: &Plan,
+    unit: &Unit,
+    threads: Threads,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<Cell> {
+    let task = task(&unit.benchmark)?;
+    let bench = benchmark(&task, unit.seed, &plan.data_dir)?;
+    let method = unit.column.method();
+    let mut settings = FitSettings {
+        ly: bench.ly,
+        lu: bench.lu,
+        seed: unit.seed,
+        threads,
+        ..FitSettings::new(method)
+    }
+    .with_inducing(plan.inducing);
+    if let Some(msgp) = settings.msgp_mut() {
+        msgp.optimizer = plan.optimizer;
+        if unit.column == Column::MsgpFilter {
+            msgp.likelihood = Likelihood::Filter;
+        }
+    }
+    if let (Some(n), Method::Msgp) = (plan.iters, method) {
+        settings = settings.with_solver_iterations(n);
+    }
+    let (model, report) = fit(std::slice::from_ref(&bench.train), &settings, progress)?;
+    let mm = model.evaluate_as(&bench.test, Rollout::ALL[MM])?;
+    let mean = model.evaluate_as(&bench.test, Rollout::ALL[MEAN])?;
+    Ok(Cell {
+        metrics: [mm, mean],
+        train_seconds: report.train_seconds,
+        iterations_run: report.iterations_run,
+        best_iteration: report.best_iteration,
+    })
+}
+
+/// The rows of the table from every unit's cell (any order; each unit exactly once).
+pub fn assemble(plan: &Plan, results: Vec<(Unit, Cell)>) -> Result<Vec<Row>> {
+    let units = plan.units();
+    let mut slots: Vec<Option<Cell>> = units.iter().map(|_| None).collect();
+    for (unit, cell) in results {
+        let Some(k) = units.iter().position(|u| *u == unit) else {
+            return Err(MsgpError::Data(format!(
+                "a result for {} is not part of this plan",
+                unit.describe()
+            )));
+        };
+        if slots[k].replace(cell).is_some() {
+            return Err(MsgpError::Data(format!(
+                "two results for {}",
+                unit.describe()
+            )));
+        }
+    }
+    let mut cells = units.into_iter().zip(slots);
+    let mut rows = Vec::with_capacity(plan.benchmarks.len());
+    for key in &plan.benchmarks {
+        let task = task(key)?;
+        let mut by_column: Vec<Vec<Cell>> = COLUMNS.iter().map(|_| Vec::new()).collect();
+        for _ in 0..plan.seeds.len() * plan.columns.len() {
+            match cells.next() {
+                Some((unit, Some(cell))) => by_column[unit.column.index()].push(cell),
+                Some((unit, None)) => {
+                    return Err(MsgpError::Data(format!(
+                        "no result for {}",
+                        unit.describe()
+                    )));
+                }
+                None => return Err(MsgpError::Data("fewer units than the plan".into())),
+            }
+        }
+        let bench = benchmark(&task, plan.seeds[0], &plan.data_dir)?;
+        rows.push(Row {
+            task,
+            bench,
+            cells: by_column,
+        });
+    }
+    Ok(rows)
+}
+
+/// The rows as JSON records, one per cell and rollout (what `--json` prints).
+pub fn rows_json(plan: &Plan, rows: &[Row]) -> Vec<serde_json::Value> {
+    let mut list = Vec::new();
+    for row in rows {
+        for &column in &plan.columns {
+            for (cell, seed) in row.cells[column.index()].iter().zip(&plan.seeds) {
+                for (k, rollout) in Rollout::ALL.into_iter().enumerate() {
+                    let m = &cell.metrics[k];
+                    list.push(serde_json::json!({
+                        "benchmark": row.task.key,
+                        "method": column.method().name(),
+                        "column": column.name(),
+                        "seed": seed,
+                        "rollout": rollout.name(),
+                        "rmse": m.rmse,
+                        "paper_rmse": column.paper().map(|i| row.task.paper[i]),
+                        "nll": m.nll,
+                        "coverage_2sigma": m.coverage_2sigma,
+                        "train_seconds": cell.train_seconds,
+                        "history": [row.bench.ly, row.bench.lu],
+                        "n_train": row.bench.train.len(),
+                        "n_test": row.bench.test.len(),
+                    }));
+                }
+            }
+        }
+    }
+    list
+}
+
+/// Where the markdown says the numbers came from.
+#[derive(Clone, Debug)]
+pub struct Provenance {
+    /// The command that produced them, as a user would type it (markdown: in code spans).
+    pub command: String,
+    /// Total wall time \[s\].
+    pub seconds: f64,
+    /// Where it ran (`2 CPUs (…)`, or a Ray cluster).
+    pub machine: String,
+    /// Date (UTC), `YYYY-MM-DD`.
+    pub date: String,
+}
+
+/// The RMSE table: ours (mean ± std over the seeds) beside the paper's; the baselines with
+/// moment-matching and mean-feedback simulations.
+pub fn rmse_table(rows: &[Row], columns: &[Column]) -> String {
+    let mut head = String::from("| Task ");
+    let mut rule = String::from("|---");
+    for c in columns {
+        if c.paper().is_some() {
+            let _ = write!(head, "| {} (paper) ", c.label());
+            rule.push_str("|---:");
+        }
+        if c.is_baseline() {
+            let _ = write!(head, "| {0} (ours, MM) | {0} (ours, mean) ", c.label());
+            rule.push_str("|---:|---:");
+        } else {
+            let _ = write!(head, "| {} (ours) ", c.label());
+            rule.push_str("|---:");
+        }
+    }
+    let mut s = format!("{head}|\n{rule}|\n");
+    for row in rows {
+        let _ = write!(s, "| {} ", row.task.label);
+        for c in columns {
+            let cells = &row.cells[c.index()];
+            if let Some(i) = c.paper() {
+                let _ = write!(s, "| {:.4} ", row.task.paper[i]);
+            }
+            let _ = write!(s, "| {} ", stat(cells, 4, |x| x.metrics[MM].rmse));
+            if c.is_baseline() {
+                let _ = write!(s, "| {} ", stat(cells, 4, |x| x.metrics[MEAN].rmse));
+            }
+        }
+        s.push_str("|\n");
+    }
+    s
+}
+
+/// The issue's targets, counted over the rows (seed means).
+pub fn targets(rows: &[Row], columns: &[Column]) -> Vec<String> {
+    let mut lines = Vec::new();
+    let rmse =
+        |row: &Row, c: Column, k: usize| mean_of(&row.cells[c.index()], |x| x.metrics[k].rmse);
+    for c in [Column::Msgp, Column::MsgpFilter] {
+        if !columns.contains(&c) {
+            continue;
+        }
+        let (mut at_paper, mut at_best, mut nll_better, mut n) = (0, 0, 0, 0);
+        for row in rows {
+            let Some(r) = rmse(row, c, MM) else { continue };
+            n += 1;
+            let paper_msgp = row.task.paper[2];
+            let best = row.task.paper.iter().copied().fold(f64::INFINITY, f64::min);
+            at_paper += usize::from(r <= paper_msgp);
+            at_best += usize::from(r <= best);
+            let nll = mean_of(&row.cells[c.index()], |x| x.metrics[MM].nll);
+            let base = mean_of(&row.cells[Column::GpNarx.index()], |x| x.metrics[MM].nll);
+            if let (Some(a), Some(b)) = (nll, base) {
+                nll_better += usize::from(a < b);
+            }
+        }
+        lines.push(format!(
+            "- {}: seed-mean RMSE at or below the paper's MSGP on {at_paper}/{n} rows, at or \
+             below the best column of Table 1 on {at_best}/{n}; NLL below GP-NARX's (MM) on \
+             {nll_better}/{n}",
+            c.label()
+        ));
+    }
+    for c in [Column::GpNarx, Column::PilcoNarx] {
+        if !columns.contains(&c) {
+            continue;
+        }
+        let (mut within, mut n) = (0, 0);
+        for row in rows {
+            let (Some(r), Some(i)) = (rmse(row, c, MEAN), c.paper()) else {
+                continue;
+            };
+            n += 1;
+            within += usize::from((r - row.task.paper[i]).abs() <= 0.1 * row.task.paper[i]);
+        }
+        lines.push(format!(
+            "- {} (mean feedback): within 10 % of the paper's column on {within}/{n} rows",
+            c.label()
+        ));
+    }
+    lines
+}
+
+/// The markdown section for `rows` (see [`Plan::section`]).
+pub fn render(plan: &Plan, rows: &[Row], provenance: &Provenance) -> String {
+    let columns = &plan.columns[..];
+    let (title, solver) = match plan.optimizer {
+        FitOptimizer::Adam => ("# Table 1, reproduced\n\n", "Adam"),
+        FitOptimizer::Lbfgs => (
+            "# Table 1, reproduced with MSGP fitted by L-BFGS\n\n",
+            "L-BFGS (`msgp_core::fit::FIT_LBFGS`, validation after every iteration)",
+        ),
+    };
+    let seeds: Vec<String> = plan.seeds.iter().map(|s| s.to_string()).collect();
+    let mut s = String::from(title);
+    let _ = writeln!(
+        s,
+        "Free-simulation RMSE on the test part (original units) of the paper's Table 1 \
+         (Doerr et al., CoRL 2017), ours beside the paper's, as mean ± sample standard \
+         deviation over seeds {seeds}. Synthetic systems: generated as in Table 2 with each \
+         seed, training noise `N(0, s)` read as a standard deviation (`docs/design.md`), \
+         noise-free test outputs. Real series: the paper's Table 3 splits and history lengths \
+         (first samples train, the rest test; only the fits' seeds vary). Every method: m = {m} \
+         pseudo-inputs; MSGP: the default protocol of `msgp_core::fit::MsgpSettings` with at \
+         most {iters} {solver} iterations. MM: moment-matching simulation (the paper's method \
+         and our default); mean: the predicted means fed back, no uncertainty propagated \
+         (`msgp eval --rollout mean`), the reading that matches the paper's baseline columns.\n",
+        seeds = seeds.join(", "),
+        m = plan.inducing,
+        iters = plan.iters.unwrap_or(MsgpSettings::default().iterations),
+    );
+    let _ = writeln!(s, "- Command: {}", provenance.command);
+    let _ = writeln!(
+        s,
+        "- Wall time: {:.0} s ({:.1} min) for {} fits, msgp {} on {}",
+        provenance.seconds,
+        provenance.seconds / 60.0,
+        rows.iter()
+            .map(|r| r.cells.iter().map(Vec::len).sum::<usize>())
+            .sum::<usize>(),
+        env!("CARGO_PKG_VERSION"),
+        provenance.machine
+    );
+    let _ = writeln!(s, "- Date (UTC): {}\n", provenance.date);
+    s.push_str("## RMSE\n\n");
+    s.push_str(&rmse_table(rows, columns));
+    s.push('\n');
+    for line in targets(rows, columns) {
+        let _ = writeln!(s, "{line}");
+    }
+    let _ = write!(
+        s,
+        "\n## Our calibration\n\nMean negative log predictive density per step (NLL, original \
+         units) and the fraction of test outputs inside mean ± 2σ, per rollout, with the \
+         training time (means ± standard deviations over the seeds).\n\n\
+         | Task | method | rollout | RMSE | NLL/step | 2σ coverage | train s | {} iterations (kept) |\n\
+         |---|---|---|---:|---:|---:|---:|---:|\n",
+        plan.optimizer.name()
+    );
+    for row in rows {
+        for &c in columns {
+            let cells = &row.cells[c.index()];
+            if cells.is_empty() {
+                continue;
+            }
+            for (k, rollout) in Rollout::ALL.into_iter().enumerate() {
+                let iters = if c.method() == Method::Msgp {
+                    cells
+                        .iter()
+                        .map(|x| format!("{} ({})", x.iterations_run, x.best_iteration))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                } else {
+                    "—".to_string()
+                };
+                let _ = writeln!(
+                    s,
+                    "| {} | {} | {} | {} | {} | {} | {} | {} |",
+                    row.task.label,
+                    c.name(),
+                    rollout.name(),
+                    stat(cells, 4, |x| x.metrics[k].rmse),
+                    stat(cells, 3, |x| x.metrics[k].nll),
+                    stat(cells, 3, |x| x.metrics[k].coverage_2sigma),
+                    stat(cells, 1, |x| x.train_seconds),
+                    iters
+                );
+            }
+        }
+    }
+    s.push_str(
+        "\n## Data\n\n| Task | training samples | test samples | l_y, l_u |\n|---|---:|---:|---|\n",
+    );
+    for row in rows {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {}, {} |",
+            row.task.label,
+            row.bench.train.len(),
+            row.bench.test.len(),
+            row.bench.ly,
+            row.bench.lu
+        );
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mean_and_sample_standard_deviation() {
+        assert_eq!(mean_std(&[]), None);
+        assert_eq!(mean_std(&[2.0]), Some((2.0, 0.0)));
+        let (m, sd) = mean_std(&[1.0, 2.0, 3.0]).expect("three");
+        assert!((m - 2.0).abs() < 1e-15 && (sd - 1.0).abs() < 1e-15);
+    }
+
+    fn cell(x: f64) -> Cell {
+        let m = Metrics {
+            rmse: x,
+            nll: -x,
+            coverage_2sigma: 0.5,
+            steps: 10,
+        };
+        Cell {
+            metrics: [m, m],
+            train_seconds: 0.0,
+            iterations_run: 1,
+            best_iteration: 1,
+        }
+    }
+
+    #[test]
+    fn results_assemble_in_any_order_and_every_unit_exactly_once() {
+        let only = ["synthetic2".to_string(), "synthetic5".to_string()];
+        let plan = Plan::new(
+            &[3, 1],
+            &only,
+            &[Method::GpNarx, Method::Msgp],
+            &[Likelihood::Filter],
+            10,
+            None,
+            FitOptimizer::Adam,
+            Path::new("nowhere"),
+        )
+        .expect("plan");
+        assert_eq!(plan.columns, [Column::GpNarx, Column::MsgpFilter]);
+        let units = plan.units();
+        assert_eq!(units.len(), 8);
+        assert_eq!(units[1].describe(), "msgp-filter on synthetic2 (seed 3)");
+        let numbered: Vec<(Unit, Cell)> = units
+            .iter()
+            .enumerate()
+            .map(|(k, u)| (u.clone(), cell(k as f64)))
+            .collect();
+        let in_order = assemble(&plan, numbered.clone()).expect("rows");
+        let reversed = assemble(&plan, numbered.iter().rev().cloned().collect()).expect("rows");
+        for (a, b) in in_order.iter().zip(&reversed) {
+            assert_eq!(a.cells, b.cells);
+        }
+        // synthetic5, msgp-filter: units 5 (seed 3) and 7 (seed 1), in seed order
+        let col = &in_order[1].cells[Column::MsgpFilter.index()];
+        assert_eq!(
+            col.iter().map(|c| c.metrics[0].rmse).collect::<Vec<_>>(),
+            [5.0, 7.0]
+        );
+        let e = assemble(&plan, numbered[1..].to_vec()).expect_err("missing");
+        assert!(
+            e.to_string()
+                .contains("no result for gp-narx on synthetic2 (seed 3)"),
+            "{e}"
+        );
+        let mut twice = numbered.clone();
+        twice.push(numbered[0].clone());
+        let e = assemble(&plan, twice).expect_err("duplicate");
+        assert!(e.to_string().contains("two results for"), "{e}");
+        let mut foreign = numbered.clone();
+        foreign[0].0.seed = 9;
+        let e = assemble(&plan, foreign).expect_err("foreign");
+        assert!(e.to_string().contains("not part of this plan"), "{e}");
+        let e = Plan::new(
+            &[0],
+            &["x".into()],
+            &[],
+            &[],
+            10,
+            None,
+            FitOptimizer::Adam,
+            Path::new("."),
+        )
+        .expect_err("unknown benchmark");
+        assert!(e.to_string().contains("unknown benchmark `x`"), "{e}");
+    }
+
+    #[test]
+    fn ten_tasks_with_paper_numbers() {
+        let t = tasks();
+        assert_eq!(t.len(), 10);
+        assert_eq!(t[3].paper, [0.5711, 0.6016, 0.3287]);
+        assert_eq!(t[9].key, "dryer");
+    }
+}

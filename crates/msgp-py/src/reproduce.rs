@@ -1,0 +1,154 @@
+//! The paper's reproductions as independent units, for `msgp.sweep`: a plan, one unit's fit,
+//! and the report (markdown section and rows) from every unit's result — the same library
+//! calls as `msgp reproduce table1`, so a sweep spread over processes or a Ray cluster writes
+//! the numbers of the serial command line run.
+
+use std::path::PathBuf;
+
+use msgp_core::fit::{FitOptimizer, FitProgress};
+use msgp_core::loss::Likelihood;
+use msgp_core::numeric::parallel::Threads;
+use msgp_core::reproduce::results::{machine, today, update_section};
+use msgp_core::reproduce::table1::{self, Cell, Plan, Provenance, Unit};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use serde::de::DeserializeOwned;
+
+use crate::convert::{to_json, to_python};
+use crate::error::{Result, detached, input};
+use crate::model::method;
+
+/// A plan, unit or cell given back by Python (a dict made by the functions below).
+fn parse<T: DeserializeOwned>(obj: &Bound<'_, PyAny>, what: &str) -> Result<T> {
+    serde_json::from_value(to_json(obj, what)?).map_err(|e| {
+        input(format!(
+            "{what} is not a table 1 {what} of this msgp version: {e}"
+        ))
+    })
+}
+
+fn likelihood(name: &str) -> Result<Likelihood> {
+    match name {
+        "free-run" => Ok(Likelihood::FreeRun),
+        "filter" => Ok(Likelihood::Filter),
+        _ => Err(input(format!(
+            "unknown likelihood {name:?}: expected \"free-run\" or \"filter\""
+        ))),
+    }
+}
+
+/// The validated plan of a Table 1 reproduction (as `msgp reproduce table1` takes its options)
+/// as a dict, with its independent `units` (one benchmark × seed × column each, in the serial
+/// run's order). `data_dir` holds the real series (default: `$MSGP_DATA_DIR`, else
+/// `../shared/data/real`, as the command line).
+#[pyfunction]
+#[pyo3(signature = (seeds, *, data_dir = None, only = None, methods = None, likelihoods = None, inducing = 100, iters = None, optimizer = "adam"))]
+#[allow(clippy::too_many_arguments)]
+pub fn table1_plan<'py>(
+    py: Python<'py>,
+    seeds: Vec<u64>,
+    data_dir: Option<PathBuf>,
+    only: Option<Vec<String>>,
+    methods: Option<Vec<String>>,
+    likelihoods: Option<Vec<String>>,
+    inducing: usize,
+    iters: Option<usize>,
+    optimizer: &str,
+) -> PyResult<Bound<'py, PyDict>> {
+    let methods = methods
+        .unwrap_or_default()
+        .iter()
+        .map(|m| method(m))
+        .collect::<Result<Vec<_>>>()?;
+    let likelihoods = likelihoods
+        .unwrap_or_default()
+        .iter()
+        .map(|l| likelihood(l))
+        .collect::<Result<Vec<_>>>()?;
+    let optimizer = match optimizer {
+        "adam" => FitOptimizer::Adam,
+        "lbfgs" => FitOptimizer::Lbfgs,
+        other => {
+            return Err(input(format!(
+                "unknown optimizer {other:?}: expected \"adam\" or \"lbfgs\""
+            ))
+            .into());
+        }
+    };
+    let plan = Plan::new(
+        &seeds,
+        &only.unwrap_or_default(),
+        &methods,
+        &likelihoods,
+        inducing,
+        iters,
+        optimizer,
+        &data_dir.unwrap_or_else(|| msgp_core::data::real::data_dir(std::path::Path::new("."))),
+    )
+    .map_err(crate::error::Error::from)?;
+    let out = PyDict::new(py);
+    out.set_item("plan", to_python(py, &plan)?)?;
+    out.set_item("units", to_python(py, &plan.units())?)?;
+    out.set_item("section", plan.section())?;
+    Ok(out)
+}
+
+/// Fits one unit of `plan` (both from `table1_plan`) and returns its cell: the test metrics of
+/// the moment-matching and mean-feedback simulations, train time and iterations. Releases the
+/// GIL; the same numbers on every machine and thread count.
+#[pyfunction]
+pub fn table1_unit<'py>(
+    py: Python<'py>,
+    plan: &Bound<'py, PyAny>,
+    unit: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let plan: Plan = parse(plan, "plan")?;
+    let unit: Unit = parse(unit, "unit")?;
+    let threads = Threads::from_env().map_err(crate::error::Error::from)?;
+    let cell = detached(py, || {
+        table1::fit_unit(&plan, &unit, threads, &mut |_: &FitProgress| {})
+            .map_err(crate::error::Error::from)
+    })?;
+    to_python(py, &cell)
+}
+
+/// The report of a finished plan from `results`, a list of `(unit, cell)` pairs in any order:
+/// `{"section", "markdown", "rows"}` — the markdown section `msgp reproduce table1` writes and
+/// the rows its `--json` prints. `command` (markdown) and `seconds` go into the provenance
+/// lines, `machine` too (default: this machine's CPUs).
+#[pyfunction]
+#[pyo3(signature = (plan, results, command, seconds, machine = None))]
+pub fn table1_report<'py>(
+    py: Python<'py>,
+    plan: &Bound<'py, PyAny>,
+    results: Vec<(Bound<'py, PyAny>, Bound<'py, PyAny>)>,
+    command: String,
+    seconds: f64,
+    machine: Option<String>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let plan: Plan = parse(plan, "plan")?;
+    let results = results
+        .iter()
+        .map(|(u, c)| Ok((parse::<Unit>(u, "unit")?, parse::<Cell>(c, "cell")?)))
+        .collect::<Result<Vec<_>>>()?;
+    let rows = table1::assemble(&plan, results).map_err(crate::error::Error::from)?;
+    let provenance = Provenance {
+        command,
+        seconds,
+        machine: machine.unwrap_or_else(self::machine),
+        date: today(),
+    };
+    let out = PyDict::new(py);
+    out.set_item("section", plan.section())?;
+    out.set_item("markdown", table1::render(&plan, &rows, &provenance))?;
+    out.set_item("rows", to_python(py, &table1::rows_json(&plan, &rows))?)?;
+    Ok(out)
+}
+
+/// Replaces section `name` of the markdown file `path` (created when missing) by `body`,
+/// atomically, as the `msgp reproduce` commands do.
+#[pyfunction]
+pub fn update_results_section(path: PathBuf, name: &str, body: &str) -> PyResult<()> {
+    update_section(&path, name, body).map_err(crate::error::Error::from)?;
+    Ok(())
+}
