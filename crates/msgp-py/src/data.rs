@@ -34,7 +34,8 @@ fn paths(files: &Bound<'_, PyAny>) -> Result<Vec<PathBuf>> {
 /// position), an `episode` column or several files giving several trajectories. Returns a dict:
 /// `inputs`, `outputs` (the names chosen) and `parts`, a list of dicts `source`, `episode`
 /// (None without an episode column), `t` (the time column, or the row number), `u` (T × d_u)
-/// and `y` (T × d_y) numpy arrays. Bad data raise `InvalidInputError` naming the file, line and
+/// and `y` (T × d_y) numpy arrays, and `warnings`, lines about the data that do not stop the
+/// load (an irregular time step). Bad data raise `InvalidInputError` naming the file, line and
 /// column. MCAP logs are read by the `msgp` command line (this module is built without MCAP).
 #[pyfunction]
 #[pyo3(signature = (files, *, inputs = None, outputs = None, topic = None))]
@@ -70,5 +71,6 @@ pub fn load<'py>(
     out.set_item("inputs", &data.inputs)?;
     out.set_item("outputs", &data.outputs)?;
     out.set_item("parts", parts)?;
+    out.set_item("warnings", &data.warnings)?;
     Ok(out)
 }

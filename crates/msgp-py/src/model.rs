@@ -387,6 +387,16 @@ impl Msgp {
         if let Some(n) = inputs.iter().find(|n| outputs.contains(n)) {
             return Err(input(format!("{n:?} is both an input and an output name")).into());
         }
+        if let Some(note) = options.inducing_warning(&train) {
+            // what `msgp fit` prints as a warning: the fit goes on with what it says
+            let warning = py.get_type::<pyo3::exceptions::PyUserWarning>();
+            PyErr::warn(
+                py,
+                &warning,
+                &std::ffi::CString::new(note).unwrap_or_default(),
+                1,
+            )?;
+        }
         let fitted = detached(py, move || -> Result<std::result::Result<Fitted, PyErr>> {
             let settings = Msgp::settings(&options, overrides.as_ref(), &train)?;
             let mut raised = None;

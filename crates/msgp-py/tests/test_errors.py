@@ -202,3 +202,33 @@ def test_the_msgp_likelihood_is_a_setting():
         msgp.Msgp(method="gp-narx", settings={"likelihood": "filter"})
     with pytest.raises(ValueError, match="settings.likelihood"):
         msgp.Msgp(settings={"likelihood": "kalman"})
+
+
+def test_warnings_about_the_data_do_not_stop_a_fit(tmp_path):
+    """Too few training windows for the pseudo-inputs and an irregular time step are warnings
+    that say what was done, in Python and on the command line (stderr and --json)."""
+    import subprocess
+
+    from conftest import msgp_bin
+
+    with pytest.warns(UserWarning, match="only 4 windows .* so the model gets 2 pseudo-inputs"):
+        msgp.Msgp(iterations=2).fit(U[:6], Y[:6])
+    with pytest.warns(UserWarning, match="100 pseudo-inputs requested but .* 58 windows"):
+        msgp.Msgp(inducing=100, iterations=1, method="gp-narx").fit(U, Y)
+    t = np.arange(60) * 0.02
+    t[30:] += 0.02  # one dropped sample
+    path = tmp_path / "gap.csv"
+    rows = zip(t.tolist(), U.tolist(), Y.tolist())
+    path.write_text("t,u,y\n" + "".join(f"{a!r},{b!r},{c!r}\n" for a, b, c in rows))
+    loaded = msgp.load(path)
+    (warning,) = loaded["warnings"]
+    assert "gap.csv: the time step of `t` is irregular: 1 of 59 steps" in warning
+    assert "line 32 (a step of 0.04, 100 % off)" in warning
+    proc = subprocess.run(
+        [str(msgp_bin()), "fit", "--data", path, "--method", "gp-narx", "--iters", "2", "--json",
+         "--out", tmp_path / "m.json"],
+        capture_output=True, text=True, timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert f"warning: {warning}" in proc.stderr
+    assert json.loads(proc.stdout)["warnings"] == [warning]

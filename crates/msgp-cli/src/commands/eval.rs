@@ -57,6 +57,9 @@ fn load(model_path: &std::path::Path, args: &DataArgs, from: usize) -> anyhow::R
             time: args.time.into(),
         },
     )?;
+    for w in &data.warnings {
+        eprintln!("warning: {w}");
+    }
     let mut parts = Vec::new();
     for p in &data.parts {
         if from >= p.traj.len() {

@@ -40,6 +40,7 @@ fn files(paths: &[PathBuf]) -> String {
 /// Runs `msgp fit`.
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let data = Dataset::load(&args.data.data, &args.data.selection())?;
+    let mut warnings = data.warnings.clone();
     let how = match (args.train, args.train_frac) {
         (Some(n), _) => Split::Count(n),
         (None, Some(f)) if f > 0.0 && f <= 1.0 => Split::Fraction(f),
@@ -64,7 +65,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     }
     let trajs: Vec<Trajectory> = train.iter().map(|p| p.traj.clone()).collect();
     // the same settings as the Python `msgp.Msgp` for the same options
-    let settings = FitOptions {
+    let options = FitOptions {
         method,
         ly,
         lu,
@@ -76,8 +77,12 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         optimizer: args.optimizer.into(),
         likelihood: args.likelihood.map_or(Likelihood::default(), Into::into),
         threads: Threads::from_env()?,
+    };
+    let settings = options.settings(&trajs)?;
+    warnings.extend(options.inducing_warning(&trajs));
+    for w in &warnings {
+        eprintln!("warning: {w}");
     }
-    .settings(&trajs)?;
     let n_train: usize = trajs.iter().map(Trajectory::len).sum();
     let label = format!(
         "{} on {}",
@@ -160,6 +165,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             "model": model_path.display().to_string(),
             "plot": args.plot.as_ref().map(|p| p.display().to_string()),
             "data_hash": file.training.data_hash,
+            "warnings": warnings,
         });
         metrics_json(&mut v, metrics.as_ref());
         return out_json(&v);

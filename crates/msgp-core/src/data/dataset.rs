@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 #[cfg(feature = "mcap")]
 use super::mcap::{McapLog, Signal};
-use super::table::{EPISODE_COLUMN, Table, TimeSource};
+use super::table::{EPISODE_COLUMN, IRREGULAR_STEP_TOLERANCE, Table, TimeSource};
 use super::trajectory::Trajectory;
 use crate::error::{MsgpError, Result};
 
@@ -63,6 +63,9 @@ pub struct Dataset {
     pub outputs: Vec<String>,
     /// The trajectories.
     pub parts: Vec<Part>,
+    /// What a user should know about the data but that does not stop the load (an irregular
+    /// time step), one line each, naming the file.
+    pub warnings: Vec<String>,
 }
 
 /// What the user asked for: explicit names, or the defaults above.
@@ -290,8 +293,10 @@ impl Dataset {
     pub fn load(files: &[PathBuf], sel: &Selection<'_>) -> Result<Self> {
         let mut names = None;
         let mut parts = Vec::new();
+        let mut warnings = Vec::new();
         for path in files {
             let table = load_file(path, sel, &mut names)?;
+            warnings.extend(table.irregular_steps(IRREGULAR_STEP_TOLERANCE));
             let Some((inputs, outputs)) = &names else {
                 return Err(MsgpError::Data("no columns selected".into()));
             };
@@ -322,6 +327,7 @@ impl Dataset {
             inputs,
             outputs,
             parts,
+            warnings,
         })
     }
 }

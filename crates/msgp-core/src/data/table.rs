@@ -21,6 +21,10 @@ use crate::error::{MsgpError, Result};
 /// Name of the column whose value changes mark the start of a new trajectory.
 pub const EPISODE_COLUMN: &str = "episode";
 
+/// Relative deviation of a time step from its trajectory's median above which the data
+/// loader warns ([`Table::irregular_steps`]): far above clock jitter, well below a dropped sample.
+pub const IRREGULAR_STEP_TOLERANCE: f64 = 0.25;
+
 /// Names accepted for a time column (matched case-insensitively), in order of preference.
 pub const TIME_COLUMNS: [&str; 2] = ["t", "time"];
 
@@ -212,6 +216,56 @@ impl Table {
             }
         }
         Ok(())
+    }
+
+    /// A warning when the time column's steps are not (nearly) equal within a trajectory: some
+    /// step differs from the median step of its trajectory by more than `tolerance` (relative).
+    /// The models assume equally spaced samples; a dropped sample or an irregular log breaks
+    /// that silently. Says how many steps are off and where the worst one is.
+    pub fn irregular_steps(&self, tolerance: f64) -> Option<String> {
+        let j = self.time_column()?;
+        let (mut off, mut total) = (0usize, 0usize);
+        let mut worst: Option<(f64, usize, f64, f64)> = None; // (deviation, row, step, median)
+        for range in self.episodes() {
+            let mut steps: Vec<f64> = (range.start + 1..range.end)
+                .map(|i| self.rows[i][j] - self.rows[i - 1][j])
+                .collect();
+            if steps.is_empty() {
+                continue;
+            }
+            let raw = steps.clone();
+            steps.sort_by(f64::total_cmp);
+            let median = steps[steps.len() / 2];
+            if median <= 0.0 {
+                continue;
+            }
+            total += raw.len();
+            for (k, step) in raw.into_iter().enumerate() {
+                let deviation = (step - median).abs() / median;
+                if deviation > tolerance {
+                    off += 1;
+                    if worst.is_none_or(|w| deviation > w.0) {
+                        worst = Some((deviation, range.start + 1 + k, step, median));
+                    }
+                }
+            }
+        }
+        let (deviation, row, step, median) = worst?;
+        let short = |x: f64| {
+            let t = format!("{x:.6}");
+            t.trim_end_matches('0').trim_end_matches('.').to_string()
+        };
+        let (step, median) = (short(step), short(median));
+        Some(format!(
+            "{}: the time step of `{}` is irregular: {off} of {total} steps differ from their \
+             trajectory's median step ({median}) by more than {:.0} %, the most at line {} \
+             (a step of {step}, {:.0} % off); the models assume equally spaced samples",
+            self.path.display(),
+            self.columns[j],
+            100.0 * tolerance,
+            self.lines[row],
+            100.0 * deviation
+        ))
     }
 
     /// Row ranges of the trajectories: one per contiguous run of equal values in the
@@ -418,5 +472,26 @@ mod tests {
             .expect_err("repeat inside episode 1")
             .to_string();
         assert!(in_episode.starts_with("x.csv:5:1:"), "{in_episode}");
+    }
+
+    #[test]
+    fn an_irregular_time_step_is_a_warning_naming_the_line() {
+        let steps = |csv: &str| parse(csv).expect("parses").irregular_steps(0.25);
+        // 1 % jitter is not irregular; a dropped sample (a double step) is, at its line
+        let even = "t,u\n0,1\n1.01,1\n2,1\n3.01,1\n4,1\n";
+        assert_eq!(steps(even), None);
+        let gap = steps("t,u\n0,1\n1,1\n2,1\n4,1\n5,1\n").expect("gap");
+        assert!(
+            gap.starts_with("x.csv: the time step of `t` is irregular: 1 of 4 steps"),
+            "{gap}"
+        );
+        assert!(
+            gap.contains("median step (1)") && gap.contains("line 5 (a step of 2, 100 % off)"),
+            "{gap}"
+        );
+        // the median is per trajectory: two episodes at different rates are regular
+        let two = "t,u,episode\n0,1,0\n1,1,0\n2,1,0\n0,1,1\n0.5,1,1\n1,1,1\n";
+        assert_eq!(steps(two), None);
+        assert_eq!(steps("u,y\n1,2\n3,4\n"), None, "no time column");
     }
 }

@@ -550,7 +550,50 @@ pub struct FitOptions {
     pub threads: Threads,
 }
 
+/// Fewer default pseudo-inputs than this make [`FitOptions::inducing_warning`] speak up.
+pub const FEW_INDUCING: usize = 10;
+
 impl FitOptions {
+    /// Training windows of `train`: per trajectory, the samples after the history.
+    fn windows(&self, train: &[Trajectory]) -> usize {
+        let warmup = self.ly.max(self.lu);
+        train.iter().map(|t| t.len().saturating_sub(warmup)).sum()
+    }
+
+    /// The pseudo-inputs a GP fit of `train` gets: the requested number, or the default.
+    fn chosen_inducing(&self, windows: usize) -> usize {
+        self.inducing
+            .unwrap_or_else(|| DEFAULT_MAX_INDUCING.min((windows / 2).max(1)))
+    }
+
+    /// A warning when the pseudo-inputs the fit of `train` gets are not what a user would
+    /// expect: more requested than there are training windows (all windows are used instead),
+    /// or so few windows that the default gives fewer than [`FEW_INDUCING`].
+    pub fn inducing_warning(&self, train: &[Trajectory]) -> Option<String> {
+        if self.method == Method::LinearKf {
+            return None;
+        }
+        let windows = self.windows(train);
+        let m = self.chosen_inducing(windows);
+        match self.inducing {
+            Some(asked) if asked > windows => Some(format!(
+                "{asked} pseudo-inputs requested but the training part has only {windows} \
+                 windows (samples after the history l_y={}, l_u={}): all {windows} are used",
+                self.ly, self.lu
+            )),
+            None if m < FEW_INDUCING => Some(format!(
+                "the training part has only {windows} windows (samples after the history \
+                 l_y={}, l_u={}), so the model gets {m} pseudo-input{} (the default is \
+                 min({DEFAULT_MAX_INDUCING}, windows / 2)); expect a poor model: give more \
+                 data, a larger training part or a shorter history",
+                self.ly,
+                self.lu,
+                if m == 1 { "" } else { "s" }
+            )),
+            _ => None,
+        }
+    }
+
     /// The full settings for fitting `train`, every other field at the method's default,
     /// checked against the data ([`FitSettings::validate`]).
     pub fn settings(&self, train: &[Trajectory]) -> Result<FitSettings> {
@@ -560,11 +603,7 @@ impl FitOptions {
                 reason: "need at least one pseudo-input".into(),
             });
         }
-        let warmup = self.ly.max(self.lu);
-        let windows: usize = train.iter().map(|t| t.len().saturating_sub(warmup)).sum();
-        let inducing = self
-            .inducing
-            .unwrap_or_else(|| DEFAULT_MAX_INDUCING.min((windows / 2).max(1)));
+        let inducing = self.chosen_inducing(self.windows(train));
         let mean = self.mean.unwrap_or_default();
         let one_step = OneStepFitSettings {
             inducing,

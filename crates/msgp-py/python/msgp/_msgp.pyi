@@ -128,8 +128,9 @@ def load(
     outputs: Optional[Sequence[str]] = None,
     topic: Optional[str] = None,
 ) -> Dict[str, Any]:
-    """CSV data files read as `msgp fit --data` reads them: {"inputs", "outputs", "parts"},
-    each part {"source", "episode", "t", "u", "y"} (u, y: T × d arrays). Bad data raise
+    """CSV data files read as `msgp fit --data` reads them: {"inputs", "outputs", "parts",
+    "warnings"}, each part {"source", "episode", "t", "u", "y"} (u, y: T × d arrays); warnings
+    are lines about the data that do not stop the load (an irregular time step). Bad data raise
     InvalidInputError naming the file, line and column."""
 
 def synthetic_system(k: int, seed: int = 0, noise: str = "std") -> Dict[str, Any]:
