@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use msgp_sim::log::mcap_file::{TOPIC_COMMAND, TOPIC_LATENT, TOPIC_MEASUREMENT};
+use msgp_sim::log::scene::{TOPIC_SCENE, TOPIC_TRANSFORMS};
 use msgp_sim::{
     Episode, EpisodeConfig, ExcitationConfig, LogFormat, PendulumParams, PidPdGains, PidPdPolicy,
     PlantTier, RandomExcitation, SimError, Termination, encode_run, read_run, run_episode,
@@ -109,8 +110,32 @@ fn mcap_has_documented_topics_and_json_schemas() {
         .expect("summary present");
     let mut topics: Vec<_> = summary.channels.values().map(|c| c.topic.clone()).collect();
     topics.sort();
-    assert_eq!(topics, vec![TOPIC_COMMAND, TOPIC_LATENT, TOPIC_MEASUREMENT]);
+    assert_eq!(
+        topics,
+        vec![
+            TOPIC_COMMAND,
+            TOPIC_LATENT,
+            TOPIC_MEASUREMENT,
+            TOPIC_SCENE,
+            TOPIC_TRANSFORMS
+        ]
+    );
     for channel in summary.channels.values() {
+        if [TOPIC_SCENE, TOPIC_TRANSFORMS].contains(&channel.topic.as_str()) {
+            // the 3D scene: Foxglove's well-known protobuf schemas
+            let schema = channel.schema.as_ref().expect("schema present");
+            assert_eq!(
+                (channel.message_encoding.as_str(), schema.encoding.as_str()),
+                ("protobuf", "protobuf")
+            );
+            let expected = if channel.topic == TOPIC_SCENE {
+                "foxglove.SceneUpdate"
+            } else {
+                "foxglove.FrameTransforms"
+            };
+            assert_eq!(schema.name, expected);
+            continue;
+        }
         assert_eq!(channel.message_encoding, "json");
         let schema = channel.schema.as_ref().expect("schema present");
         assert_eq!(schema.encoding, "jsonschema");
@@ -123,11 +148,15 @@ fn mcap_has_documented_topics_and_json_schemas() {
         );
     }
     let stats = summary.stats.expect("statistics present");
-    assert_eq!(stats.message_count, 3 * episode.samples.len() as u64);
+    // per step three signals and a transform, and the scene once
+    assert_eq!(stats.message_count, 4 * episode.samples.len() as u64 + 1);
     // Messages are plain JSON objects with the documented fields and nanosecond log times.
     let mut seen = 0;
     for message in mcap::MessageStream::new(&bytes).expect("stream") {
         let message = message.expect("message parses");
+        if message.channel.message_encoding == "protobuf" {
+            continue;
+        }
         let value: serde_json::Value = serde_json::from_slice(&message.data).expect("JSON body");
         let step = value["step"].as_u64().expect("step field") as usize;
         let sample = &episode.samples[step];

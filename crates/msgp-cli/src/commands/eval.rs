@@ -161,7 +161,7 @@ fn rollout_note(rollout: Rollout) -> &'static str {
 
 /// Runs `msgp simulate`.
 pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
-    let format = prediction::Format::of(&args.out)?;
+    let format = prediction::format_of(&args.out)?;
     let l = load(&args.model, &args.data, args.from)?;
     let rollout = Rollout::from(args.rollout);
     let sims = l.model.simulate_parts_as(&l.parts, rollout)?;

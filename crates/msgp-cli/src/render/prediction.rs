@@ -17,35 +17,21 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use msgp_core::model::Simulated;
 use serde_json::json;
 
-/// The format of a prediction file.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Format {
-    /// Comma-separated values.
-    Csv,
-    /// An MCAP log of JSON messages.
-    Mcap,
-}
+/// The format of a prediction file: the run logs' choice by extension (`.csv` or `.mcap`).
+pub use msgp_sim::log::LogFormat as Format;
 
-impl Format {
-    /// The format `path`'s extension names (`.csv` or `.mcap`, any case).
-    pub fn of(path: &Path) -> anyhow::Result<Self> {
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
-        match ext.as_deref() {
-            Some("csv") => Ok(Self::Csv),
-            Some("mcap") => Ok(Self::Mcap),
-            _ => bail!(
-                "--out {}: the prediction file's extension must be .csv or .mcap",
-                path.display()
-            ),
-        }
-    }
+/// The format `path`'s extension names, or an error saying which ones there are.
+pub fn format_of(path: &Path) -> anyhow::Result<Format> {
+    Format::from_path(path).map_err(|_| {
+        anyhow::anyhow!(
+            "--out {}: the prediction file's extension must be .csv or .mcap",
+            path.display()
+        )
+    })
 }
 
 /// The file's bytes in `format`.
