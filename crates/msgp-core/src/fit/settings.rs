@@ -568,12 +568,16 @@ impl FitOptions {
 
     /// A warning when the pseudo-inputs the fit of `train` gets are not what a user would
     /// expect: more requested than there are training windows (all windows are used instead),
-    /// or so few windows that the default gives fewer than [`FEW_INDUCING`].
+    /// or so few windows that the default gives fewer than `FEW_INDUCING` (10).
     pub fn inducing_warning(&self, train: &[Trajectory]) -> Option<String> {
         if self.method == Method::LinearKf {
             return None;
         }
         let windows = self.windows(train);
+        if windows == 0 {
+            // nothing to fit: the fit's own error says so
+            return None;
+        }
         let m = self.chosen_inducing(windows);
         match self.inducing {
             Some(asked) if asked > windows => Some(format!(
