@@ -276,15 +276,19 @@ impl McapLog {
     /// The decoder of topic `k`'s messages, or an error if its encoding is not read.
     fn decoder(&self, k: usize) -> Result<Decoder> {
         let info = &self.topics[k];
-        match (info.encoding.as_str(), info.schema_encoding.as_str()) {
-            ("json", _) => Ok(Decoder::Json),
-            (ros2::MESSAGE_ENCODING, ros2::SCHEMA_ENCODING) => {
+        match (
+            info.readable(),
+            info.encoding.as_str(),
+            info.schema_encoding.as_str(),
+        ) {
+            (true, "json", _) => Ok(Decoder::Json),
+            (true, _, _) => {
                 let name = info.schema.as_deref().unwrap_or_default();
                 Ros2Decoder::new(name, &info.schema_data)
                     .map(Decoder::Ros2)
                     .map_err(|e| file_err(&self.path, format!("topic {}: {e}", info.topic)))
             }
-            (encoding, schema) => Err(file_err(
+            (false, encoding, schema) => Err(file_err(
                 &self.path,
                 format!(
                     "topic {} uses message encoding `{encoding}`{}; supported are `json` and ROS 2 \
