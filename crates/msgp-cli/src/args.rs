@@ -11,7 +11,8 @@ use msgp_core::gp::integrator::Integrator;
 use msgp_core::loss::Likelihood;
 use msgp_core::model::{Method, Rollout};
 use msgp_sim::Saturation;
-use msgp_sim::learn::LearnSettings;
+use msgp_sim::figure4::Figure4Model;
+use msgp_sim::learn::{Budget, Experiment, LearnSettings};
 
 /// Gaussian-process dynamics models optimised for long-term predictions (MSGP).
 #[derive(Debug, Parser)]
@@ -386,10 +387,10 @@ pub struct BudgetArgs {
     pub likelihood: Option<LikelihoodArg>,
     /// Random episodes before the first policy (random excitation, or random policies: see
     /// `--experimental random-policies=K`).
-    #[arg(long, default_value_t = LearnSettings::default().random_rollouts)]
+    #[arg(long, default_value_t = Budget::default().random_rollouts)]
     pub random_rollouts: usize,
     /// Length of every interaction episode [s].
-    #[arg(long, default_value_t = LearnSettings::default().episode_seconds)]
+    #[arg(long, default_value_t = Budget::default().episode_seconds)]
     pub episode_seconds: f64,
     /// Solver iterations of each model fit [default: 100 L-BFGS for msgp on the filter
     /// likelihood, 300 Adam on the free-run one; the one-step fit's 300 Adam iterations for
@@ -403,13 +404,13 @@ pub struct BudgetArgs {
     #[arg(long, value_name = "N")]
     pub warm_start: Option<usize>,
     /// Pseudo-inputs of the model.
-    #[arg(long, value_name = "M", default_value_t = msgp_sim::learn::LEARN_INDUCING)]
+    #[arg(long, value_name = "M", default_value_t = Budget::default().inducing)]
     pub inducing: usize,
     /// Adam steps of each policy optimisation start.
-    #[arg(long, value_name = "N", default_value_t = LearnSettings::default().search.iterations)]
+    #[arg(long, value_name = "N", default_value_t = Budget::default().search_iters)]
     pub search_iters: usize,
     /// Random gain candidates screened on the model before each policy optimisation.
-    #[arg(long, value_name = "N", default_value_t = LearnSettings::default().search.candidates)]
+    #[arg(long, value_name = "N", default_value_t = Budget::default().candidates)]
     pub candidates: usize,
     /// Prior mean of the GP model, for both models (zero: the paper's GP; linear: an ARX map
     /// under the GP, started by instrumental variables; see docs/design.md).
@@ -422,7 +423,7 @@ pub struct BudgetArgs {
     /// Widths of the saturating cost on the pole angle [rad] and the end-effector position [m]:
     /// `c = 1 − exp(−½ ((θ/w_θ)² + (x/w_x)²))` per step.
     #[arg(long, value_name = "W_THETA,W_X", value_delimiter = ',',
-          default_values_t = LearnSettings::default().cost_widths)]
+          default_values_t = Budget::default().cost_widths)]
     pub cost_widths: Vec<f64>,
     /// An experiment switch of the loop, KEY=VALUE (repeatable): settings that the experiments
     /// of docs/design.md varied, not options the loop needs. Keys: start-smoothing=N (MSGP:
@@ -433,94 +434,33 @@ pub struct BudgetArgs {
     /// excitation, 10), random-policies=K (K of the random rollouts run random PID + PD gains,
     /// each also stability-tested), trust-region=R (no gain moves further than R typical
     /// magnitudes per search, 1; 0: off), fit-optimizer=adam|lbfgs (solver of each MSGP fit).
-    #[arg(long = "experimental", value_name = "KEY=VALUE", value_parser = parse_experiment)]
+    #[arg(long = "experimental", value_name = "KEY=VALUE", value_parser = Experiment::parse)]
     pub experimental: Vec<Experiment>,
 }
 
-/// One experiment switch of the learning loop (`--experimental KEY=VALUE`).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Experiment {
-    /// `start-smoothing=N`
-    StartSmoothing(usize),
-    /// `fb-segment=N`
-    FbSegment(usize),
-    /// `free-position=true|false`
-    FreePosition(bool),
-    /// `excitation-max-hz=HZ`
-    ExcitationMaxHz(f64),
-    /// `random-policies=K`
-    RandomPolicies(usize),
-    /// `trust-region=R`
-    TrustRegion(f64),
-    /// `fit-optimizer=adam|lbfgs`
-    FitOptimizer(OptimizerArg),
-}
-
-impl Experiment {
-    /// The switch's key, as written on the command line.
-    pub fn key(&self) -> &'static str {
-        EXPERIMENT_KEYS[match self {
-            Experiment::StartSmoothing(_) => 0,
-            Experiment::FbSegment(_) => 1,
-            Experiment::FreePosition(_) => 2,
-            Experiment::ExcitationMaxHz(_) => 3,
-            Experiment::RandomPolicies(_) => 4,
-            Experiment::TrustRegion(_) => 5,
-            Experiment::FitOptimizer(_) => 6,
-        }]
+impl BudgetArgs {
+    /// The budget these options state (checked by [`Budget::settings`]).
+    pub fn budget(&self) -> Budget {
+        Budget {
+            likelihood: self.likelihood.map(Into::into),
+            random_rollouts: self.random_rollouts,
+            episode_seconds: self.episode_seconds,
+            fit_iters: self.fit_iters,
+            warm_start: self.warm_start,
+            inducing: self.inducing,
+            search_iters: self.search_iters,
+            candidates: self.candidates,
+            mean: self.mean.into(),
+            policy_horizon: self.policy_horizon,
+            cost_widths: self.cost_widths.clone(),
+            experimental: self.experimental.clone(),
+        }
     }
 }
 
-/// The keys [`parse_experiment`] knows.
-pub const EXPERIMENT_KEYS: [&str; 7] = [
-    "start-smoothing",
-    "fb-segment",
-    "free-position",
-    "excitation-max-hz",
-    "random-policies",
-    "trust-region",
-    "fit-optimizer",
-];
-
-/// `KEY=VALUE` as an [`Experiment`]; the value's syntax is checked here, its range where the
-/// loop's settings are made.
-pub fn parse_experiment(s: &str) -> Result<Experiment, String> {
-    let (key, value) = s
-        .split_once('=')
-        .ok_or_else(|| format!("expected KEY=VALUE, got `{s}`"))?;
-    let (key, value) = (key.trim(), value.trim());
-    let count = || {
-        value
-            .parse::<usize>()
-            .map_err(|_| format!("{key} needs a count, got `{value}`"))
-    };
-    let number = || {
-        value
-            .parse::<f64>()
-            .map_err(|_| format!("{key} needs a number, got `{value}`"))
-    };
-    Ok(match key {
-        "start-smoothing" => Experiment::StartSmoothing(count()?),
-        "fb-segment" => Experiment::FbSegment(count()?),
-        "free-position" => Experiment::FreePosition(
-            value
-                .parse::<bool>()
-                .map_err(|_| format!("{key} is true or false, got `{value}`"))?,
-        ),
-        "excitation-max-hz" => Experiment::ExcitationMaxHz(number()?),
-        "random-policies" => Experiment::RandomPolicies(count()?),
-        "trust-region" => Experiment::TrustRegion(number()?),
-        "fit-optimizer" => Experiment::FitOptimizer(
-            OptimizerArg::from_str(value, true)
-                .map_err(|_| format!("{key} is adam or lbfgs, got `{value}`"))?,
-        ),
-        other => {
-            return Err(format!(
-                "unknown experiment `{other}` (known: {})",
-                EXPERIMENT_KEYS.join(", ")
-            ));
-        }
-    })
+/// A `--models` entry of `msgp reproduce figure4`.
+fn model4(s: &str) -> Result<Figure4Model, String> {
+    s.trim().parse()
 }
 
 /// Options of `msgp learn-policy`.
@@ -644,8 +584,11 @@ pub struct Figure4Args {
     /// Policy iterations per run.
     #[arg(long, default_value_t = LearnSettings::default().iterations)]
     pub iterations: usize,
-    /// Models to run (comma-separated).
-    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [Figure4Model::Msgp, Figure4Model::MsgpFilter, Figure4Model::GpNarx, Figure4Model::LinearKf])]
+    /// Models to run, comma-separated: msgp (MSGP on the free-run likelihood, the paper's),
+    /// msgp-filter (MSGP on the filter likelihood), gp-narx (one-step GP-NARX, standard PILCO),
+    /// linear-kf (the linear-Gaussian window model by the Kalman-filter likelihood).
+    #[arg(long, value_name = "MODEL,...", value_delimiter = ',', value_parser = model4,
+          default_values = ["msgp", "msgp-filter", "gp-narx", "linear-kf"])]
     pub models: Vec<Figure4Model>,
     /// No progress lines on stderr.
     #[arg(long)]
@@ -654,42 +597,6 @@ pub struct Figure4Args {
     pub budget: BudgetArgs,
     #[command(flatten)]
     pub plant: PlantArgs,
-}
-
-/// A model of `msgp reproduce figure4`: a `learn-policy --model`, MSGP with either likelihood.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum Figure4Model {
-    /// MSGP trained on the free-run likelihood (the paper's): `--model msgp --likelihood
-    /// free-run`.
-    Msgp,
-    /// MSGP trained on the filter likelihood: `--model msgp --likelihood filter`.
-    MsgpFilter,
-    /// One-step GP-NARX (standard PILCO).
-    GpNarx,
-    /// The linear-Gaussian window model by the Kalman-filter likelihood.
-    LinearKf,
-}
-
-impl Figure4Model {
-    /// The `learn-policy` model and MSGP likelihood.
-    pub fn model(self) -> (ModelArg, Option<LikelihoodArg>) {
-        match self {
-            Figure4Model::Msgp => (ModelArg::Msgp, Some(LikelihoodArg::FreeRun)),
-            Figure4Model::MsgpFilter => (ModelArg::Msgp, Some(LikelihoodArg::Filter)),
-            Figure4Model::GpNarx => (ModelArg::GpNarx, None),
-            Figure4Model::LinearKf => (ModelArg::LinearKf, None),
-        }
-    }
-
-    /// Name in tables, folders and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            Figure4Model::Msgp => "msgp",
-            Figure4Model::MsgpFilter => "msgp-filter",
-            Figure4Model::GpNarx => "gp-narx",
-            Figure4Model::LinearKf => "linear-kf",
-        }
-    }
 }
 
 /// Options of `msgp demo`.
@@ -953,31 +860,6 @@ mod tests {
         assert!(parse_history("0,2").is_err());
         assert!(parse_history("2").is_err());
         assert!(parse_history("a,b").is_err());
-    }
-
-    #[test]
-    fn experiments_parse() {
-        assert_eq!(
-            parse_experiment("fb-segment=50"),
-            Ok(Experiment::FbSegment(50))
-        );
-        assert_eq!(
-            parse_experiment(" trust-region = 2.5 "),
-            Ok(Experiment::TrustRegion(2.5))
-        );
-        assert_eq!(
-            parse_experiment("fit-optimizer=lbfgs"),
-            Ok(Experiment::FitOptimizer(OptimizerArg::Lbfgs))
-        );
-        assert_eq!(
-            parse_experiment("free-position=true"),
-            Ok(Experiment::FreePosition(true))
-        );
-        for bad in ["fb-segment", "fb-segment=x", "free-position=1", "wobble=3"] {
-            assert!(parse_experiment(bad).is_err(), "{bad}");
-        }
-        let unknown = parse_experiment("wobble=3").expect_err("unknown key");
-        assert!(unknown.contains("start-smoothing"), "{unknown}");
     }
 
     #[test]

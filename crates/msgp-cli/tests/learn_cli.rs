@@ -315,11 +315,11 @@ fn bad_learning_options_fail_with_a_message() {
         (vec!["learn-policy", "--sim", "cartpole"], "cartpole"),
         (
             vec!["learn-policy", "--sim", "pendulum", "--cost-widths", "0.1"],
-            "--cost-widths needs two positive widths",
+            "invalid --cost-widths: needs two positive widths",
         ),
         (
             vec!["learn-policy", "--sim", "pendulum", "--cost-widths=0.1,-1"],
-            "--cost-widths needs two positive widths",
+            "invalid --cost-widths: needs two positive widths",
         ),
         (
             vec![
@@ -329,7 +329,7 @@ fn bad_learning_options_fail_with_a_message() {
                 "--experimental",
                 "trust-region=-1",
             ],
-            "--experimental trust-region must be finite",
+            "invalid --experimental trust-region: must be finite",
         ),
         (
             vec!["learn-policy", "--sim", "pendulum", "--policy-horizon", "0"],
@@ -357,7 +357,7 @@ fn bad_learning_options_fail_with_a_message() {
                 "--experimental",
                 "start-smoothing=2",
             ],
-            "--experimental start-smoothing=2",
+            "invalid --experimental start-smoothing",
         ),
         (
             vec![
@@ -369,7 +369,7 @@ fn bad_learning_options_fail_with_a_message() {
                 "--experimental",
                 "random-policies=3",
             ],
-            "--experimental random-policies (3) cannot exceed --random-rollouts (2)",
+            "invalid --experimental random-policies: (3) cannot exceed random-rollouts (2)",
         ),
     ] {
         let o = run(&dir, &args);

@@ -149,7 +149,7 @@ impl Error {
             Error::NotFitted => Kind::NotFitted,
             Error::Core(e) => core_kind(e),
             Error::Sim(SimError::Model(e)) => core_kind(e),
-            Error::Sim(SimError::InvalidParameter { .. }) => Kind::Input,
+            Error::Sim(SimError::InvalidParameter { .. } | SimError::Budget { .. }) => Kind::Input,
             Error::Sim(SimError::NonFiniteCommand { .. } | SimError::NonFiniteState { .. }) => {
                 Kind::Numerical
             }

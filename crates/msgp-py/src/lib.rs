@@ -5,7 +5,8 @@
 //! - [`sim`]: the synthetic systems, the pendulum simulator, its stability test and the
 //!   policy-learning loop;
 //! - [`data`]: data files loaded as `msgp fit` loads them;
-//! - [`reproduce`]: the paper's Table 1 as independent units, for sweeps (`msgp.sweep`);
+//! - [`reproduce`]: the paper's Table 1 and Figure 4 as independent units, for sweeps
+//!   (`msgp.sweep`);
 //! - [`convert`]: numpy arrays ↔ matrices, Python containers ↔ JSON settings;
 //! - [`error`]: the exception hierarchy; no panic reaches Python.
 //!
@@ -40,6 +41,10 @@ fn _msgp(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(reproduce::table1_plan, m)?)?;
     m.add_function(wrap_pyfunction!(reproduce::table1_unit, m)?)?;
     m.add_function(wrap_pyfunction!(reproduce::table1_report, m)?)?;
+    m.add_function(wrap_pyfunction!(reproduce::figure4_plan, m)?)?;
+    m.add_function(wrap_pyfunction!(reproduce::figure4_budget, m)?)?;
+    m.add_function(wrap_pyfunction!(reproduce::figure4_unit, m)?)?;
+    m.add_function(wrap_pyfunction!(reproduce::figure4_report, m)?)?;
     m.add_function(wrap_pyfunction!(reproduce::update_results_section, m)?)?;
     Ok(())
 }

@@ -1,7 +1,7 @@
-//! The paper's reproductions as independent units, for `msgp.sweep`: a plan, one unit's fit,
-//! and the report (markdown section and rows) from every unit's result — the same library
-//! calls as `msgp reproduce table1`, so a sweep spread over processes or a Ray cluster writes
-//! the numbers of the serial command line run.
+//! The paper's reproductions as independent units, for `msgp.sweep`: a plan, one unit's fit
+//! (Table 1) or learning run (Figure 4), and the report (markdown section, rows, plot) from
+//! every unit's result — the same library calls as `msgp reproduce table1|figure4`, so a sweep
+//! spread over processes or a Ray cluster writes the numbers of the serial command line run.
 
 use std::path::PathBuf;
 
@@ -14,17 +14,18 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use serde::de::DeserializeOwned;
 
-use crate::convert::{to_json, to_python};
-use crate::error::{Result, detached, input};
-use crate::model::method;
+use msgp_sim::figure4::{self as fig4, Figure4Model};
+use msgp_sim::learn::{Budget, learn_policy_observed, summary, write_run_dir};
+use msgp_sim::{PendulumParams, PlantTier};
+
+use crate::convert::{to_json, to_python, with_overrides};
+use crate::error::{Error, Result, detached, input, with_python};
+use crate::model::{count, method};
 
 /// A plan, unit or cell given back by Python (a dict made by the functions below).
 fn parse<T: DeserializeOwned>(obj: &Bound<'_, PyAny>, what: &str) -> Result<T> {
-    serde_json::from_value(to_json(obj, what)?).map_err(|e| {
-        input(format!(
-            "{what} is not a table 1 {what} of this msgp version: {e}"
-        ))
-    })
+    serde_json::from_value(to_json(obj, what)?)
+        .map_err(|e| input(format!("{what} is not a {what} of this msgp version: {e}")))
 }
 
 fn likelihood(name: &str) -> Result<Likelihood> {
@@ -151,4 +152,144 @@ pub fn table1_report<'py>(
 pub fn update_results_section(path: PathBuf, name: &str, body: &str) -> PyResult<()> {
     update_section(&path, name, body).map_err(crate::error::Error::from)?;
     Ok(())
+}
+
+/// The validated plan of a Figure 4 reproduction (as `msgp reproduce figure4` takes its
+/// options) as a dict, with its `units` (one model × seed each, in the serial run's order),
+/// the `pending` ones (no finished run in the plan's folder yet: the command line reuses
+/// finished runs, so does the sweep) and the results file's `section`. `tier`: "apollo" or
+/// "noisy"; `params` overrides the tier's plant parameters; `models`: "msgp" (free-run
+/// likelihood), "msgp-filter", "gp-narx", "linear-kf" (default: all four); `budget` overrides
+/// `figure4_budget()` (the command line's budget options, snake_case); `dir`: default
+/// `results/figure4-<tier>`.
+#[pyfunction]
+#[pyo3(signature = (seeds, *, tier = "apollo", params = None, models = None, iterations = 8, budget = None, dir = None))]
+#[allow(clippy::too_many_arguments)]
+pub fn figure4_plan<'py>(
+    py: Python<'py>,
+    seeds: Vec<u64>,
+    tier: &str,
+    params: Option<&Bound<'py, PyAny>>,
+    models: Option<Vec<String>>,
+    iterations: i128,
+    budget: Option<&Bound<'py, PyAny>>,
+    dir: Option<PathBuf>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let tier = match tier {
+        "apollo" => PlantTier::Apollo,
+        "noisy" => PlantTier::Noisy,
+        other => {
+            return Err(input(format!(
+                "unknown plant tier {other:?}: expected \"apollo\" or \"noisy\""
+            ))
+            .into());
+        }
+    };
+    let plant: PendulumParams = with_overrides(&PendulumParams::tier(tier), params, "params")?;
+    let models = match models {
+        None => Figure4Model::ALL.to_vec(),
+        Some(names) => names
+            .iter()
+            .map(|m| m.parse::<Figure4Model>().map_err(input))
+            .collect::<Result<Vec<_>>>()?,
+    };
+    let budget: Budget = with_overrides(&Budget::default(), budget, "budget")?;
+    let plan = fig4::Plan::new(
+        tier.name(),
+        plant,
+        models,
+        seeds,
+        count(iterations, "iterations")?,
+        budget,
+        dir,
+    )
+    .map_err(Error::from)?;
+    let mut pending = Vec::new();
+    for unit in plan.units() {
+        if plan.finished(&unit).map_err(Error::from)?.is_none() {
+            pending.push(unit);
+        }
+    }
+    let out = PyDict::new(py);
+    out.set_item("plan", to_python(py, &plan)?)?;
+    out.set_item("units", to_python(py, &plan.units())?)?;
+    out.set_item("pending", to_python(py, &pending)?)?;
+    out.set_item("section", plan.section())?;
+    out.set_item("dir", plan.dir.clone())?;
+    Ok(out)
+}
+
+/// The budget options of `msgp learn-policy` / `msgp reproduce figure4` at their defaults, as
+/// a dict (`None`: the model's own default).
+#[pyfunction]
+pub fn figure4_budget(py: Python<'_>) -> PyResult<Bound<'_, PyAny>> {
+    to_python(py, &Budget::default())
+}
+
+/// Runs one unit of `plan` (both from `figure4_plan`): the learning loop, its folder written
+/// into `dir` (policy, iterations.csv, episodes, cost.png, summary.json last) — a scratch folder
+/// on a worker, whose files the sweep brings to the plan's folder; returns the run's summary.
+/// Takes minutes; releases the GIL; Ctrl-C stops it within one model fit.
+#[pyfunction]
+pub fn figure4_unit<'py>(
+    py: Python<'py>,
+    plan: &Bound<'py, PyAny>,
+    unit: &Bound<'py, PyAny>,
+    dir: PathBuf,
+) -> PyResult<Bound<'py, PyAny>> {
+    let plan: fig4::Plan = parse(plan, "plan")?;
+    let unit: fig4::Unit = parse(unit, "unit")?;
+    let settings = plan.settings(&unit).map_err(Error::from)?;
+    let (done, raised) = detached(py, || {
+        let started = std::time::Instant::now();
+        let mut raised: Option<PyErr> = None;
+        let learned = learn_policy_observed(&plan.plant, &settings, &mut |_| {
+            with_python(&mut raised, |_| Ok(()))
+        });
+        let done = learned.and_then(|outcome| {
+            let summary = summary(
+                &outcome,
+                &settings,
+                &plan.plant,
+                started.elapsed().as_secs_f64(),
+            );
+            let label = format!("{} seed {}", unit.model.name(), unit.seed);
+            write_run_dir(&dir, &outcome, &settings, &summary, &label)?;
+            Ok(summary)
+        });
+        Ok((done, raised))
+    })?;
+    if let Some(err) = raised {
+        return Err(err);
+    }
+    to_python(py, &done.map_err(Error::from)?)
+}
+
+/// The report of a plan whose every unit has its finished run in the plan's folder:
+/// `{"section", "markdown", "plot"}` — the section `msgp reproduce figure4` writes, and the
+/// cost-band plot it draws (`<dir>/figure4.png`). `command` (markdown) and `seconds` go into
+/// the provenance lines, `machine` too (default: this machine's CPUs).
+#[pyfunction]
+#[pyo3(signature = (plan, command, seconds, machine = None))]
+pub fn figure4_report<'py>(
+    py: Python<'py>,
+    plan: &Bound<'py, PyAny>,
+    command: String,
+    seconds: f64,
+    machine: Option<String>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let plan: fig4::Plan = parse(plan, "plan")?;
+    let runs = fig4::collect(&plan).map_err(Error::from)?;
+    let provenance = Provenance {
+        command,
+        seconds,
+        machine: machine.unwrap_or_else(self::machine),
+        date: today(),
+    };
+    let markdown = fig4::report(&plan, &runs, &provenance).map_err(Error::from)?;
+    let out = PyDict::new(py);
+    out.set_item("section", plan.section())?;
+    out.set_item("markdown", markdown)?;
+    out.set_item("plot", plan.dir.join("figure4.png"))?;
+    Ok(out)
 }

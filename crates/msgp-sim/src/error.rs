@@ -78,6 +78,22 @@ pub enum SimError {
         /// What went wrong.
         message: String,
     },
+    /// An option of a learning run's budget or of a reproduction plan is out of range.
+    #[error("invalid {option}: {reason}")]
+    Budget {
+        /// The option (the command line's name, without dashes).
+        option: String,
+        /// What is wrong and what it got.
+        reason: String,
+    },
+    /// A plot could not be drawn or written.
+    #[error("cannot write the plot {path}: {message}")]
+    Plot {
+        /// The file concerned.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
     /// The observer of [`crate::learn::learn_policy_observed`] asked the loop to stop.
     #[error("policy learning stopped by its observer at iteration {iteration}")]
     Stopped {

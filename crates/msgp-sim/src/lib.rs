@@ -14,6 +14,8 @@
 //!   seeded [`RandomExcitation`].
 //! * [`run_episode`] — seeded episodes; same seed, same bytes.
 //! * [`stability_test`] — five fixed starts, pass/fail per start.
+//! * [`figure4`] — the paper's Figure 4 as independent learning runs: plan, units, report.
+//! * [`plot`] — PNG cost curves of learning runs (one run, or bands over seeds).
 //! * [`log`] — CSV and MCAP (JSON messages, Foxglove-ready) run logs, written atomically
 //!   ([`atomic`], as the policy files are).
 //!
@@ -35,11 +37,13 @@ pub mod atomic;
 pub mod controller;
 pub mod episode;
 pub mod error;
+pub mod figure4;
 pub mod learn;
 pub mod log;
 pub mod params;
 pub mod physics;
 pub mod plant;
+pub mod plot;
 pub mod seed;
 pub mod stability;
 

@@ -1,8 +1,7 @@
 //! What `msgp` shows: text and JSON lines on stdout ([`output`], [`report`]), markdown results
-//! files (`msgp_core::reproduce::results`), PNG plots of simulations and cost curves ([`plot`], [`cost_plot`])
+//! files (`msgp_core::reproduce::results`), PNG plots of simulations ([`plot`]; cost curves: `msgp_sim::plot`)
 //! and progress bars on stderr ([`progress`]).
 
-pub mod cost_plot;
 pub mod output;
 pub mod plot;
 pub mod prediction;

@@ -1,15 +1,14 @@
 //! PNG plots of free simulations, like the paper's Figure 3: the measured output, the predicted
 //! mean and the ±2σ band, one panel per output and trajectory.
 //!
-//! Drawn with plotters' bitmap backend; text uses DejaVu Sans embedded in the binary (crate
-//! `dejavu`), so no system font library is needed.
+//! Drawn with plotters' bitmap backend, in the style of every msgp plot (`msgp_sim::plot`: the
+//! embedded DejaVu Sans, the legend).
 
 use std::path::Path;
-use std::sync::OnceLock;
 
 use anyhow::{Context, anyhow};
+use msgp_sim::plot::{font, legend};
 use plotters::prelude::*;
-use plotters::style::FontStyle;
 
 use msgp_core::model::{Simulated, score_output};
 
@@ -17,36 +16,6 @@ use msgp_core::model::{Simulated, score_output};
 const MAX_PANELS: usize = 6;
 const WIDTH: u32 = 1200;
 const PANEL_HEIGHT: u32 = 340;
-
-/// Registers the embedded font once.
-pub(crate) fn font() -> anyhow::Result<()> {
-    static DONE: OnceLock<bool> = OnceLock::new();
-    let ok = DONE.get_or_init(|| {
-        plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())
-            .is_ok()
-    });
-    if *ok {
-        Ok(())
-    } else {
-        Err(anyhow!("cannot load the embedded font"))
-    }
-}
-
-/// The series legend in the upper right corner, as every plot of the CLI draws it.
-pub(crate) fn legend<'a, DB, CT>(chart: &mut ChartContext<'a, DB, CT>) -> anyhow::Result<()>
-where
-    DB: DrawingBackend + 'a,
-    CT: plotters::coord::CoordTranslate,
-{
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.3))
-        .label_font(("sans-serif", 13))
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(|e| anyhow!("{e}"))
-}
 
 /// One panel: a trajectory's output `j`.
 struct Panel<'a> {
@@ -168,7 +137,7 @@ fn draw_panel(
         .map_err(e)?
         .label("predicted mean")
         .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], band.stroke_width(2)));
-    legend(&mut chart)?;
+    legend(&mut chart).map_err(anyhow::Error::msg)?;
     Ok(())
 }
 

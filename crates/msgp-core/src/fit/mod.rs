@@ -167,8 +167,9 @@ pub fn fit_episodes_observed(
 /// same episodes, as a policy-search loop adds one episode per iteration: `settings.iterations`
 /// solver steps on `episodes` from `previous`'s parameters, in `previous`'s normalised units
 /// and with its pseudo-inputs, instead of a new normaliser, one-step fit and k-means. The
-/// settings must describe the same model (method MSGP, history, outputs and inputs, pseudo-input
-/// count and prior mean). A linear-kf fit continues likewise: L-BFGS from the previous `A` and
+/// settings must describe the same model (method MSGP, history, outputs and inputs, prior mean,
+/// and at least the previous model's pseudo-inputs: a first fit on few windows has fewer than
+/// asked, and the continuation keeps them). A linear-kf fit continues likewise: L-BFGS from the previous `A` and
 /// noise levels alone, instead of its two cold starts.
 pub fn refit_episodes(
     episodes: &[TrainingEpisode],
@@ -210,12 +211,14 @@ fn check_continuation(settings: &FitSettings, previous: &Model) -> Result<()> {
         return Ok(());
     };
     if !history
-        || msgp.inducing != previous.params.pseudo_inputs.nrows()
+        // fewer pseudo-inputs than asked: the first fit's data had fewer windows, which capped
+        // them; the continuation keeps the previous model's
+        || previous.params.pseudo_inputs.nrows() > msgp.inducing
         || msgp.mean != previous.config.mean
     {
         return refuse(format!(
             "the previous model has history ({}, {}), {} pseudo-inputs and a {:?} mean; the \
-             settings ask for ({}, {}), {} and {:?}",
+             settings ask for ({}, {}), at most {} and {:?}",
             previous.spec.ly,
             previous.spec.lu,
             previous.params.pseudo_inputs.nrows(),

@@ -32,8 +32,9 @@ fn options(method: Method, inducing: Option<usize>, iterations: Option<usize>) -
 
 /// A warm start continues the previous model: zero iterations give it back unchanged (same
 /// parameters and normaliser, although the new data would normalise differently), more
-/// iterations lower the loss on the new data from there, and a model of another shape is
-/// refused.
+/// iterations lower the loss on the new data from there, settings with more pseudo-inputs keep
+/// the model's, and a model of another shape (more pseudo-inputs than asked, another history,
+/// another method) is refused.
 #[test]
 fn a_warm_start_continues_the_previous_model() {
     let first: Vec<TrainingEpisode> = [traj(60), traj(50)]
@@ -83,14 +84,20 @@ fn a_warm_start_continues_the_previous_model() {
     let mut scratch = Vec::new();
     fit_episodes(&more, &zero, &mut |p| scratch.push(p.loss)).expect("scratch");
     assert_ne!(scratch[0], losses[0]);
+    // settings asking for more pseudo-inputs than the previous model has (its first data had
+    // fewer windows, say) continue it with its own
+    let mut wider = zero.clone();
+    wider.msgp_mut().expect("msgp").inducing = 50;
+    let (kept, _) = refit_episodes(&more, &wider, &previous, &mut |_| {}).expect("refit wider");
+    assert_eq!(kept.params, previous.params);
     for (bad, needle) in [
         (
             {
                 let mut s = settings.clone();
-                s.msgp_mut().expect("msgp").inducing = 13;
+                s.msgp_mut().expect("msgp").inducing = 11;
                 s
             },
-            "13",
+            "at most 11",
         ),
         (settings.one_step_start().expect("msgp"), "only MSGP"),
         (

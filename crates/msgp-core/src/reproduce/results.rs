@@ -83,6 +83,19 @@ fn civil_from_days(z: i64) -> (i64, u32, u32) {
     (if m <= 2 { y + 1 } else { y }, m, d)
 }
 
+/// Where the markdown says the numbers came from.
+#[derive(Clone, Debug)]
+pub struct Provenance {
+    /// The command that produced them, as a user would type it (markdown: in code spans).
+    pub command: String,
+    /// Total wall time \[s\].
+    pub seconds: f64,
+    /// Where it ran (`2 CPUs (…)`, or a Ray cluster).
+    pub machine: String,
+    /// Date (UTC), `YYYY-MM-DD`.
+    pub date: String,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

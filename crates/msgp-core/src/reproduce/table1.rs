@@ -23,6 +23,7 @@ use crate::fit::{FitOptimizer, FitProgress, FitSettings, MsgpSettings, fit};
 use crate::loss::Likelihood;
 use crate::model::{Method, Metrics, Rollout};
 use crate::numeric::parallel::Threads;
+pub use crate::reproduce::results::Provenance;
 
 /// One benchmark of Table 1 and the paper's RMSE for (GP-NARX, PILCO, MSGP).
 #[derive(Clone, Copy, Debug)]
@@ -540,19 +541,6 @@ pub fn rows_json(plan: &Plan, rows: &[Row]) -> Vec<serde_json::Value> {
         }
     }
     list
-}
-
-/// Where the markdown says the numbers came from.
-#[derive(Clone, Debug)]
-pub struct Provenance {
-    /// The command that produced them, as a user would type it (markdown: in code spans).
-    pub command: String,
-    /// Total wall time \[s\].
-    pub seconds: f64,
-    /// Where it ran (`2 CPUs (…)`, or a Ray cluster).
-    pub machine: String,
-    /// Date (UTC), `YYYY-MM-DD`.
-    pub date: String,
 }
 
 /// The RMSE table: ours (mean ± std over the seeds) beside the paper's; the baselines with

@@ -29,7 +29,16 @@ from ._msgp import (
     stability_test,
     synthetic_system,
 )
-from . import sweep
+
+
+def __getattr__(name):
+    # ``msgp.sweep`` is imported on first use: imported here eagerly, ``python -m msgp.sweep``
+    # would find it in sys.modules before running it as the main module (a runpy warning)
+    if name == "sweep":
+        import importlib  # noqa: PLC0415
+
+        return importlib.import_module(".sweep", __name__)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __all__ = [
     "InvalidInputError",

@@ -13,15 +13,19 @@
 //! is [`msgp_core::policy::PidPolicy`] with the sine saturation that the simulator's policy
 //! applies when its gains say `saturation: sine`.
 
+mod budget;
 mod episodes;
 mod problem;
+mod record;
 mod report;
 mod settings;
 
+pub use budget::{Budget, EXPERIMENT_KEYS, Experiment};
 pub use episodes::{episode_trajectory, segments};
 use episodes::{feedback_episode, interact, msgp_segments};
 use problem::gains_from;
 pub use problem::{episode_cost, modelled_policy, pendulum_problem};
+pub use record::{FinishedRun, finished_run, summary, write_run_dir};
 pub use report::{IterationReport, LearnOutcome};
 pub use settings::{
     END_EFFECTOR_INTEGRATOR, END_EFFECTOR_KINEMATIC, FILTER_NOISE_FLOOR, FILTERED_MSGP_ITERATIONS,

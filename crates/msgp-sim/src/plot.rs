@@ -1,25 +1,86 @@
-//! PNG of policy-search cost curves, like the paper's Figure 4: per iteration, the expected cost
+//! PNG plots of policy learning, like the paper's Figure 4: per iteration, the expected cost
 //! predicted by the model (± 2σ bars) and the cost measured on the system; iterations whose
-//! policy passed the stability test are drawn as filled markers.
+//! policy passed the stability test are drawn as filled markers ([`plot_costs`]); over seeds, the
+//! mean ± 1 standard deviation of both ([`plot_cost_bands`]).
+//!
+//! Drawn with plotters' bitmap backend; text uses DejaVu Sans embedded in the library (crate
+//! `dejavu`), so no system font library is needed. [`font`] and [`legend`] are the style every
+//! msgp plot shares (the command line's simulation plots use them too).
 
 use std::path::Path;
+use std::sync::OnceLock;
 
-use anyhow::{Context, anyhow};
-use msgp_sim::learn::IterationReport;
 use plotters::prelude::*;
+use plotters::style::FontStyle;
 
-use crate::render::plot::{font, legend};
+use crate::error::SimError;
+
+/// A plot's error, named by the file it was drawn into.
+fn failed(path: &Path, message: impl std::fmt::Display) -> SimError {
+    SimError::Plot {
+        path: path.to_path_buf(),
+        message: message.to_string(),
+    }
+}
+
+/// Registers the embedded font (once per process); every plot calls it first.
+pub fn font() -> Result<(), SimError> {
+    static DONE: OnceLock<bool> = OnceLock::new();
+    let ok = DONE.get_or_init(|| {
+        plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())
+            .is_ok()
+    });
+    if *ok {
+        Ok(())
+    } else {
+        Err(failed(
+            Path::new("dejavu::sans::regular"),
+            "cannot load the embedded font",
+        ))
+    }
+}
+
+/// The series legend in the upper right corner, as every msgp plot draws it.
+pub fn legend<'a, DB, CT>(chart: &mut ChartContext<'a, DB, CT>) -> Result<(), String>
+where
+    DB: DrawingBackend + 'a,
+    CT: plotters::coord::CoordTranslate,
+{
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.3))
+        .label_font(("sans-serif", 13))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(|e| e.to_string())
+}
 
 const WIDTH: u32 = 1000;
 const HEIGHT: u32 = 560;
 
-/// One learning run: `(iteration, predicted, predicted_std, actual, stable)` per iteration.
+/// One policy iteration as the plots show it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CostPoint {
+    /// The iteration (from 1).
+    pub iteration: usize,
+    /// The expected episode cost the model predicted.
+    pub predicted: f64,
+    /// Its standard deviation.
+    pub predicted_std: f64,
+    /// The cost measured on the system.
+    pub actual: f64,
+    /// Whether the iteration's policy passed the stability test.
+    pub stable: bool,
+}
+
+/// One learning run.
 #[derive(Clone, Debug)]
 pub struct CostCurve {
     /// Legend label.
     pub label: String,
     /// Points in iteration order.
-    pub points: Vec<(usize, f64, f64, f64, bool)>,
+    pub points: Vec<CostPoint>,
 }
 
 const PALETTE: [RGBColor; 6] = [
@@ -32,24 +93,24 @@ const PALETTE: [RGBColor; 6] = [
 ];
 
 /// Writes the plot of `curves` to `path`.
-pub fn plot_costs(path: &Path, title: &str, curves: &[CostCurve]) -> anyhow::Result<()> {
+pub fn plot_costs(path: &Path, title: &str, curves: &[CostCurve]) -> Result<(), SimError> {
     font()?;
-    draw(path, title, curves).with_context(|| format!("cannot write the plot {}", path.display()))
+    draw(path, title, curves).map_err(|m| failed(path, m))
 }
 
-fn draw(path: &Path, title: &str, curves: &[CostCurve]) -> anyhow::Result<()> {
-    let e = |e: DrawingAreaErrorKind<_>| anyhow!("{e}");
+fn draw(path: &Path, title: &str, curves: &[CostCurve]) -> Result<(), String> {
+    let e = |e: DrawingAreaErrorKind<_>| e.to_string();
     let last = curves
         .iter()
-        .flat_map(|c| c.points.iter().map(|p| p.0))
+        .flat_map(|c| c.points.iter().map(|p| p.iteration))
         .max()
-        .ok_or_else(|| anyhow!("nothing to plot"))?;
+        .ok_or_else(|| "nothing to plot".to_string())?;
     let ymax = curves
         .iter()
         .flat_map(|c| {
             c.points
                 .iter()
-                .flat_map(|p| [p.1 + 2.0 * p.2, p.3].into_iter())
+                .flat_map(|p| [p.predicted + 2.0 * p.predicted_std, p.actual].into_iter())
         })
         .filter(|v| v.is_finite())
         .fold(1.0_f64, f64::max);
@@ -81,13 +142,24 @@ fn draw(path: &Path, title: &str, curves: &[CostCurve]) -> anyhow::Result<()> {
         } else {
             0.0
         };
-        let predicted: Vec<(f64, f64)> = c.points.iter().map(|p| (p.0 as f64 + dx, p.1)).collect();
-        let actual: Vec<(f64, f64)> = c.points.iter().map(|p| (p.0 as f64 + dx, p.3)).collect();
+        let predicted: Vec<(f64, f64)> = c
+            .points
+            .iter()
+            .map(|p| (p.iteration as f64 + dx, p.predicted))
+            .collect();
+        let actual: Vec<(f64, f64)> = c
+            .points
+            .iter()
+            .map(|p| (p.iteration as f64 + dx, p.actual))
+            .collect();
         chart
             .draw_series(c.points.iter().map(|p| {
-                let x = p.0 as f64 + dx;
+                let x = p.iteration as f64 + dx;
                 PathElement::new(
-                    vec![(x, (p.1 - 2.0 * p.2).max(0.0)), (x, p.1 + 2.0 * p.2)],
+                    vec![
+                        (x, (p.predicted - 2.0 * p.predicted_std).max(0.0)),
+                        (x, p.predicted + 2.0 * p.predicted_std),
+                    ],
                     colour.mix(0.6).stroke_width(1),
                 )
             }))
@@ -121,12 +193,12 @@ fn draw(path: &Path, title: &str, curves: &[CostCurve]) -> anyhow::Result<()> {
             });
         chart
             .draw_series(c.points.iter().map(|p| {
-                let style = if p.4 {
+                let style = if p.stable {
                     colour.filled()
                 } else {
                     colour.stroke_width(2)
                 };
-                Circle::new((p.0 as f64 + dx, p.3), 5, style)
+                Circle::new((p.iteration as f64 + dx, p.actual), 5, style)
             }))
             .map_err(e)?;
     }
@@ -142,13 +214,10 @@ fn draw(path: &Path, title: &str, curves: &[CostCurve]) -> anyhow::Result<()> {
 }
 
 /// Which cost of an iteration a panel shows.
-type Pick = fn(&IterationReport) -> f64;
+type Pick = fn(&CostPoint) -> f64;
 
 /// Mean and standard deviation across runs of `f` at each iteration (runs may differ in length).
-fn band(
-    runs: &[Vec<IterationReport>],
-    f: impl Fn(&IterationReport) -> f64,
-) -> Vec<(f64, f64, f64)> {
+fn band(runs: &[Vec<CostPoint>], f: impl Fn(&CostPoint) -> f64) -> Vec<(f64, f64, f64)> {
     let last = runs.iter().map(Vec::len).max().unwrap_or(0);
     (0..last)
         .filter_map(|i| {
@@ -168,20 +237,20 @@ fn band(
 /// (left panel) and the actual (right panel) cost per iteration.
 pub fn plot_cost_bands(
     path: &Path,
-    models: &[(String, Vec<Vec<IterationReport>>)],
-) -> anyhow::Result<()> {
+    models: &[(String, Vec<Vec<CostPoint>>)],
+) -> Result<(), SimError> {
     font()?;
-    draw_bands(path, models).with_context(|| format!("cannot write the plot {}", path.display()))
+    draw_bands(path, models).map_err(|m| failed(path, m))
 }
 
-fn draw_bands(path: &Path, models: &[(String, Vec<Vec<IterationReport>>)]) -> anyhow::Result<()> {
-    let e = |e: DrawingAreaErrorKind<_>| anyhow!("{e}");
+fn draw_bands(path: &Path, models: &[(String, Vec<Vec<CostPoint>>)]) -> Result<(), String> {
+    let e = |e: DrawingAreaErrorKind<_>| e.to_string();
     let root = BitMapBackend::new(path, (WIDTH + 200, HEIGHT)).into_drawing_area();
     root.fill(&WHITE).map_err(e)?;
     let panels = root.split_evenly((1, 2));
     let pick: [(&str, Pick); 2] = [
-        ("predicted cost (model)", |r| r.predicted_cost),
-        ("actual cost (system)", |r| r.actual_cost),
+        ("predicted cost (model)", |r| r.predicted),
+        ("actual cost (system)", |r| r.actual),
     ];
     let bands: Vec<[Vec<(f64, f64, f64)>; 2]> = models
         .iter()
@@ -240,4 +309,50 @@ fn draw_bands(path: &Path, models: &[(String, Vec<Vec<IterationReport>>)]) -> an
     }
     root.present().map_err(e)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(offset: f64) -> Vec<CostPoint> {
+        (1..=4)
+            .map(|iteration| CostPoint {
+                iteration,
+                predicted: 10.0 / iteration as f64 + offset,
+                predicted_std: 0.5,
+                actual: 12.0 / iteration as f64,
+                stable: iteration > 2,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn plots_are_pngs_and_say_what_failed() {
+        let dir = std::env::temp_dir().join(format!("msgp-plot-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let one = dir.join("one.png");
+        let curve = CostCurve {
+            label: "msgp".to_string(),
+            points: run(0.0),
+        };
+        plot_costs(&one, "a run", &[curve]).expect("plot");
+        let bands = dir.join("bands.png");
+        plot_cost_bands(&bands, &[("msgp".to_string(), vec![run(0.0), run(1.0)])]).expect("bands");
+        for path in [&one, &bands] {
+            let bytes = std::fs::read(path).expect("written");
+            assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{}", path.display());
+            assert!(bytes.len() > 10_000, "{} is nearly empty", path.display());
+        }
+        let empty = plot_costs(&dir.join("empty.png"), "nothing", &[]).expect_err("no points");
+        assert!(
+            empty.to_string().contains("empty.png: nothing to plot"),
+            "{empty}"
+        );
+        let nowhere = dir.join("missing-folder").join("x.png");
+        let e =
+            plot_cost_bands(&nowhere, &[("m".to_string(), vec![run(0.0)])]).expect_err("no folder");
+        assert!(e.to_string().contains("x.png"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

@@ -1,0 +1,600 @@
+//! The paper's Figure 4 as independent learning runs: PILCO on the simulated pendulum with
+//! several models and seeds; per run the iteration and interaction time of the first policy
+//! that passes the stability test, and the cost curves over seeds.
+//!
+//! A [`Plan`] (plant, models, seeds, iterations, [`Budget`], folder) lists its [`Unit`]s (one
+//! model × seed each); every unit is one learning loop whose folder
+//! ([`crate::learn::write_run_dir`]) is collected again by [`Plan::finished`]; [`report`]
+//! draws the cost bands and renders the markdown section from the finished runs. `msgp
+//! reproduce figure4` runs the units one after another (reusing finished folders), the Python
+//! sweep (`python -m msgp.sweep figure4`) on processes or a Ray cluster: same units, same
+//! numbers (a run's numbers do not depend on the machine or the thread count).
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use msgp_core::fit::FitOptimizer;
+use msgp_core::loss::Likelihood;
+use msgp_core::model::Method;
+use msgp_core::reproduce::results::Provenance;
+use serde::{Deserialize, Serialize};
+
+use crate::error::SimError;
+use crate::learn::{
+    Budget, FILTERED_MSGP_ITERATIONS, FinishedRun, IterationReport,
+    LINEAR_KF_POLICY_HORIZON_SECONDS, LINEAR_KF_WARM_START, LearnSettings, finished_run,
+};
+use crate::params::PendulumParams;
+use crate::plot::{CostPoint, plot_cost_bands};
+
+/// A model of the figure: a learning loop's model, MSGP with either likelihood.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Figure4Model {
+    /// MSGP trained on the free-run likelihood (the paper's).
+    Msgp,
+    /// MSGP trained on the filter likelihood.
+    MsgpFilter,
+    /// One-step GP-NARX (standard PILCO).
+    GpNarx,
+    /// The linear-Gaussian window model by the Kalman-filter likelihood.
+    LinearKf,
+}
+
+impl Figure4Model {
+    /// Every model, in the figure's order (the default set).
+    pub const ALL: [Figure4Model; 4] = [
+        Figure4Model::Msgp,
+        Figure4Model::MsgpFilter,
+        Figure4Model::GpNarx,
+        Figure4Model::LinearKf,
+    ];
+
+    /// The loop's model and MSGP likelihood.
+    pub fn model(self) -> (Method, Option<Likelihood>) {
+        match self {
+            Figure4Model::Msgp => (Method::Msgp, Some(Likelihood::FreeRun)),
+            Figure4Model::MsgpFilter => (Method::Msgp, Some(Likelihood::Filter)),
+            Figure4Model::GpNarx => (Method::GpNarx, None),
+            Figure4Model::LinearKf => (Method::LinearKf, None),
+        }
+    }
+
+    /// Name in tables, folders and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Figure4Model::Msgp => "msgp",
+            Figure4Model::MsgpFilter => "msgp-filter",
+            Figure4Model::GpNarx => "gp-narx",
+            Figure4Model::LinearKf => "linear-kf",
+        }
+    }
+}
+
+impl FromStr for Figure4Model {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        Figure4Model::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<&str> = Figure4Model::ALL.iter().map(|m| m.name()).collect();
+                format!("unknown model `{s}` (known: {})", names.join(", "))
+            })
+    }
+}
+
+/// One learning run of the plan.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Unit {
+    /// Its model.
+    pub model: Figure4Model,
+    /// Its seed.
+    pub seed: u64,
+}
+
+impl Unit {
+    /// `<model>-seed<k>`: its folder's name.
+    pub fn name(&self) -> String {
+        format!("{}-seed{}", self.model.name(), self.seed)
+    }
+}
+
+/// A validated reproduction of Figure 4.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Plan {
+    /// The plant tier's name (`apollo`, `noisy`): the section is `figure4-<tier>`.
+    pub tier: String,
+    /// The plant every run learns on.
+    pub plant: PendulumParams,
+    /// Models, in the table's order.
+    pub models: Vec<Figure4Model>,
+    /// Seeds of every model.
+    pub seeds: Vec<u64>,
+    /// Policy iterations per run.
+    pub iterations: usize,
+    /// The budget of every run (its `likelihood` unset: the models say it).
+    pub budget: Budget,
+    /// Folder of the runs' folders and the plot.
+    pub dir: PathBuf,
+}
+
+impl Plan {
+    /// Checks everything a run will use, so that no run fails on a setting after others have
+    /// taken an hour. `dir` defaults to `results/figure4-<tier>`.
+    pub fn new(
+        tier: &str,
+        plant: PendulumParams,
+        models: Vec<Figure4Model>,
+        seeds: Vec<u64>,
+        iterations: usize,
+        budget: Budget,
+        dir: Option<PathBuf>,
+    ) -> Result<Plan, SimError> {
+        let invalid = |option: &str, reason: String| SimError::Budget {
+            option: option.to_string(),
+            reason,
+        };
+        if let Some(l) = budget.likelihood {
+            return Err(invalid(
+                "likelihood",
+                format!(
+                    "{}: figure 4 runs MSGP with each likelihood as its own model (models \
+                     msgp, msgp-filter)",
+                    l.name()
+                ),
+            ));
+        }
+        if models.is_empty() {
+            return Err(invalid("models", "give at least one model".to_string()));
+        }
+        if seeds.is_empty() {
+            return Err(invalid("seeds", "give at least one seed".to_string()));
+        }
+        if iterations == 0 {
+            return Err(invalid("iterations", "must be at least 1".to_string()));
+        }
+        plant.validate()?;
+        let mut seen = Vec::new();
+        for unit in models.iter().flat_map(|&model| {
+            seeds
+                .iter()
+                .map(move |&seed| Unit { model, seed })
+                .collect::<Vec<_>>()
+        }) {
+            if seen.contains(&unit) {
+                return Err(invalid(
+                    "models and seeds",
+                    format!("{} appears twice", unit.name()),
+                ));
+            }
+            seen.push(unit);
+        }
+        let plan = Plan {
+            dir: dir.unwrap_or_else(|| PathBuf::from(format!("results/figure4-{tier}"))),
+            tier: tier.to_string(),
+            plant,
+            models,
+            seeds,
+            iterations,
+            budget,
+        };
+        for model in &plan.models {
+            plan.settings(&Unit {
+                model: *model,
+                seed: plan.seeds[0],
+            })?;
+        }
+        Ok(plan)
+    }
+
+    /// The section of the results file: `figure4-<tier>`.
+    pub fn section(&self) -> String {
+        format!("figure4-{}", self.tier)
+    }
+
+    /// Every run, model by model, seeds in order: the serial run's order and the report's.
+    pub fn units(&self) -> Vec<Unit> {
+        self.models
+            .iter()
+            .flat_map(|&model| self.seeds.iter().map(move |&seed| Unit { model, seed }))
+            .collect()
+    }
+
+    /// The loop's settings of `unit`.
+    pub fn settings(&self, unit: &Unit) -> Result<LearnSettings, SimError> {
+        let (method, likelihood) = unit.model.model();
+        Budget {
+            likelihood,
+            ..self.budget.clone()
+        }
+        .settings(method, unit.seed, self.iterations)
+    }
+
+    /// The folder of `unit`'s run.
+    pub fn run_dir(&self, unit: &Unit) -> PathBuf {
+        self.dir.join(unit.name())
+    }
+
+    /// `unit`'s run if its folder holds it, finished, with this plan's plant and settings.
+    pub fn finished(&self, unit: &Unit) -> Result<Option<FinishedRun>, SimError> {
+        Ok(finished_run(
+            &self.run_dir(unit),
+            &self.settings(unit)?,
+            &self.plant,
+        ))
+    }
+}
+
+/// A finished run of a unit.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Run {
+    /// Which.
+    pub unit: Unit,
+    /// What it did.
+    pub run: FinishedRun,
+}
+
+impl Run {
+    fn first_stable(&self) -> Option<&IterationReport> {
+        self.run.iterations.iter().find(|r| r.stable)
+    }
+}
+
+/// Every unit's finished run, in the plan's order; a unit whose folder lacks it is an error
+/// naming the folder.
+pub fn collect(plan: &Plan) -> Result<Vec<Run>, SimError> {
+    plan.units()
+        .into_iter()
+        .map(|unit| match plan.finished(&unit)? {
+            Some(run) => Ok(Run { unit, run }),
+            None => Err(SimError::MalformedLog {
+                path: plan.run_dir(&unit).join("summary.json"),
+                reason: format!(
+                    "no finished run of {} with this plan's plant and settings",
+                    unit.name()
+                ),
+            }),
+        })
+        .collect()
+}
+
+/// Draws `figure4.png` into the plan's folder and returns the markdown section for `runs`
+/// (every unit of the plan, [`collect`]).
+pub fn report(plan: &Plan, runs: &[Run], provenance: &Provenance) -> Result<String, SimError> {
+    let plot = plan.dir.join("figure4.png");
+    let bands: Vec<(String, Vec<Vec<CostPoint>>)> = plan
+        .models
+        .iter()
+        .map(|&m| {
+            (
+                m.name().to_string(),
+                runs.iter()
+                    .filter(|r| r.unit.model == m)
+                    .map(|r| r.run.iterations.iter().map(CostPoint::from).collect())
+                    .collect(),
+            )
+        })
+        .collect();
+    plot_cost_bands(&plot, &bands)?;
+    let learned = Budget {
+        likelihood: None,
+        ..plan.budget.clone()
+    }
+    .settings(Method::Msgp, 0, plan.iterations)?;
+    Ok(render(plan, &learned, runs, provenance, &plot))
+}
+
+/// `0–4` for consecutive seeds, else the list.
+fn seed_list(seeds: &[u64]) -> String {
+    let consecutive = seeds.windows(2).all(|w| w[1] == w[0] + 1);
+    match (seeds, consecutive) {
+        ([one], _) => one.to_string(),
+        ([first, .., last], true) => format!("{first}–{last}"),
+        _ => seeds
+            .iter()
+            .map(u64::to_string)
+            .collect::<Vec<_>>()
+            .join(", "),
+    }
+}
+
+/// `k/n (p %)`, or `—` when nothing was scored.
+fn fraction(k: usize, n: usize) -> String {
+    match n {
+        0 => "—".to_string(),
+        n => format!("{k}/{n} ({:.0} %)", 100.0 * k as f64 / n as f64),
+    }
+}
+
+/// The markdown section; `learned` holds the loop's settings (of an MSGP run: what the budget
+/// and the experiment switches resolved to).
+fn render(
+    plan: &Plan,
+    learned: &LearnSettings,
+    runs: &[Run],
+    provenance: &Provenance,
+    plot: &Path,
+) -> String {
+    let d = &plan.budget;
+    let params = &plan.plant;
+    let has = |m: Figure4Model| plan.models.contains(&m);
+    let models: Vec<&str> = plan.models.iter().map(|&m| m.name()).collect();
+    let tier = &plan.tier;
+    let mut s =
+        format!("# PILCO on the simulated pendulum (the paper's Figure 4), {tier} plant\n\n");
+    let _ = write!(
+        s,
+        "Learning to balance the pole on the robot's end effector (`msgp-sim`, `--plant {tier}`: σθ {} rad, σx {} m, {}-step delay, {} s lag, {} Hz control) from scratch: {} rollouts, then per iteration fit the model on all data, optimise the PID + PD gains on it, run them for one {} s episode. After every iteration the simulator's stability test (5 starts × 3 noise draws, 10 s each; not interaction, not training data) judges the gains. Interaction seconds count every episode so far, random rollouts included. Models: {}; seeds {}; {} iterations per run.\n\n",
+        params.sigma_theta,
+        params.sigma_x,
+        params.command_delay_steps,
+        params.lag_time_constant,
+        params.control_rate_hz,
+        match learned.random_policies {
+            0 => format!("{} random-excitation", d.random_rollouts),
+            k => format!(
+                "{} random-excitation and {k} random-policy (gains drawn uniformly in [0, 2 × typical])",
+                d.random_rollouts - k
+            ),
+        },
+        d.episode_seconds,
+        models.join(", "),
+        seed_list(&plan.seeds),
+        plan.iterations
+    );
+    let _ = writeln!(s, "- Command: {}", provenance.command);
+    let solver = learned
+        .fit
+        .msgp()
+        .map_or(FitOptimizer::default(), |s| s.optimizer)
+        .name();
+    let warm = match d.warm_start {
+        None | Some(0) => String::new(),
+        Some(n) => format!(", from the second iteration on warm-started for {n} iterations"),
+    };
+    let kf = match (has(Figure4Model::LinearKf), d.warm_start) {
+        (false, _) => String::new(),
+        (true, None) => format!(
+            " (linear-kf: no GP, at most that many L-BFGS iterations on the filter likelihood from each of two starts at iteration 1, then at most {LINEAR_KF_WARM_START} from the previous model)"
+        ),
+        (true, Some(0)) => {
+            " (linear-kf: no GP, at most that many L-BFGS iterations on the filter likelihood from each of two starts)"
+                .to_string()
+        }
+        (true, Some(_)) => {
+            " (linear-kf: no GP, L-BFGS on the filter likelihood, at iteration 1 from each of two starts)"
+                .to_string()
+        }
+    };
+    let kf = match has(Figure4Model::MsgpFilter) {
+        false => kf,
+        true => format!(
+            "{kf} (msgp-filter: {} L-BFGS iterations on the filter likelihood, at iteration 1 from the linear-kf model of the data under a GP that starts at zero, then from the previous model unless --warm-start 0)",
+            d.fit_iters.unwrap_or(FILTERED_MSGP_ITERATIONS)
+        ),
+    };
+    let horizon = match d.policy_horizon {
+        Some(h) => format!("{h} s"),
+        None if has(Figure4Model::LinearKf) || has(Figure4Model::MsgpFilter) => format!(
+            "{} s (linear-kf and msgp-filter: {LINEAR_KF_POLICY_HORIZON_SECONDS} s)",
+            LearnSettings::default().policy_horizon_seconds,
+        ),
+        None => format!("{} s", LearnSettings::default().policy_horizon_seconds),
+    };
+    let _ = writeln!(
+        s,
+        "- Budget per iteration: model fit {} {solver} iterations{warm} (m = {}){kf}, policy search: {} random gain candidates screened, {} Adam steps per start, on predicted rollouts over {horizon}",
+        d.fit_iters
+            .map_or_else(|| "default".to_string(), |n| n.to_string()),
+        d.inducing,
+        d.candidates,
+        d.search_iters
+    );
+    let summed: f64 = runs
+        .iter()
+        .map(|r| r.run.seconds)
+        .filter(|s| s.is_finite())
+        .sum();
+    let _ = write!(
+        s,
+        "- Wall time: {summed:.0} s ({:.1} min) summed over the runs (runs may be split over processes: `msgp learn-policy --out {}/<model>-seed<k>` writes a run that `msgp reproduce figure4` then collects, `python -m msgp.sweep figure4` spreads them over processes or a Ray cluster); this report: {:.0} s, msgp {} on {}\n- Date (UTC): {}\n\n",
+        summed / 60.0,
+        plan.dir.display(),
+        provenance.seconds,
+        env!("CARGO_PKG_VERSION"),
+        provenance.machine,
+        provenance.date
+    );
+    s.push_str("## Summary\n\n| model | stable within the budget | iterations to first stable policy (per seed) | interaction s to stable (median) | kept: later iterations stable | calibrated: iterations ≥ 3 with the measured cost within 2× of the predicted | fit + search s per iteration (median) |\n|---|---:|---|---:|---:|---:|---:|\n");
+    for &m in &plan.models {
+        let mine: Vec<&Run> = runs.iter().filter(|r| r.unit.model == m).collect();
+        let firsts: Vec<Option<&IterationReport>> = mine.iter().map(|r| r.first_stable()).collect();
+        let ok = firsts.iter().filter(|f| f.is_some()).count();
+        let per_seed: Vec<String> = firsts
+            .iter()
+            .map(|f| f.map_or_else(|| "—".to_string(), |r| r.iteration.to_string()))
+            .collect();
+        let mut secs: Vec<f64> = firsts
+            .iter()
+            .flatten()
+            .map(|r| r.interaction_seconds)
+            .collect();
+        secs.sort_by(f64::total_cmp);
+        let median = secs
+            .get(secs.len() / 2)
+            .map_or_else(|| "—".to_string(), |t| format!("{t:.1}"));
+        let (kept, later) = mine.iter().fold((0, 0), |(k, n), r| {
+            let after: Vec<&IterationReport> = match r.first_stable() {
+                Some(f) => r
+                    .run
+                    .iterations
+                    .iter()
+                    .filter(|i| i.iteration > f.iteration)
+                    .collect(),
+                None => Vec::new(),
+            };
+            (
+                k + after.iter().filter(|i| i.stable).count(),
+                n + after.len(),
+            )
+        });
+        let (calibrated, scored) = mine
+            .iter()
+            .flat_map(|r| r.run.iterations.iter().filter(|i| i.iteration >= 3))
+            .fold((0, 0), |(c, n), i| {
+                let ratio = i.actual_cost / i.predicted_cost;
+                (c + usize::from((0.5..=2.0).contains(&ratio)), n + 1)
+            });
+        let mut per_iteration: Vec<f64> = mine
+            .iter()
+            .flat_map(|r| {
+                r.run
+                    .iterations
+                    .iter()
+                    .map(|i| i.fit_seconds + i.search_seconds)
+            })
+            .collect();
+        per_iteration.sort_by(f64::total_cmp);
+        let _ = writeln!(
+            s,
+            "| {} | {ok}/{} | {} | {median} | {} | {} | {} |",
+            m.name(),
+            mine.len(),
+            per_seed.join(", "),
+            fraction(kept, later),
+            fraction(calibrated, scored),
+            per_iteration
+                .get(per_iteration.len() / 2)
+                .map_or_else(|| "—".to_string(), |t| format!("{t:.1}"))
+        );
+    }
+    s.push_str("\n## Runs\n\n| model | seed | first stable iteration | interaction s to stable | stable iterations | lowest actual cost | last actual cost | wall s |\n|---|---:|---:|---:|---|---:|---:|---:|\n");
+    for r in runs {
+        let first = r.first_stable();
+        let stable: Vec<String> = r
+            .run
+            .iterations
+            .iter()
+            .filter(|i| i.stable)
+            .map(|i| i.iteration.to_string())
+            .collect();
+        let lowest = r
+            .run
+            .iterations
+            .iter()
+            .map(|i| i.actual_cost)
+            .fold(f64::INFINITY, f64::min);
+        let last = r.run.iterations.last().map_or(f64::NAN, |i| i.actual_cost);
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} | {lowest:.2} | {last:.2} | {:.0} |",
+            r.unit.model.name(),
+            r.unit.seed,
+            first.map_or_else(|| "—".to_string(), |i| i.iteration.to_string()),
+            first.map_or_else(
+                || "—".to_string(),
+                |i| format!("{:.1}", i.interaction_seconds)
+            ),
+            if stable.is_empty() {
+                "none".to_string()
+            } else {
+                stable.join(", ")
+            },
+            r.run.seconds
+        );
+    }
+    let _ = write!(
+        s,
+        "\nCost over each {} s episode (a step after an early stop counts 1): mean ± 1 standard deviation over the seeds, predicted by the model (left) and measured on the simulator (right). Per-run artefacts (policy, iterations.csv, episodes as MCAP, cost.png) are in `{}/<model>-seed<k>/`.\n\n![cost curves]({})\n",
+        d.episode_seconds,
+        plan.dir.display(),
+        plot.display()
+    );
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plan(models: Vec<Figure4Model>, seeds: Vec<u64>, budget: Budget) -> Result<Plan, SimError> {
+        Plan::new(
+            "apollo",
+            PendulumParams::default(),
+            models,
+            seeds,
+            2,
+            budget,
+            None,
+        )
+    }
+
+    #[test]
+    fn units_run_model_by_model_in_seed_order() {
+        let p = plan(
+            vec![Figure4Model::LinearKf, Figure4Model::Msgp],
+            vec![0, 1, 2],
+            Budget::default(),
+        )
+        .expect("valid plan");
+        let names: Vec<String> = p.units().iter().map(Unit::name).collect();
+        assert_eq!(
+            names,
+            [
+                "linear-kf-seed0",
+                "linear-kf-seed1",
+                "linear-kf-seed2",
+                "msgp-seed0",
+                "msgp-seed1",
+                "msgp-seed2"
+            ]
+        );
+        assert_eq!(p.dir, PathBuf::from("results/figure4-apollo"));
+        assert_eq!(p.section(), "figure4-apollo");
+        let s = p.settings(&p.units()[4]).expect("settings");
+        assert_eq!(s.seed, 1);
+        assert_eq!(
+            s.fit.msgp().map(|m| m.likelihood),
+            Some(Likelihood::FreeRun)
+        );
+        let back: Plan =
+            serde_json::from_str(&serde_json::to_string(&p).expect("json")).expect("reads");
+        assert_eq!(back, p);
+        assert_eq!(seed_list(&[0, 1, 2]), "0–2");
+        assert_eq!(seed_list(&[0, 2]), "0, 2");
+        assert_eq!(seed_list(&[3]), "3");
+    }
+
+    #[test]
+    fn a_plan_refuses_what_no_run_could_use() {
+        let refused = [
+            plan(Vec::new(), vec![0], Budget::default()),
+            plan(vec![Figure4Model::Msgp], Vec::new(), Budget::default()),
+            plan(vec![Figure4Model::Msgp], vec![1, 1], Budget::default()),
+            plan(
+                vec![Figure4Model::Msgp],
+                vec![0],
+                Budget {
+                    likelihood: Some(Likelihood::Filter),
+                    ..Budget::default()
+                },
+            ),
+            plan(
+                vec![Figure4Model::GpNarx],
+                vec![0],
+                Budget {
+                    episode_seconds: 0.0,
+                    ..Budget::default()
+                },
+            ),
+        ];
+        for r in refused {
+            assert!(matches!(r, Err(SimError::Budget { .. })), "{r:?}");
+        }
+        assert_eq!("msgp-filter".parse(), Ok(Figure4Model::MsgpFilter));
+        assert!("msgp_filter".parse::<Figure4Model>().is_err());
+    }
+}
