@@ -53,6 +53,7 @@ fn defaults() -> Selection<'static> {
         outputs: &[],
         topic: None,
         time: TimeSource::Log,
+        sort_time: false,
     }
 }
 
@@ -117,6 +118,7 @@ fn a_model_fitted_on_a_simulator_log_predicts_another_excitation() {
         outputs: &outputs,
         topic: None,
         time: TimeSource::Log,
+        sort_time: false,
     };
     let data = Dataset::load(std::slice::from_ref(&path), &angle).expect("load log");
     let train: Vec<Trajectory> = data.parts.iter().map(|p| p.traj.clone()).collect();

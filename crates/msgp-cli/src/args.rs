@@ -61,6 +61,10 @@ pub struct DataArgs {
     /// messages with a header; every selected topic must have one).
     #[arg(long, value_name = "SOURCE", default_value = "log")]
     pub time: TimeArg,
+    /// CSV: sort each trajectory's rows by the time column instead of refusing rows written
+    /// out of order (a warning says how many moved; repeated times are still an error).
+    #[arg(long)]
+    pub sort_time: bool,
 }
 
 /// Where MCAP message times come from, on the command line.

@@ -731,7 +731,49 @@ fn bad_inputs_fail_with_clear_messages() {
     dir.write("back.csv", &backwards);
     fit(
         &["--data", "back.csv"],
-        &["back.csv:4:1:", "time `t` = 0.5 does not increase"],
+        &[
+            "back.csv:4:1:",
+            "time `t` = 0.5 does not increase",
+            "--sort-time",
+        ],
+    );
+    // --sort-time sorts such rows, says so, and fits what the ordered file fits
+    let ordered_csv = system_csv(120, None);
+    let mut rows: Vec<&str> = ordered_csv.lines().collect();
+    rows.swap(3, 7);
+    rows.swap(50, 51);
+    dir.write("shuffled.csv", &(rows.join("\n") + "\n"));
+    let sorted = run(
+        &dir,
+        &args(
+            &["fit", "--data", "shuffled.csv", "--sort-time", "--json"],
+            &FAST,
+        ),
+    );
+    assert!(
+        sorted.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sorted.stderr)
+    );
+    assert!(
+        String::from_utf8_lossy(&sorted.stderr).contains(
+            "warning: shuffled.csv: sorted the rows by `t` within each trajectory: 4 of 120 rows moved"
+        ),
+        "{}",
+        String::from_utf8_lossy(&sorted.stderr)
+    );
+    let sorted: serde_json::Value = serde_json::from_slice(&sorted.stdout).expect("json");
+    let ordered = ok_json(&dir, &args(&["fit", "--data", "d.csv", "--json"], &FAST));
+    assert_eq!(sorted["data_hash"], ordered["data_hash"]);
+    assert_eq!(sorted["rmse"], ordered["rmse"]);
+    // a time that repeats stays an error
+    dir.write(
+        "repeat.csv",
+        &system_csv(120, None).replacen("\n2,", "\n1,", 1),
+    );
+    fit(
+        &["--data", "repeat.csv", "--sort-time"],
+        &["repeat.csv:", "time `t` = 1 does not increase"],
     );
     dir.write("inf.csv", "t,u,y\n0,1,2\n1,-inf,1\n");
     fit(

@@ -35,16 +35,19 @@ fn paths(files: &Bound<'_, PyAny>) -> Result<Vec<PathBuf>> {
 /// `inputs`, `outputs` (the names chosen) and `parts`, a list of dicts `source`, `episode`
 /// (None without an episode column), `t` (the time column, or the row number), `u` (T × d_u)
 /// and `y` (T × d_y) numpy arrays, and `warnings`, lines about the data that do not stop the
-/// load (an irregular time step). Bad data raise `InvalidInputError` naming the file, line and
-/// column. MCAP logs are read by the `msgp` command line (this module is built without MCAP).
+/// load (an irregular time step, rows sorted). Bad data raise `InvalidInputError` naming the
+/// file, line and column; a time column that goes back within a trajectory is one, unless
+/// `sort_time` sorts each trajectory's rows by time first (as `msgp fit --sort-time`). MCAP
+/// logs are read by the `msgp` command line (this module is built without MCAP).
 #[pyfunction]
-#[pyo3(signature = (files, *, inputs = None, outputs = None, topic = None))]
+#[pyo3(signature = (files, *, inputs = None, outputs = None, topic = None, sort_time = false))]
 pub fn load<'py>(
     py: Python<'py>,
     files: &Bound<'py, PyAny>,
     inputs: Option<Vec<String>>,
     outputs: Option<Vec<String>>,
     topic: Option<String>,
+    sort_time: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let files = paths(files)?;
     let (inputs, outputs) = (inputs.unwrap_or_default(), outputs.unwrap_or_default());
@@ -53,6 +56,7 @@ pub fn load<'py>(
         outputs: &outputs,
         topic: topic.as_deref(),
         time: TimeSource::Log,
+        sort_time,
     };
     let data = detached(py, || {
         Dataset::load(&files, &selection).map_err(|e| input(e.to_string()))

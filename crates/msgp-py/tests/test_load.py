@@ -66,3 +66,16 @@ def test_missing_files_and_mcap_are_refused_clearly(tmp_path):
         msgp.load(log)
     with pytest.raises(msgp.InvalidInputError, match="files"):
         msgp.load(42)
+
+
+def test_rows_out_of_time_order_are_refused_or_sorted(tmp_path):
+    path = tmp_path / "late.csv"
+    path.write_text("t,u,y\n0,1,10\n2,3,12\n1,2,11\n3,4,13\n")
+    with pytest.raises(msgp.InvalidInputError, match=r"late.csv:4:1: time `t` = 1 does not"):
+        msgp.load(path)
+    data = msgp.load(path, sort_time=True)
+    np.testing.assert_array_equal(data["parts"][0]["y"][:, 0], [10, 11, 12, 13])
+    assert any("2 of 4 rows moved" in w for w in data["warnings"]), data["warnings"]
+    path.write_text("t,u,y\n0,1,10\n1,3,12\n1,2,11\n")
+    with pytest.raises(msgp.InvalidInputError, match="time `t` = 1 does not increase"):
+        msgp.load(path, sort_time=True)

@@ -55,6 +55,7 @@ fn load(model_path: &std::path::Path, args: &DataArgs, from: usize) -> anyhow::R
             outputs,
             topic: args.topic.as_deref(),
             time: args.time.into(),
+            sort_time: args.sort_time,
         },
     )?;
     for w in &data.warnings {

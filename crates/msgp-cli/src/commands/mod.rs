@@ -42,6 +42,7 @@ impl DataArgs {
             outputs: &self.output,
             topic: self.topic.as_deref(),
             time: self.time.into(),
+            sort_time: self.sort_time,
         }
     }
 }

@@ -79,6 +79,10 @@ pub struct Selection<'a> {
     pub topic: Option<&'a str>,
     /// MCAP: where the message times come from.
     pub time: TimeSource,
+    /// CSV: sort each trajectory's rows by the time column instead of refusing a time that
+    /// goes back (a warning says how many rows moved; repeated times are still an error).
+    /// MCAP messages are always read in time order.
+    pub sort_time: bool,
 }
 
 const SKIP: [&str; 5] = ["t", "time", "step", EPISODE_COLUMN, "index"];
@@ -271,6 +275,7 @@ fn load_file(
     path: &Path,
     sel: &Selection<'_>,
     names: &mut Option<(Vec<String>, Vec<String>)>,
+    warnings: &mut Vec<String>,
 ) -> Result<Table> {
     let bytes = std::fs::read(path).map_err(|e| MsgpError::File {
         path: path.to_path_buf(),
@@ -279,7 +284,10 @@ fn load_file(
     if is_mcap(path, &bytes) {
         mcap_table(path, &bytes, sel, names)
     } else {
-        let table = Table::parse_csv(&bytes, path)?;
+        let mut table = Table::parse_csv(&bytes, path)?;
+        if sel.sort_time {
+            warnings.extend(table.sort_by_time());
+        }
         table.check_time_order()?;
         if names.is_none() {
             *names = Some(csv_names(&table, sel)?);
@@ -295,7 +303,7 @@ impl Dataset {
         let mut parts = Vec::new();
         let mut warnings = Vec::new();
         for path in files {
-            let table = load_file(path, sel, &mut names)?;
+            let table = load_file(path, sel, &mut names, &mut warnings)?;
             warnings.extend(table.irregular_steps(IRREGULAR_STEP_TOLERANCE));
             let Some((inputs, outputs)) = &names else {
                 return Err(MsgpError::Data("no columns selected".into()));

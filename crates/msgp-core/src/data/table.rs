@@ -207,7 +207,8 @@ impl Table {
                         format!(
                             "time `{}` = {now} does not increase (the sample before, line {}, \
                              is at {before}); times must increase strictly within a trajectory \
-                             (an `{EPISODE_COLUMN}` column separates trajectories)",
+                             (an `{EPISODE_COLUMN}` column separates trajectories; the command \
+                             line's --sort-time sorts rows written out of order)",
                             self.columns[j],
                             self.lines[i - 1]
                         ),
@@ -216,6 +217,36 @@ impl Table {
             }
         }
         Ok(())
+    }
+
+    /// Sorts every trajectory's rows by the time column (stable: rows with equal times keep
+    /// their order, and [`Table::check_time_order`] still refuses them); the rows keep their
+    /// file lines, so later errors still point into the file. A note saying how many rows
+    /// moved, or `None` when none did or there is no time column.
+    pub fn sort_by_time(&mut self) -> Option<String> {
+        let j = self.time_column()?;
+        let mut moved = 0usize;
+        for range in self.episodes() {
+            let mut order: Vec<usize> = range.clone().collect();
+            order.sort_by(|&a, &b| self.rows[a][j].total_cmp(&self.rows[b][j]));
+            moved += order
+                .iter()
+                .zip(range.clone())
+                .filter(|(from, to)| *from != to)
+                .count();
+            let rows: Vec<Vec<f64>> = order.iter().map(|&i| self.rows[i].clone()).collect();
+            let lines: Vec<u64> = order.iter().map(|&i| self.lines[i]).collect();
+            self.rows.splice(range.clone(), rows);
+            self.lines.splice(range, lines);
+        }
+        (moved > 0).then(|| {
+            format!(
+                "{}: sorted the rows by `{}` within each trajectory: {moved} of {} rows moved",
+                self.path.display(),
+                self.columns[j],
+                self.rows.len()
+            )
+        })
     }
 
     /// A warning when the time column's steps are not (nearly) equal within a trajectory: some
@@ -472,6 +503,29 @@ mod tests {
             .expect_err("repeat inside episode 1")
             .to_string();
         assert!(in_episode.starts_with("x.csv:5:1:"), "{in_episode}");
+    }
+
+    /// Sorting by time orders each trajectory on its own, keeps the file lines of the rows
+    /// (a repeat found afterwards names the lines it has in the file) and says how many moved.
+    #[test]
+    fn rows_sort_by_time_within_each_trajectory() {
+        let mut t = parse("t,u,y,episode\n0,1,10,0\n2,3,12,0\n1,2,11,0\n1,5,15,1\n0,4,14,1\n")
+            .expect("parses");
+        let note = t.sort_by_time().expect("rows moved");
+        assert_eq!(
+            note,
+            "x.csv: sorted the rows by `t` within each trajectory: 4 of 5 rows moved"
+        );
+        assert_eq!(t.column("y").expect("y"), [10.0, 11.0, 12.0, 14.0, 15.0]);
+        t.check_time_order().expect("ordered now");
+        assert_eq!(t.sort_by_time(), None, "nothing moves the second time");
+        let mut repeat = parse("t,u,y\n1,1,2\n0,1,2\n1,1,3\n").expect("parses");
+        repeat.sort_by_time().expect("moved");
+        let e = repeat.check_time_order().expect_err("repeat").to_string();
+        assert!(e.starts_with("x.csv:4:1: time `t` = 1"), "{e}");
+        assert!(e.contains("line 2, is at 1"), "{e}");
+        let mut untimed = parse("u,y\n2,1\n1,2\n").expect("parses");
+        assert_eq!(untimed.sort_by_time(), None);
     }
 
     #[test]
