@@ -14,6 +14,14 @@ pub enum Stream {
     RandomGains,
     /// Stability-test start number `i` (its own episode seed); its first noise draw.
     StabilityStart(u32),
+    /// Evaluation episode `episode` (below 65 536) of a learning loop's `iteration`: its own
+    /// episode seed.
+    Evaluation {
+        /// The loop's iteration.
+        iteration: u32,
+        /// The evaluation episode.
+        episode: u32,
+    },
     /// Further noise draws of a stability-test start (`repeat ≥ 1`, below 65 536).
     StabilityRepeat {
         /// Start number.
@@ -31,6 +39,9 @@ impl Stream {
             Stream::Excitation => 3,
             Stream::RandomGains => 4,
             Stream::StabilityStart(i) => 0x1000 + u64::from(i),
+            Stream::Evaluation { iteration, episode } => {
+                (2 << 48) + (u64::from(iteration) << 16) + u64::from(episode & 0xFFFF)
+            }
             Stream::StabilityRepeat { start, repeat } => {
                 (1 << 48) + (u64::from(start) << 16) + u64::from(repeat & 0xFFFF)
             }

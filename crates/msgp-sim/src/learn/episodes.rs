@@ -7,13 +7,15 @@ use msgp_core::data::Trajectory;
 use msgp_core::fit::TrainingEpisode;
 use msgp_core::loss::Likelihood;
 use msgp_core::policy::PolicySpec;
+use msgp_core::policy_search::cost::SaturatingCost;
 
 use crate::controller::{Controller, PidPdGains, PidPdPolicy};
 use crate::episode::{Episode, EpisodeConfig, run_episode};
 use crate::error::SimError;
 use crate::params::PendulumParams;
+use crate::seed::{Stream, rng_for};
 
-use super::problem::modelled_policy;
+use super::problem::{episode_cost, modelled_policy};
 use super::settings::LearnSettings;
 
 /// `[θ, x]` and the commands of an episode.
@@ -101,6 +103,43 @@ pub(super) fn feedback_episode(
         })
         .collect();
     Ok((ep, entries))
+}
+
+/// The expected cost of `gains` on the system after `iteration`: the mean measured cost
+/// ([`episode_cost`] over the scored steps `from..from + steps`) of
+/// [`LearnSettings::evaluation_episodes`] episodes of the loop's length from random initial
+/// angles, each with its own seed; `None` when there are none.
+pub(super) fn expected_cost(
+    params: &PendulumParams,
+    gains: &PidPdGains,
+    settings: &LearnSettings,
+    iteration: usize,
+    cost: &SaturatingCost,
+    (from, steps): (usize, usize),
+) -> Result<Option<f64>, SimError> {
+    let n = settings.evaluation_episodes;
+    if n == 0 {
+        return Ok(None);
+    }
+    let mut total = 0.0;
+    for k in 0..n {
+        let mut controller = PidPdPolicy::new(*gains, params)?;
+        let stream = Stream::Evaluation {
+            iteration: u32::try_from(iteration).unwrap_or(u32::MAX),
+            episode: u32::try_from(k).unwrap_or(u32::MAX),
+        };
+        let ep = run_episode(
+            params,
+            &mut controller,
+            &EpisodeConfig {
+                seconds: settings.episode_seconds,
+                seed: rng_for(settings.seed, stream),
+                initial_theta: None,
+            },
+        )?;
+        total += episode_cost(&ep, cost, from, steps);
+    }
+    Ok(Some(total / n as f64))
 }
 
 /// One interaction episode from a random initial angle; adds its duration to `seconds`.

@@ -22,15 +22,15 @@ mod settings;
 
 pub use budget::{Budget, EXPERIMENT_KEYS, Experiment};
 pub use episodes::{episode_trajectory, segments};
-use episodes::{feedback_episode, interact, msgp_segments};
+use episodes::{expected_cost, feedback_episode, interact, msgp_segments};
 use problem::gains_from;
 pub use problem::{episode_cost, modelled_policy, pendulum_problem};
 pub use record::{FinishedRun, finished_run, summary, write_run_dir};
 pub use report::{IterationReport, LearnOutcome};
 pub use settings::{
-    END_EFFECTOR_INTEGRATOR, END_EFFECTOR_KINEMATIC, FILTER_NOISE_FLOOR, FILTERED_MSGP_ITERATIONS,
-    LEARN_INDUCING, LINEAR_KF_POLICY_HORIZON_SECONDS, LINEAR_KF_WARM_START, LearnSettings,
-    learn_excitation,
+    END_EFFECTOR_INTEGRATOR, END_EFFECTOR_KINEMATIC, EVALUATION_EPISODES, FILTER_NOISE_FLOOR,
+    FILTERED_MSGP_ITERATIONS, LEARN_INDUCING, LINEAR_KF_POLICY_HORIZON_SECONDS,
+    LINEAR_KF_WARM_START, LearnSettings, learn_excitation,
 };
 
 use std::ops::ControlFlow;
@@ -293,11 +293,13 @@ pub fn learn_policy_observed(
         episodes.push(ep);
         let stable =
             stability_test(params, &gains, settings.seed, &StabilityCriteria::default())?.passed;
+        let expected = expected_cost(params, &gains, settings, it, &cost, (window, scored))?;
         let report = IterationReport {
             iteration: it,
             predicted_cost: predicted,
             predicted_cost_std: var.sqrt(),
             actual_cost: actual,
+            expected_cost: expected,
             interaction_seconds: seconds,
             stable,
             fit_seconds,

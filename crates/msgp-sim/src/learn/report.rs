@@ -17,6 +17,13 @@ pub struct IterationReport {
     pub predicted_cost_std: f64,
     /// Cost of the episode actually run, on the measured outputs.
     pub actual_cost: f64,
+    /// The gains' expected cost on the system: the mean measured cost of
+    /// [`LearnSettings::evaluation_episodes`](super::LearnSettings::evaluation_episodes)
+    /// evaluation episodes from the same initial distribution, what `predicted_cost` predicts
+    /// (one episode's cost is a single draw, dominated by its random initial angle). `None`
+    /// without evaluation episodes (and in runs made before it was measured).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub expected_cost: Option<f64>,
     /// Interaction time so far, random rollouts included \[s\].
     pub interaction_seconds: f64,
     /// Whether the gains passed the simulator's stability test.

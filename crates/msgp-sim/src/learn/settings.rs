@@ -57,6 +57,14 @@ pub struct LearnSettings {
     pub search: PolicySearchSettings,
     /// Cost widths for `[θ, x]` (rad, m): `c = 1 − exp(−½ Σ (y_j / w_j)²)`.
     pub cost_widths: [f64; 2],
+    /// After every iteration, this many evaluation episodes of the new gains (an episode's
+    /// length each, random initial angles, their own seeds) estimate the expected cost the
+    /// model predicted ([`IterationReport::expected_cost`](super::IterationReport::expected_cost)):
+    /// one episode's cost is a single draw whose spread is as large as its mean (the initial
+    /// angle's square), so only the mean says whether the prediction was right. Like the
+    /// stability test, neither interaction nor training data. 0: none.
+    #[serde(default = "evaluation_episodes")]
+    pub evaluation_episodes: usize,
     /// Feed-forward (random-excitation) episodes enter the model loss as overlapping segments
     /// of this many samples (stride half of it); `None` keeps them whole. MSGP only. The pendulum is
     /// open-loop unstable: a free-running prediction from an episode's first samples carries no
@@ -126,6 +134,7 @@ impl Default for LearnSettings {
                 ..PolicySearchSettings::default()
             },
             cost_widths: [0.1, 0.3],
+            evaluation_episodes: EVALUATION_EPISODES,
             ff_segment: Some(30),
             fb_segment: None,
             gain_scale: [1.0, 0.3, 1.0, 10.0, 2.0],
@@ -224,6 +233,14 @@ impl LearnSettings {
     pub fn method(&self) -> Method {
         self.fit.method()
     }
+}
+
+/// Evaluation episodes per iteration ([`LearnSettings::evaluation_episodes`]): the mean of 50
+/// costs whose spread equals their mean is known to ±14 % (one standard error).
+pub const EVALUATION_EPISODES: usize = 50;
+
+fn evaluation_episodes() -> usize {
+    EVALUATION_EPISODES
 }
 
 /// Most L-BFGS iterations of a filtered MSGP fit in the loop (cold at iteration 1, warm after).
