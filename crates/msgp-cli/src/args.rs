@@ -437,7 +437,9 @@ pub struct BudgetArgs {
     /// double integrator of the command), excitation-max-hz=HZ (highest frequency of the random
     /// excitation, 10), random-policies=K (K of the random rollouts run random PID + PD gains,
     /// each also stability-tested), trust-region=R (no gain moves further than R typical
-    /// magnitudes per search, 1; 0: off), fit-optimizer=adam|lbfgs (solver of each MSGP fit).
+    /// magnitudes per search, 1; 0: off), fit-optimizer=adam|lbfgs (solver of each MSGP fit),
+    /// hold-margin=K (the search's gains replace the running ones only when predicted to pay
+    /// by K standard deviations of their predicted cost; 0: always).
     #[arg(long = "experimental", value_name = "KEY=VALUE", value_parser = Experiment::parse)]
     pub experimental: Vec<Experiment>,
 }

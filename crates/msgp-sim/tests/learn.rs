@@ -384,3 +384,57 @@ fn the_observed_loop_reports_fits_searches_and_iterations_in_order() {
         assert_eq!(seen.last().map(String::as_str), Some(at), "{seen:?}");
     }
 }
+
+/// `hold_margin`: with a margin no search can beat, every iteration after the first runs the
+/// first gains again (`held`, their own predicted cost); without one, the searches move them.
+#[test]
+fn a_hold_margin_keeps_the_running_gains_unless_the_model_predicts_a_gain() {
+    use msgp_core::model::Method;
+    let kf = LearnSettings::for_method(Method::LinearKf);
+    let run = |hold_margin: f64| {
+        let settings = LearnSettings {
+            iterations: 3,
+            random_rollouts: 2,
+            episode_seconds: 1.0,
+            evaluation_episodes: 2,
+            hold_margin,
+            search: PolicySearchSettings {
+                iterations: 3,
+                restarts: 0,
+                candidates: 4,
+                ..kf.search
+            },
+            ..kf.clone()
+        };
+        learn_policy(
+            &PendulumParams::tier(PlantTier::Noisy),
+            &settings,
+            &mut |_| {},
+        )
+        .expect("loop runs")
+    };
+    let moving = run(0.0);
+    assert!(moving.iterations.iter().all(|r| !r.held));
+    assert_ne!(moving.iterations[0].gains, moving.iterations[1].gains);
+    let held = run(1e9);
+    let flags: Vec<bool> = held.iterations.iter().map(|r| r.held).collect();
+    assert_eq!(flags, [false, true, true]);
+    assert!(
+        held.iterations
+            .iter()
+            .all(|r| r.gains == held.iterations[0].gains)
+    );
+    let first = |r: &msgp_sim::learn::IterationReport| {
+        (r.gains, r.predicted_cost, r.actual_cost, r.expected_cost)
+    };
+    assert_eq!(
+        first(&held.iterations[0]),
+        first(&moving.iterations[0]),
+        "the first iteration alike"
+    );
+    assert!(
+        held.iterations[1].predicted_cost.is_finite()
+            && held.iterations[1].predicted_cost != moving.iterations[1].predicted_cost
+    );
+    assert!(held.iterations.iter().all(|r| r.expected_cost.is_some()));
+}

@@ -39,10 +39,13 @@ pub enum Experiment {
     TrustRegion(f64),
     /// `fit-optimizer=adam|lbfgs` (MSGP): the solver of each fit.
     FitOptimizer(FitOptimizer),
+    /// `hold-margin=K`: the search's gains replace the running ones only when predicted to
+    /// pay by K standard deviations of their predicted cost; 0: always.
+    HoldMargin(f64),
 }
 
 /// The keys of [`Experiment`], as written on the command line.
-pub const EXPERIMENT_KEYS: [&str; 7] = [
+pub const EXPERIMENT_KEYS: [&str; 8] = [
     "start-smoothing",
     "fb-segment",
     "free-position",
@@ -50,6 +53,7 @@ pub const EXPERIMENT_KEYS: [&str; 7] = [
     "random-policies",
     "trust-region",
     "fit-optimizer",
+    "hold-margin",
 ];
 
 impl Experiment {
@@ -63,6 +67,7 @@ impl Experiment {
             Experiment::RandomPolicies(_) => 4,
             Experiment::TrustRegion(_) => 5,
             Experiment::FitOptimizer(_) => 6,
+            Experiment::HoldMargin(_) => 7,
         }]
     }
 
@@ -94,6 +99,7 @@ impl Experiment {
             "excitation-max-hz" => Experiment::ExcitationMaxHz(number()?),
             "random-policies" => Experiment::RandomPolicies(count()?),
             "trust-region" => Experiment::TrustRegion(number()?),
+            "hold-margin" => Experiment::HoldMargin(number()?),
             "fit-optimizer" => {
                 Experiment::FitOptimizer(match value.to_ascii_lowercase().as_str() {
                     "adam" => FitOptimizer::Adam,
@@ -243,6 +249,7 @@ impl Budget {
         let mut random_policies = d.random_policies;
         let mut trust_region = d.search.trust_region;
         let mut optimizer = msgp_defaults.optimizer;
+        let mut hold_margin = d.hold_margin;
         for e in &self.experimental {
             if matches!(
                 e,
@@ -265,12 +272,19 @@ impl Budget {
                 Experiment::RandomPolicies(k) => random_policies = k,
                 Experiment::TrustRegion(r) => trust_region = r,
                 Experiment::FitOptimizer(o) => optimizer = o,
+                Experiment::HoldMargin(k) => hold_margin = k,
             }
         }
         if !(trust_region.is_finite() && trust_region >= 0.0) {
             return Err(invalid(
                 "experimental trust-region",
                 format!("must be finite and at least 0, got {trust_region}"),
+            ));
+        }
+        if !(hold_margin.is_finite() && hold_margin >= 0.0) {
+            return Err(invalid(
+                "experimental hold-margin",
+                format!("must be finite and at least 0, got {hold_margin}"),
             ));
         }
         if random_policies > self.random_rollouts {
@@ -330,6 +344,7 @@ impl Budget {
             policy_horizon_seconds: self.policy_horizon.unwrap_or(d.policy_horizon_seconds),
             excitation,
             cost_widths,
+            hold_margin,
             seed,
             fit,
             warm_start: match self.warm_start {
@@ -443,7 +458,7 @@ mod tests {
             r#"{"fit-optimizer":"lbfgs"}"#
         );
         for (k, key) in EXPERIMENT_KEYS.iter().enumerate() {
-            let value = ["4", "4", "true", "5", "1", "0.5", "adam"][k];
+            let value = ["4", "4", "true", "5", "1", "0.5", "adam", "1"][k];
             let e = Experiment::parse(&format!("{key}={value}")).expect("parses");
             assert_eq!(e.key(), *key);
             let back: Experiment =

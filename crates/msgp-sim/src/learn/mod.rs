@@ -263,12 +263,35 @@ pub fn learn_policy_observed(
             &search,
         );
         let search_seconds = clock.elapsed().as_secs_f64();
+        let mut held = false;
         let (predicted, var, search_failure) = match searched {
             Ok(result) => {
-                gains = gains_from(&result.policy);
+                // the running gains stay unless this iteration's model predicts the new ones
+                // to pay by `hold_margin` standard deviations of their predicted cost
+                // ([`LearnSettings::hold_margin`]); the first gains have not run yet
+                let current = match (settings.hold_margin > 0.0, it > 1) {
+                    (true, true) => problem
+                        .evaluate(&modelled_policy(&gains, params)?)
+                        .ok()
+                        .filter(|(total, _)| total.is_finite()),
+                    _ => None,
+                };
+                let spread = result.steps.iter().map(|(_, v)| v).sum::<f64>().sqrt();
+                let steps = match current {
+                    Some((total, steps))
+                        if result.expected_cost > total - settings.hold_margin * spread =>
+                    {
+                        held = true;
+                        steps
+                    }
+                    _ => {
+                        gains = gains_from(&result.policy);
+                        result.steps
+                    }
+                };
                 // reported over the episode's length, comparable with the cost measured on the
                 // system
-                let episode_steps = &result.steps[..scored.min(result.steps.len())];
+                let episode_steps = &steps[..scored.min(steps.len())];
                 let predicted: f64 = episode_steps.iter().map(|(m, _)| m).sum();
                 let var: f64 = episode_steps.iter().map(|(_, v)| v).sum();
                 (predicted, var, None)
@@ -300,6 +323,7 @@ pub fn learn_policy_observed(
             predicted_cost_std: var.sqrt(),
             actual_cost: actual,
             expected_cost: expected,
+            held,
             interaction_seconds: seconds,
             stable,
             fit_seconds,

@@ -24,6 +24,11 @@ pub struct IterationReport {
     /// without evaluation episodes (and in runs made before it was measured).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub expected_cost: Option<f64>,
+    /// The search's gains were not run: this iteration's model did not predict them to pay
+    /// by [`LearnSettings::hold_margin`](super::LearnSettings::hold_margin), so the previous
+    /// gains ran again (and `predicted_cost` is theirs).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub held: bool,
     /// Interaction time so far, random rollouts included \[s\].
     pub interaction_seconds: f64,
     /// Whether the gains passed the simulator's stability test.

@@ -65,6 +65,15 @@ pub struct LearnSettings {
     /// stability test, neither interaction nor training data. 0: none.
     #[serde(default = "evaluation_episodes")]
     pub evaluation_episodes: usize,
+    /// A change of the running gains must be predicted to pay: from the second iteration on,
+    /// the search's gains replace the running ones only if this iteration's model predicts
+    /// their expected cost (over the policy horizon) below the running gains' by more than
+    /// this many standard deviations of the predicted cost (per-step variances summed); else
+    /// the running gains run again. A model that ranks nearby gains wrongly otherwise walks
+    /// the gains away from stable ones a little each iteration (docs/design.md). 0: every
+    /// search's gains run.
+    #[serde(default)]
+    pub hold_margin: f64,
     /// Feed-forward (random-excitation) episodes enter the model loss as overlapping segments
     /// of this many samples (stride half of it); `None` keeps them whole. MSGP only. The pendulum is
     /// open-loop unstable: a free-running prediction from an episode's first samples carries no
@@ -135,6 +144,7 @@ impl Default for LearnSettings {
             },
             cost_widths: [0.1, 0.3],
             evaluation_episodes: EVALUATION_EPISODES,
+            hold_margin: 0.0,
             ff_segment: Some(30),
             fb_segment: None,
             gain_scale: [1.0, 0.3, 1.0, 10.0, 2.0],

@@ -9,6 +9,7 @@ fn report(iteration: usize, actual_cost: f64, stable: bool) -> IterationReport {
         predicted_cost_std: 0.1,
         actual_cost,
         expected_cost: None,
+        held: false,
         interaction_seconds: 12.0 + 3.0 * iteration as f64,
         stable,
         fit_seconds: 1.0,
