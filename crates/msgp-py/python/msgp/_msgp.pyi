@@ -127,11 +127,13 @@ def load(
     inputs: Optional[Sequence[str]] = None,
     outputs: Optional[Sequence[str]] = None,
     topic: Optional[str] = None,
+    sort_time: bool = False,
 ) -> Dict[str, Any]:
     """CSV data files read as `msgp fit --data` reads them: {"inputs", "outputs", "parts",
     "warnings"}, each part {"source", "episode", "t", "u", "y"} (u, y: T × d arrays); warnings
-    are lines about the data that do not stop the load (an irregular time step). Bad data raise
-    InvalidInputError naming the file, line and column."""
+    are lines about the data that do not stop the load (an irregular time step, rows sorted).
+    Bad data raise InvalidInputError naming the file, line and column; `sort_time` sorts each
+    trajectory's rows by time instead of refusing rows out of order (`msgp fit --sort-time`)."""
 
 def synthetic_system(k: int, seed: int = 0, noise: str = "std") -> Dict[str, Any]:
     """Synthetic system k (1–5) of the paper's Table 2: u_train, y_train, u_test, y_test
@@ -213,6 +215,38 @@ def table1_report(
 ) -> Dict[str, Any]:
     """{"section", "markdown", "rows"} of a finished plan from its (unit, cell) pairs in any
     order: the section `msgp reproduce table1` writes and the rows of its --json."""
+
+def figure4_plan(
+    seeds: Sequence[int],
+    *,
+    tier: str = "apollo",
+    params: Optional[Dict[str, Any]] = None,
+    models: Optional[Sequence[str]] = None,
+    iterations: int = 8,
+    budget: Optional[Dict[str, Any]] = None,
+    dir: Optional[PathLike] = None,
+) -> Dict[str, Any]:
+    """The validated plan of a Figure 4 reproduction (as `msgp reproduce figure4` takes its
+    options): {"plan", "units", "pending", "section", "dir"}; each unit is one model × seed, in
+    the serial run's order; `pending` lacks a finished run in the plan's folder. Used by
+    `msgp.sweep`."""
+
+def figure4_budget() -> Dict[str, Any]:
+    """The budget options of `msgp learn-policy` / `msgp reproduce figure4` at their defaults
+    (None: the model's own default)."""
+
+def figure4_unit(plan: Dict[str, Any], unit: Dict[str, Any], dir: PathLike) -> Dict[str, Any]:
+    """Runs one learning run of a plan, writes its folder into `dir` (summary.json last) and
+    returns its summary. Takes minutes; releases the GIL."""
+
+def figure4_report(
+    plan: Dict[str, Any],
+    command: str,
+    seconds: float,
+    machine: Optional[str] = None,
+) -> Dict[str, Any]:
+    """{"section", "markdown", "plot"} of a plan whose every run is finished in its folder: the
+    section `msgp reproduce figure4` writes and its cost-band plot (drawn)."""
 
 def update_results_section(path: PathLike, name: str, body: str) -> None:
     """Replaces section `name` of the markdown file `path` (created when missing), atomically."""
