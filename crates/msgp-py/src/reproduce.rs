@@ -175,16 +175,14 @@ pub fn figure4_plan<'py>(
     budget: Option<&Bound<'py, PyAny>>,
     dir: Option<PathBuf>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let tier = match tier {
-        "apollo" => PlantTier::Apollo,
-        "noisy" => PlantTier::Noisy,
-        other => {
-            return Err(input(format!(
-                "unknown plant tier {other:?}: expected \"apollo\" or \"noisy\""
+    let tier = [PlantTier::Apollo, PlantTier::Noisy]
+        .into_iter()
+        .find(|t| t.name() == tier)
+        .ok_or_else(|| {
+            input(format!(
+                "unknown plant tier {tier:?}: expected \"apollo\" or \"noisy\""
             ))
-            .into());
-        }
-    };
+        })?;
     let plant: PendulumParams = with_overrides(&PendulumParams::tier(tier), params, "params")?;
     let models = match models {
         None => Figure4Model::ALL.to_vec(),

@@ -157,21 +157,6 @@ impl Plan {
             return Err(invalid("iterations", "must be at least 1".to_string()));
         }
         plant.validate()?;
-        let mut seen = Vec::new();
-        for unit in models.iter().flat_map(|&model| {
-            seeds
-                .iter()
-                .map(move |&seed| Unit { model, seed })
-                .collect::<Vec<_>>()
-        }) {
-            if seen.contains(&unit) {
-                return Err(invalid(
-                    "models and seeds",
-                    format!("{} appears twice", unit.name()),
-                ));
-            }
-            seen.push(unit);
-        }
         let plan = Plan {
             dir: dir.unwrap_or_else(|| PathBuf::from(format!("results/figure4-{tier}"))),
             tier: tier.to_string(),
@@ -181,6 +166,17 @@ impl Plan {
             iterations,
             budget,
         };
+        let units = plan.units();
+        if let Some((_, twice)) = units
+            .iter()
+            .enumerate()
+            .find(|(k, u)| units[..*k].contains(u))
+        {
+            return Err(invalid(
+                "models and seeds",
+                format!("{} appears twice", twice.name()),
+            ));
+        }
         for model in &plan.models {
             plan.settings(&Unit {
                 model: *model,
