@@ -11,6 +11,7 @@
 //! 3 s episode of the hand-tuned gains (seeded).
 
 use std::hint::black_box;
+use std::ops::ControlFlow;
 use std::time::Duration;
 
 use criterion::measurement::WallTime;
@@ -22,19 +23,22 @@ use msgp_core::numeric::parallel::Threads;
 use msgp_core::policy::{PidPolicy, PolicySpec};
 use msgp_core::policy_search::cost::SaturatingCost;
 use msgp_core::policy_search::{PidMask, PolicyProblem, PolicySearchSettings, optimise_pid_scaled};
-use msgp_sim::learn::{LearnSettings, episode_trajectory, modelled_policy, segments};
+use msgp_sim::learn::{
+    LearnEvent, LearnSettings, episode_trajectory, fit_and_search, modelled_policy, segments,
+};
 use msgp_sim::{
-    EpisodeConfig, PendulumParams, PidPdGains, PidPdPolicy, RandomExcitation, Saturation,
-    run_episode,
+    EpisodeConfig, PendulumParams, PidPdGains, PidPdPolicy, PlantTier, RandomExcitation,
+    Saturation, run_episode,
 };
 use nalgebra::{DMatrix, DVector};
 
-/// Four random rollouts in 30-sample segments and `feedback` 3 s episodes of the hand-tuned
-/// gains (seeds 500, 501, …).
+/// Four random rollouts (in `segment`-sample segments, or whole) and `feedback` 3 s episodes of
+/// the hand-tuned gains (seeds 500, 501, …).
 fn training(
     params: &PendulumParams,
     settings: &LearnSettings,
     feedback: u64,
+    segment: Option<usize>,
 ) -> Vec<TrainingEpisode> {
     let mut out = Vec::new();
     for seed in 0..4u64 {
@@ -46,7 +50,11 @@ fn training(
         };
         let ep = run_episode(params, &mut ex, &config).expect("episode");
         let traj = episode_trajectory(&ep).expect("trajectory");
-        for traj in segments(&traj, 30, 8).expect("segments") {
+        let parts = match segment {
+            Some(n) => segments(&traj, n, 8).expect("segments"),
+            None => vec![traj],
+        };
+        for traj in parts {
             out.push(TrainingEpisode { traj, policy: None });
         }
     }
@@ -101,7 +109,7 @@ fn value_and_adjoint_gradient(
 fn bench_policy(c: &mut Criterion) {
     let params = PendulumParams::default();
     let settings = LearnSettings::default();
-    let episodes = training(&params, &settings, 1);
+    let episodes = training(&params, &settings, 1, Some(30));
     let fit = LearnSettings::for_method(Method::GpNarx).fit;
     let (model, _) = fit_episodes(&episodes, &fit, &mut |_| {}).expect("fit");
     let cost = SaturatingCost::with_widths(DVector::from_element(2, 0.0), &settings.cost_widths)
@@ -209,7 +217,7 @@ fn bench_policy(c: &mut Criterion) {
     });
     // the loop's later fits: four feedback episodes (about 900 one-step pairs, two outputs),
     // where the one-step start and the closed-loop episodes dominate
-    let later = training(&params, &settings, 4);
+    let later = training(&params, &settings, 4, Some(30));
     let one_step = msgp_with(0, 20);
     group.bench_function("msgp_one_step_20_iterations_4_feedback_episodes", |b| {
         b.iter(|| black_box(fit_episodes(&later, &one_step, &mut |_| {}).expect("fit")))
@@ -226,5 +234,36 @@ fn bench_policy(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_policy);
+/// One iteration of the default loop (`msgp learn-policy --sim pendulum`: the filtered MSGP,
+/// m = 30, warm-started fit, 10 s policy horizon, 12 Adam steps per search start), as the loop
+/// runs it ([`msgp_sim::learn::fit_and_search`]), at the state of its fifth iteration on each plant tier:
+/// four random-excitation episodes and four feedback episodes of the hand-tuned gains (3 s
+/// each, whole, seeded), the previous model fitted (outside the timing) on all but the last
+/// episode. The target: fit + search ≤ 5 s alone on the 2-core machine.
+fn bench_loop_iteration(c: &mut Criterion) {
+    let settings = LearnSettings::for_model(Method::Msgp, None);
+    let mut group = flat_group(c, "loop_iteration_filtered_msgp_m30", 60);
+    for tier in [PlantTier::Apollo, PlantTier::Noisy] {
+        let params = PendulumParams::tier(tier);
+        let data = training(&params, &settings, 4, None);
+        let mut gains = PidPdGains::hand_tuned();
+        gains.saturation = Saturation::Sine;
+        let quiet = &mut |_: LearnEvent<'_>| ControlFlow::Continue(());
+        let previous = fit_and_search(&params, &settings, &data[..7], None, &gains, 4, quiet)
+            .expect("previous iteration")
+            .model;
+        group.bench_function(format!("fit_and_search_{}_8_episodes", tier.name()), |b| {
+            b.iter(|| {
+                let quiet = &mut |_: LearnEvent<'_>| ControlFlow::Continue(());
+                black_box(
+                    fit_and_search(&params, &settings, &data, Some(&previous), &gains, 5, quiet)
+                        .expect("iteration"),
+                )
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_policy, bench_loop_iteration);
 criterion_main!(benches);

@@ -385,8 +385,9 @@ impl From<ModelArg> for Method {
 pub struct BudgetArgs {
     /// Likelihood of the MSGP fits (free-run or filter; see `msgp fit --likelihood`)
     /// [default: filter, with the filtered loop's defaults: every fit starts from the
-    /// linear-kf model of the data, 100 L-BFGS iterations, warm starts, 10 s policy horizon;
-    /// free-run: the paper's loss with the MSGP defaults].
+    /// linear-kf model of the data, m = 30, 100 L-BFGS iterations, warm starts,
+    /// 12 Adam steps per search start, 10 s policy horizon; free-run: the paper's loss with the
+    /// MSGP defaults].
     #[arg(long, value_enum)]
     pub likelihood: Option<LikelihoodArg>,
     /// Random episodes before the first policy (random excitation, or random policies: see
@@ -407,12 +408,14 @@ pub struct BudgetArgs {
     /// one and for gp-narx, 300 for linear-kf].
     #[arg(long, value_name = "N")]
     pub warm_start: Option<usize>,
-    /// Pseudo-inputs of the model.
-    #[arg(long, value_name = "M", default_value_t = Budget::default().inducing)]
-    pub inducing: usize,
-    /// Adam steps of each policy optimisation start.
-    #[arg(long, value_name = "N", default_value_t = Budget::default().search_iters)]
-    pub search_iters: usize,
+    /// Pseudo-inputs of the model [default: 30 for msgp on the filter likelihood, 50 for the
+    /// other GP models].
+    #[arg(long, value_name = "M")]
+    pub inducing: Option<usize>,
+    /// Adam steps of each policy optimisation start [default: 12 for msgp on the filter
+    /// likelihood, 20 for the other models].
+    #[arg(long, value_name = "N")]
+    pub search_iters: Option<usize>,
     /// Random gain candidates screened on the model before each policy optimisation.
     #[arg(long, value_name = "N", default_value_t = Budget::default().candidates)]
     pub candidates: usize,

@@ -22,8 +22,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::SimError;
 use crate::learn::{
-    Budget, FILTERED_MSGP_ITERATIONS, FinishedRun, IterationReport,
-    LINEAR_KF_POLICY_HORIZON_SECONDS, LINEAR_KF_WARM_START, LearnSettings, finished_run,
+    Budget, FILTERED_MSGP_INDUCING, FILTERED_MSGP_ITERATIONS, FILTERED_MSGP_SEARCH_ITERATIONS,
+    FinishedRun, IterationReport, LEARN_INDUCING, LINEAR_KF_POLICY_HORIZON_SECONDS,
+    LINEAR_KF_WARM_START, LearnSettings, finished_run,
 };
 use crate::params::PendulumParams;
 use crate::plot::{CostPoint, plot_cost_bands};
@@ -369,8 +370,14 @@ fn render(
     let kf = match has(Figure4Model::MsgpFilter) {
         false => kf,
         true => format!(
-            "{kf} (msgp-filter: {} L-BFGS iterations on the filter likelihood, at iteration 1 from the linear-kf model of the data under a GP that starts at zero, then from the previous model unless --warm-start 0)",
-            d.fit_iters.unwrap_or(FILTERED_MSGP_ITERATIONS)
+            "{kf} (msgp-filter: m = {}, {} L-BFGS iterations on the filter likelihood at iteration 1 from the linear-kf model of the data under a GP that starts at zero, then {} from the previous model, {} Adam steps per search start)",
+            d.inducing.unwrap_or(FILTERED_MSGP_INDUCING),
+            d.fit_iters.unwrap_or(FILTERED_MSGP_ITERATIONS),
+            match d.warm_start {
+                Some(0) => "each fit from scratch".to_string(),
+                n => format!("at most {}", n.unwrap_or(FILTERED_MSGP_ITERATIONS)),
+            },
+            d.search_iters.unwrap_or(FILTERED_MSGP_SEARCH_ITERATIONS),
         ),
     };
     let horizon = match d.policy_horizon {
@@ -386,9 +393,10 @@ fn render(
         "- Budget per iteration: model fit {} {solver} iterations{warm} (m = {}){kf}, policy search: {} random gain candidates screened, {} Adam steps per start, on predicted rollouts over {horizon}",
         d.fit_iters
             .map_or_else(|| "default".to_string(), |n| n.to_string()),
-        d.inducing,
+        d.inducing.unwrap_or(LEARN_INDUCING),
         d.candidates,
         d.search_iters
+            .unwrap_or(LearnSettings::default().search.iterations)
     );
     let summed: f64 = runs
         .iter()

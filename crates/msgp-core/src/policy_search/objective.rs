@@ -17,6 +17,7 @@ use crate::narx::NarxSpec;
 use crate::numeric::dual::{Dual, LANES, gradient_lanes};
 use crate::numeric::linalg::JitterLog;
 use crate::numeric::scalar::{Scalar, c};
+use crate::optim::Flow;
 use crate::policy::{FeedbackPolicy, Normalized, PidPolicy};
 use crate::rollout::{Control, StartState, rollout_from};
 
@@ -41,9 +42,28 @@ pub fn closed_loop_cost<T: MomentMatch>(
     cost: &SaturatingCost,
     log: &mut JitterLog,
 ) -> Result<RolloutCost<T>> {
+    let rc = closed_loop_cost_bounded(gp, spec, start, policy, (t0, horizon), cost, None, log)?;
+    rc.ok_or_else(|| MsgpError::NonFinite("an unbounded rollout cost stopped early".into()))
+}
+
+/// [`closed_loop_cost`] that gives up (`None`) as soon as the running total exceeds `bound`:
+/// every step's expected saturating cost lies in `[0, 1]`, so the total can only grow from
+/// there, and a rollout already dearer than the bound is known to end dearer still.
+#[allow(clippy::too_many_arguments)]
+fn closed_loop_cost_bounded<T: MomentMatch>(
+    gp: &PreparedGp<T>,
+    spec: &NarxSpec,
+    start: &StartState<T>,
+    policy: &dyn FeedbackPolicy<T>,
+    (t0, horizon): (usize, usize),
+    cost: &SaturatingCost,
+    bound: Option<f64>,
+    log: &mut JitterLog,
+) -> Result<Option<RolloutCost<T>>> {
     let mut steps = Vec::with_capacity(horizon.saturating_sub(t0));
     let mut total = T::zero();
     let mut cost_log = JitterLog::default();
+    let mut exceeded = false;
     rollout_from(
         gp,
         spec,
@@ -57,12 +77,17 @@ pub fn closed_loop_cost<T: MomentMatch>(
             let m = cost.moments(&p.mean, &p.cov, &gp.jitter, &mut cost_log)?;
             total += m.mean;
             steps.push(m);
-            Ok(())
+            // a margin far above rounding: a step's cost can come out a hair below zero
+            exceeded = bound.is_some_and(|b| total.re() > b + BOUND_SLACK * (1.0 + b.abs()));
+            Ok(if exceeded { Flow::Stop } else { Flow::Continue })
         },
     )?;
     log.merge(&cost_log);
-    Ok(RolloutCost { total, steps })
+    Ok((!exceeded).then_some(RolloutCost { total, steps }))
 }
+
+/// Relative slack of [`PolicyProblem::evaluate_bounded`]'s bound.
+const BOUND_SLACK: f64 = 1e-9;
 
 /// Which PID gains are optimised: `true` entries of the three d_u × d_y masks are free.
 #[derive(Clone, Debug, PartialEq)]
@@ -260,6 +285,23 @@ impl PolicyProblem<'_> {
 
     /// Expected total cost of `policy` and the per-step (mean, variance) of the cost.
     pub fn evaluate<T: MomentMatch>(&self, policy: &PidPolicy<T>) -> Result<(T, Vec<(T, T)>)> {
+        let rc = self.cost_of(policy, None)?;
+        let rc = rc.ok_or_else(|| MsgpError::NonFinite("an unbounded rollout stopped".into()))?;
+        Ok((rc.total, rc.steps.iter().map(|s| (s.mean, s.var)).collect()))
+    }
+
+    /// Expected total cost of `policy` if it is at most `bound`, `None` once the rollout's
+    /// running cost exceeds it (the rest of the rollout is then not computed: screening many
+    /// candidates for the few cheapest needs only the ones below the running k-th best).
+    pub fn evaluate_bounded(&self, policy: &PidPolicy<f64>, bound: f64) -> Result<Option<f64>> {
+        Ok(self.cost_of(policy, Some(bound))?.map(|rc| rc.total))
+    }
+
+    fn cost_of<T: MomentMatch>(
+        &self,
+        policy: &PidPolicy<T>,
+        bound: Option<f64>,
+    ) -> Result<Option<RolloutCost<T>>> {
         let params = self.model.params.map(c::<T>);
         let mut log = JitterLog::default();
         let gp = PreparedGp::new(&params, &self.model.config, &mut log)?;
@@ -269,17 +311,16 @@ impl PolicyProblem<'_> {
         };
         let start = self.start::<T>(wrapped.state_dim());
         let t0 = self.model.spec.warmup();
-        let rc = closed_loop_cost(
+        closed_loop_cost_bounded(
             &gp,
             &self.model.spec,
             &start,
             &wrapped,
-            t0,
-            t0 + self.horizon,
+            (t0, t0 + self.horizon),
             &self.normalised_cost(),
+            bound,
             &mut log,
-        )?;
-        Ok((rc.total, rc.steps.iter().map(|s| (s.mean, s.var)).collect()))
+        )
     }
 }
 

@@ -164,22 +164,14 @@ pub fn optimise_pid_scaled(
         let drawn: Vec<Vec<f64>> = (0..settings.candidates)
             .map(|_| draw(&mut rng, &centre, settings.candidate_spread))
             .collect();
-        let values = map_indexed(&drawn, threads, |_, x| {
-            Ok(problem.evaluate(&mask.unpack::<f64>(initial, x))?.0)
-        });
-        // a candidate whose rollout fails numerically is simply not a start
-        let mut screened: Vec<(f64, Vec<f64>)> = values
-            .into_iter()
-            .zip(drawn)
-            .filter_map(|(v, x)| v.ok().filter(|v| v.is_finite()).map(|v| (v, x)))
-            .collect();
-        screened.sort_by(|a, b| a.0.total_cmp(&b.0));
-        starts.extend(
-            screened
-                .into_iter()
-                .take(settings.candidate_starts)
-                .map(|(_, x)| x),
-        );
+        starts.extend(cheapest_candidates(
+            problem,
+            initial,
+            mask,
+            &drawn,
+            settings.candidate_starts,
+            threads,
+        ));
     }
     let active: Vec<usize> = (0..x0.len()).collect();
     // each start's Adam run is independent; its best (value, gains), earliest first on ties
@@ -241,6 +233,64 @@ pub fn optimise_pid_scaled(
     })
 }
 
+/// The `keep` cheapest of the `drawn` candidates (cheapest first, the earlier drawn first on
+/// ties), screened on up to `threads` threads. Each thread screens every `threads`-th candidate
+/// in order and bounds each rollout by the `keep`-th cheapest it has fully evaluated so far
+/// ([`PolicyProblem::evaluate_bounded`]): a candidate dearer than that cannot be among the
+/// `keep` cheapest of all, so the answer is that of evaluating every candidate in full, for any
+/// thread count, while most of the bad candidates (the pole falls, the cost climbs by about one
+/// per step) stop after a fraction of the horizon. A candidate whose rollout fails numerically
+/// is simply not a start.
+fn cheapest_candidates(
+    problem: &PolicyProblem<'_>,
+    initial: &PidPolicy<f64>,
+    mask: &PidMask,
+    drawn: &[Vec<f64>],
+    keep: usize,
+    threads: usize,
+) -> Vec<Vec<f64>> {
+    if keep == 0 || drawn.is_empty() {
+        return Vec::new();
+    }
+    let groups = threads.clamp(1, drawn.len());
+    let members: Vec<Vec<usize>> = (0..groups)
+        .map(|w| (w..drawn.len()).step_by(groups).collect())
+        .collect();
+    let screen = |_: usize, group: &Vec<usize>| -> Result<Vec<(f64, usize)>> {
+        // this group's cheapest so far, ascending by (value, index), at most `keep`
+        let mut best: Vec<(f64, usize)> = Vec::with_capacity(keep + 1);
+        for &k in group {
+            let bound = if best.len() == keep {
+                best[keep - 1].0
+            } else {
+                f64::INFINITY
+            };
+            let policy = mask.unpack::<f64>(initial, &drawn[k]);
+            let Ok(Some(value)) = problem.evaluate_bounded(&policy, bound) else {
+                continue;
+            };
+            if !value.is_finite() {
+                continue;
+            }
+            let at = best.partition_point(|&(v, i)| (v, i) < (value, k));
+            best.insert(at, (value, k));
+            best.truncate(keep);
+        }
+        Ok(best)
+    };
+    let mut found: Vec<(f64, usize)> = map_indexed(&members, groups, screen)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .collect();
+    found.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    found
+        .into_iter()
+        .take(keep)
+        .map(|(_, k)| drawn[k].clone())
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -278,12 +328,101 @@ mod tests {
         fit(&[traj], &settings, &mut |_| {}).expect("fit").0
     }
 
+    /// Zero PID gains on two outputs (one input, limit 2) and a mask freeing `kp` and `kd`.
+    fn zero_pd_gains() -> (PidPolicy<f64>, PidMask) {
+        let initial = PidPolicy::new(
+            DMatrix::zeros(1, 2),
+            DMatrix::zeros(1, 2),
+            DMatrix::zeros(1, 2),
+            0.1,
+            vec![2.0],
+        )
+        .expect("policy");
+        let mask = PidMask {
+            kp: DMatrix::from_element(1, 2, true),
+            ki: DMatrix::from_element(1, 2, false),
+            kd: DMatrix::from_element(1, 2, true),
+        };
+        (initial, mask)
+    }
+
     /// The search's gradient (one dual lane per free gain) equals the generic 8-lane dual
     /// gradient to rounding and central finite differences to their truncation error.
     #[test]
     fn the_adjoint_search_gradient_matches_duals_and_finite_differences() {
         for mean in [MeanFunction::Zero, MeanFunction::Linear] {
             search_gradient_matches_duals_and_finite_differences(mean);
+        }
+    }
+
+    /// The bounded screening returns exactly the `keep` cheapest of every candidate evaluated
+    /// in full (same order, ties to the earlier drawn), on one thread and on three, and a
+    /// bounded evaluation stops only rollouts that end above the bound.
+    #[test]
+    fn the_bounded_screening_keeps_the_cheapest_candidates_of_a_full_evaluation() {
+        let model = two_output_model_with(
+            |t, _| 0.3 * (t as f64 * 0.31 - 0.4).sin(),
+            MeanFunction::Linear,
+        );
+        let problem = PolicyProblem {
+            model: &model,
+            y0_mean: vec![0.2, -0.1],
+            y0_var: vec![0.01, 0.02],
+            u0: vec![0.0],
+            cost: SaturatingCost::with_widths(DVector::zeros(2), &[0.5, 0.5]).expect("cost"),
+            horizon: 40,
+        };
+        let (initial, mask) = zero_pd_gains();
+        let mut rng = StdRng::seed_from_u64(7);
+        let drawn: Vec<Vec<f64>> = (0..40)
+            .map(|_| {
+                (0..4)
+                    .map(|_| {
+                        let z: f64 = StandardNormal.sample(&mut rng);
+                        2.0 * z
+                    })
+                    .collect()
+            })
+            .collect();
+        let full: Vec<f64> = drawn
+            .iter()
+            .map(|x| {
+                problem
+                    .evaluate(&mask.unpack::<f64>(&initial, x))
+                    .expect("full")
+                    .0
+            })
+            .collect();
+        let spread = full.iter().fold(0.0f64, |m, v| m.max(*v))
+            - full.iter().fold(f64::INFINITY, |m, v| m.min(*v));
+        assert!(spread > 1.0, "candidates that differ: {full:?}");
+        let mut order: Vec<usize> = (0..drawn.len()).collect();
+        order.sort_by(|a, b| full[*a].total_cmp(&full[*b]).then(a.cmp(b)));
+        for keep in [1, 3] {
+            let expected: Vec<Vec<f64>> = order[..keep].iter().map(|k| drawn[*k].clone()).collect();
+            for threads in [1, 3] {
+                let got = cheapest_candidates(&problem, &initial, &mask, &drawn, keep, threads);
+                assert_eq!(got, expected, "keep {keep}, {threads} threads");
+            }
+        }
+        // a bound below a candidate's cost stops it, one at or above returns the full value
+        let median = {
+            let mut v = full.clone();
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        for (x, v) in drawn.iter().zip(&full) {
+            let p = mask.unpack::<f64>(&initial, x);
+            let bounded = problem.evaluate_bounded(&p, median).expect("bounded");
+            if *v <= median {
+                assert_eq!(bounded.map(f64::to_bits), Some(v.to_bits()));
+            } else if *v > median * (1.0 + 1e-6) + 1e-6 {
+                assert_eq!(bounded, None, "{v} above the bound {median}");
+            }
+            let open = problem
+                .evaluate_bounded(&p, f64::INFINITY)
+                .expect("unbounded");
+            assert_eq!(open.map(f64::to_bits), Some(v.to_bits()));
         }
     }
 
@@ -298,19 +437,7 @@ mod tests {
             cost: SaturatingCost::with_widths(DVector::zeros(2), &[0.5, 0.5]).expect("cost"),
             horizon: 5,
         };
-        let initial = PidPolicy::new(
-            DMatrix::zeros(1, 2),
-            DMatrix::zeros(1, 2),
-            DMatrix::zeros(1, 2),
-            0.1,
-            vec![2.0],
-        )
-        .expect("policy");
-        let mask = PidMask {
-            kp: DMatrix::from_element(1, 2, true),
-            ki: DMatrix::from_element(1, 2, false),
-            kd: DMatrix::from_element(1, 2, true),
-        };
+        let (initial, mask) = zero_pd_gains();
         let err = problem
             .gradient(&mask, &initial, &[0.1, 0.2, 0.3])
             .expect_err("three gains for a mask that frees four");

@@ -24,6 +24,7 @@ use crate::narx::NarxSpec;
 use crate::narx::start_window::StartWindow;
 use crate::numeric::linalg::JitterLog;
 use crate::numeric::scalar::Scalar;
+use crate::optim::Flow;
 use crate::policy::FeedbackPolicy;
 
 /// Where the inputs of a rollout come from.
@@ -89,7 +90,7 @@ pub(crate) fn rollout_started<T: MomentMatch>(
     horizon: usize,
     how: StartWindow,
     log: &mut JitterLog,
-    visit: impl FnMut(StepPrediction<T>) -> Result<()>,
+    mut visit: impl FnMut(StepPrediction<T>) -> Result<()>,
 ) -> Result<()> {
     let d = spec.input_dim();
     let (dy, du) = (spec.dy, spec.du);
@@ -139,12 +140,14 @@ pub(crate) fn rollout_started<T: MomentMatch>(
         t0,
         horizon,
         log,
-        visit,
+        |p| visit(p).map(|()| Flow::Continue),
     )
 }
 
 /// Runs a rollout from a Gaussian start state over `t0..horizon`. Open loop, `inputs` (rows are
-/// absolute time steps) supplies `u_t` for `t0 ≤ t < horizon − 1`.
+/// absolute time steps) supplies `u_t` for `t0 ≤ t < horizon − 1`. `visit` sees every step's
+/// prediction; [`Flow::Stop`] ends the rollout there (a bounded cost that is already too
+/// high, [`crate::policy_search::PolicyProblem::evaluate_bounded`]).
 pub fn rollout_from<T: MomentMatch>(
     gp: &PreparedGp<T>,
     spec: &NarxSpec,
@@ -154,7 +157,7 @@ pub fn rollout_from<T: MomentMatch>(
     t0: usize,
     horizon: usize,
     log: &mut JitterLog,
-    mut visit: impl FnMut(StepPrediction<T>) -> Result<()>,
+    mut visit: impl FnMut(StepPrediction<T>) -> Result<Flow>,
 ) -> Result<()> {
     let d = spec.input_dim();
     let (dy, du) = (spec.dy, spec.du);
@@ -188,12 +191,12 @@ pub fn rollout_from<T: MomentMatch>(
         let wsigma = sigma.view((0, 0), (d, d)).into_owned();
         let StepMoments { mm, xcov, ycov } =
             predict_step(gp, &wmu, &wsigma, "rollout prediction", t, log)?;
-        visit(StepPrediction {
+        let flow = visit(StepPrediction {
             t,
             mean: mm.mean.clone(),
             cov: ycov.clone(),
         })?;
-        if t + 1 >= horizon {
+        if flow == Flow::Stop || t + 1 >= horizon {
             break;
         }
         let (mut amu, mut acov) = layout.augmented(&mu, &sigma, &mm.mean, &mm.v, &xcov);

@@ -13,7 +13,7 @@ use msgp_core::narx::start_window::StartWindow;
 use msgp_core::numeric::parallel::Threads;
 use msgp_core::policy_search::PolicySearchSettings;
 
-use super::settings::{LEARN_INDUCING, LearnSettings};
+use super::settings::LearnSettings;
 use crate::error::SimError;
 
 /// One experiment switch of the learning loop (`--experimental KEY=VALUE`): a setting that the
@@ -133,10 +133,10 @@ pub struct Budget {
     /// From the second iteration on, continue the previous model for this many solver
     /// iterations; 0: always from scratch (`None`: the model's default).
     pub warm_start: Option<usize>,
-    /// Pseudo-inputs of the model.
-    pub inducing: usize,
-    /// Adam steps of each policy optimisation start.
-    pub search_iters: usize,
+    /// Pseudo-inputs of the model (`None`: the model's default).
+    pub inducing: Option<usize>,
+    /// Adam steps of each policy optimisation start (`None`: the model's default).
+    pub search_iters: Option<usize>,
     /// Random gain candidates screened on the model before each policy optimisation.
     pub candidates: usize,
     /// Prior mean of the GP model.
@@ -160,8 +160,8 @@ impl Default for Budget {
             episode_seconds: d.episode_seconds,
             fit_iters: None,
             warm_start: None,
-            inducing: LEARN_INDUCING,
-            search_iters: d.search.iterations,
+            inducing: None,
+            search_iters: None,
             candidates: d.search.candidates,
             mean: MeanFunction::Linear,
             policy_horizon: None,
@@ -222,7 +222,7 @@ impl Budget {
                 "must be at least 1 (the first model needs data)",
             ));
         }
-        if self.inducing == 0 {
+        if self.inducing == Some(0) {
             return Err(invalid("inducing", "must be at least 1"));
         }
         if let (Some(l), false) = (self.likelihood, method == Method::Msgp) {
@@ -306,7 +306,7 @@ impl Budget {
         excitation
             .validate()
             .map_err(|e| invalid("experimental excitation-max-hz", e.to_string()))?;
-        let mut fit = FitSettings {
+        let fit = FitSettings {
             // a linear-kf model has the linear mean whatever `mean` says
             integrators: match (method, self.mean, free_position) {
                 (_, _, true) => Vec::new(),
@@ -317,8 +317,11 @@ impl Budget {
             },
             threads,
             ..d.fit.clone()
-        }
-        .with_inducing(self.inducing);
+        };
+        let mut fit = match self.inducing {
+            Some(m) => fit.with_inducing(m),
+            None => fit,
+        };
         match &mut fit.method {
             MethodSettings::Msgp(s) => {
                 s.mean = self.mean;
@@ -353,7 +356,7 @@ impl Budget {
                 Some(n) => Some(n),
             },
             search: PolicySearchSettings {
-                iterations: self.search_iters,
+                iterations: self.search_iters.unwrap_or(d.search.iterations),
                 candidates: self.candidates,
                 trust_region,
                 threads,
@@ -384,11 +387,7 @@ mod tests {
             let d = LearnSettings::for_model(method, likelihood);
             assert_eq!(s.seed, 3);
             assert_eq!(s.iterations, 8);
-            assert_eq!(
-                s.fit,
-                d.fit.clone().with_inducing(LEARN_INDUCING),
-                "{method:?}"
-            );
+            assert_eq!(s.fit, d.fit, "{method:?}");
             assert_eq!(s.warm_start, d.warm_start);
             assert_eq!(s.policy_horizon_seconds, d.policy_horizon_seconds);
             assert_eq!(s.search, d.search);
@@ -484,7 +483,7 @@ mod tests {
         )
         .expect("a partial budget reads");
         assert_eq!(budget.episode_seconds, 2.0);
-        assert_eq!(budget.inducing, LEARN_INDUCING);
+        assert_eq!(budget.inducing, None);
         assert!(serde_json::from_str::<Budget>(r#"{"episodes": 2}"#).is_err());
     }
 }

@@ -29,8 +29,9 @@ pub use record::{FinishedRun, finished_run, summary, write_run_dir};
 pub use report::{IterationReport, LearnOutcome};
 pub use settings::{
     END_EFFECTOR_INTEGRATOR, END_EFFECTOR_KINEMATIC, EVALUATION_EPISODES, FILTER_NOISE_FLOOR,
-    FILTERED_MSGP_ITERATIONS, LEARN_INDUCING, LINEAR_KF_POLICY_HORIZON_SECONDS,
-    LINEAR_KF_WARM_START, LearnSettings, learn_excitation,
+    FILTERED_MSGP_INDUCING, FILTERED_MSGP_ITERATIONS, FILTERED_MSGP_SEARCH_ITERATIONS,
+    LEARN_INDUCING, LINEAR_KF_POLICY_HORIZON_SECONDS, LINEAR_KF_WARM_START, LearnSettings,
+    learn_excitation,
 };
 
 use std::ops::ControlFlow;
@@ -38,11 +39,13 @@ use std::ops::ControlFlow;
 use nalgebra::{DMatrix, DVector};
 
 use msgp_core::fit::{
-    FitProgress, FitSettings, TrainingEpisode, fit_episodes, fit_episodes_observed,
+    FitProgress, FitReport, FitSettings, TrainingEpisode, fit_episodes, fit_episodes_observed,
 };
-use msgp_core::model::Method;
+use msgp_core::model::{Method, Model};
 use msgp_core::policy_search::cost::SaturatingCost;
-use msgp_core::policy_search::{PidMask, PolicySearchSettings, optimise_pid_scaled};
+use msgp_core::policy_search::{
+    PidMask, PolicySearchResult, PolicySearchSettings, optimise_pid_scaled,
+};
 
 use crate::controller::{PidPdGains, RandomExcitation, Saturation};
 use crate::episode::Episode;
@@ -163,106 +166,31 @@ pub fn learn_policy_observed(
             "the episode and the policy horizon need at least one control step",
         ));
     }
-    let s = settings.gain_scale;
-    let mut gains = PidPdGains {
-        kp_x: s[0],
-        ki_x: s[1],
-        kd_x: s[2],
-        kp_theta: s[3],
-        kd_theta: s[4],
-        saturation: Saturation::Sine,
-    };
-    let mask = PidMask {
-        kp: DMatrix::from_element(1, 2, true),
-        ki: DMatrix::from_row_slice(1, 2, &[false, true]),
-        kd: DMatrix::from_element(1, 2, true),
-    };
-    // the optimiser's coordinate scales: a gain near zero keeps its kind's typical magnitude
-    let typical: Vec<f64> = mask
-        .pack(&modelled_policy(&gains, params)?)
-        .into_iter()
-        .map(f64::abs)
-        .collect();
+    let mut gains = initial_gains(&settings.gain_scale);
     let mut reports = Vec::new();
-    let mut previous_model: Option<msgp_core::model::Model> = None;
+    let mut previous_model: Option<Model> = None;
     for it in 1..=settings.iterations {
-        let method = settings.method();
-        let fit_settings = FitSettings {
-            seed: settings.seed.wrapping_add(it as u64),
-            ..settings.fit.clone()
-        };
-        let clock = std::time::Instant::now();
-        let stopped = SimError::Stopped { iteration: it };
-        if observe(LearnEvent::FitStarted { iteration: it }).is_break() {
-            return Err(stopped);
-        }
-        let warm = match (&previous_model, settings.warm_start) {
-            (Some(prev), Some(n)) if matches!(method, Method::Msgp | Method::LinearKf) => {
-                Some((prev, n))
-            }
-            _ => None,
-        };
-        let fitted = fit_episodes_observed(
+        let step = fit_and_search(
+            params,
+            settings,
             &training,
-            &match warm {
-                Some((_, n)) => fit_settings.clone().with_solver_iterations(n),
-                None => fit_settings.clone(),
-            },
-            warm.map(|(prev, _)| prev),
-            &mut |p| {
-                observe(LearnEvent::Fit {
-                    iteration: it,
-                    progress: p,
-                })
-            },
-        );
-        let (model, mut fit_report) = match fitted {
-            Ok(fitted) => fitted,
-            // the MSGP start (the one-step model rolled out over every episode) can already
-            // fail numerically; the iteration then runs on that one-step model
-            Err(
-                e @ (msgp_core::MsgpError::NonFinite(_)
-                | msgp_core::MsgpError::NotPositiveDefinite { .. }),
-            ) if method == Method::Msgp => {
-                let Some(one_step) = fit_settings.one_step_start() else {
-                    return Err(e.into());
-                };
-                let (model, mut report) = fit_episodes(&training, &one_step, &mut |_| {})?;
-                report.numerical_stop = Some(format!(
-                    "the MSGP fit failed at its start ({e}); this iteration used the one-step \
-                     GP-NARX model"
-                ));
-                (model, report)
-            }
-            Err(msgp_core::MsgpError::Stopped { .. }) => return Err(stopped),
-            Err(e) => return Err(e.into()),
-        };
-        let fit_seconds = clock.elapsed().as_secs_f64();
+            previous_model.as_ref(),
+            &gains,
+            it,
+            observe,
+        )?;
         // a one-step fallback model is not continued: the next fit starts over
         if settings.warm_start.is_some() {
-            previous_model = (model.method == method).then(|| model.clone());
+            previous_model = (step.model.method == settings.method()).then(|| step.model.clone());
         }
+        let FitAndSearch {
+            model,
+            mut fit_report,
+            searched,
+            fit_seconds,
+            search_seconds,
+        } = step;
         let problem = pendulum_problem(&model, params, cost.clone(), policy_horizon);
-        let search = PolicySearchSettings {
-            seed: settings
-                .search
-                .seed
-                .wrapping_add(settings.seed)
-                .wrapping_add(it as u64),
-            ..settings.search
-        };
-        if observe(LearnEvent::SearchStarted { iteration: it }).is_break() {
-            return Err(stopped);
-        }
-        let clock = std::time::Instant::now();
-        let searched = optimise_pid_scaled(
-            &problem,
-            &modelled_policy(&gains, params)?,
-            &mask,
-            &typical,
-            &search,
-        );
-        let search_seconds = clock.elapsed().as_secs_f64();
         let mut held = false;
         let (predicted, var, search_failure) = match searched {
             Ok(result) => {
@@ -298,12 +226,7 @@ pub fn learn_policy_observed(
             }
             // the model's rollouts diverge for every start: it predicts failure whatever the
             // gains (every step costs 1); the gains stay and the episode adds data
-            Err(
-                e @ (msgp_core::MsgpError::NonFinite(_)
-                | msgp_core::MsgpError::NotPositiveDefinite { .. }),
-            ) => (scored as f64, 0.0, Some(e.to_string())),
-            Err(msgp_core::MsgpError::Stopped { .. }) => return Err(stopped),
-            Err(e) => return Err(e.into()),
+            Err(e) => (scored as f64, 0.0, Some(e.to_string())),
         };
 
         let seed = settings
@@ -333,7 +256,7 @@ pub fn learn_policy_observed(
             gains,
         };
         if observe(LearnEvent::Iteration(&report)).is_break() {
-            return Err(stopped);
+            return Err(SimError::Stopped { iteration: it });
         }
         reports.push(report);
     }
@@ -343,6 +266,172 @@ pub fn learn_policy_observed(
         final_gains: gains,
         random_policies,
     })
+}
+
+/// What one iteration's model fit and policy search produced ([`fit_and_search`]).
+#[derive(Debug)]
+pub struct FitAndSearch {
+    /// The fitted model (the one-step GP-NARX model when an MSGP fit failed at its start; its
+    /// report says so).
+    pub model: Model,
+    /// The fit's report.
+    pub fit_report: FitReport,
+    /// The search's best gains, or why every start failed numerically (the model's rollouts
+    /// diverge whatever the gains: it predicts failure).
+    pub searched: Result<PolicySearchResult, msgp_core::MsgpError>,
+    /// Wall seconds of the fit.
+    pub fit_seconds: f64,
+    /// Wall seconds of the search.
+    pub search_seconds: f64,
+}
+
+/// One iteration's model fit and policy search as [`learn_policy_observed`] runs them: the fit
+/// of `settings` on `training` (seeded by the iteration; continuing `previous` for
+/// [`LearnSettings::warm_start`] solver iterations when given and the method continues), then
+/// the gains optimised on it from `gains`, within the trust region. `observe` sees
+/// [`LearnEvent::FitStarted`], the fit's progress and [`LearnEvent::SearchStarted`]; a
+/// [`ControlFlow::Break`] ends it with [`SimError::Stopped`]. The criterion bench of a loop
+/// iteration times this function (`benches/benches/policy.rs`).
+pub fn fit_and_search(
+    params: &PendulumParams,
+    settings: &LearnSettings,
+    training: &[TrainingEpisode],
+    previous: Option<&Model>,
+    gains: &PidPdGains,
+    iteration: usize,
+    observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
+) -> Result<FitAndSearch, SimError> {
+    let it = iteration;
+    let method = settings.method();
+    let fit_settings = FitSettings {
+        seed: settings.seed.wrapping_add(it as u64),
+        ..settings.fit.clone()
+    };
+    let clock = std::time::Instant::now();
+    let stopped = SimError::Stopped { iteration: it };
+    if observe(LearnEvent::FitStarted { iteration: it }).is_break() {
+        return Err(stopped);
+    }
+    let warm = match (previous, settings.warm_start) {
+        (Some(prev), Some(n)) if matches!(method, Method::Msgp | Method::LinearKf) => {
+            Some((prev, n))
+        }
+        _ => None,
+    };
+    let fitted = fit_episodes_observed(
+        training,
+        &match warm {
+            Some((_, n)) => fit_settings.clone().with_solver_iterations(n),
+            None => fit_settings.clone(),
+        },
+        warm.map(|(prev, _)| prev),
+        &mut |p| {
+            observe(LearnEvent::Fit {
+                iteration: it,
+                progress: p,
+            })
+        },
+    );
+    let (model, fit_report) = match fitted {
+        Ok(fitted) => fitted,
+        // the MSGP start (the one-step model rolled out over every episode) can already
+        // fail numerically; the iteration then runs on that one-step model
+        Err(
+            e @ (msgp_core::MsgpError::NonFinite(_)
+            | msgp_core::MsgpError::NotPositiveDefinite { .. }),
+        ) if method == Method::Msgp => {
+            let Some(one_step) = fit_settings.one_step_start() else {
+                return Err(e.into());
+            };
+            let (model, mut report) = fit_episodes(training, &one_step, &mut |_| {})?;
+            report.numerical_stop = Some(format!(
+                "the MSGP fit failed at its start ({e}); this iteration used the one-step \
+                 GP-NARX model"
+            ));
+            (model, report)
+        }
+        Err(msgp_core::MsgpError::Stopped { .. }) => return Err(stopped),
+        Err(e) => return Err(e.into()),
+    };
+    let fit_seconds = clock.elapsed().as_secs_f64();
+    let cost = SaturatingCost::with_widths(DVector::from_element(2, 0.0), &settings.cost_widths)?;
+    let policy_horizon =
+        (settings.policy_horizon_seconds * params.control_rate_hz).round() as usize;
+    let problem = pendulum_problem(&model, params, cost, policy_horizon);
+    let search = PolicySearchSettings {
+        seed: settings
+            .search
+            .seed
+            .wrapping_add(settings.seed)
+            .wrapping_add(it as u64),
+        ..settings.search
+    };
+    if observe(LearnEvent::SearchStarted { iteration: it }).is_break() {
+        return Err(stopped);
+    }
+    let clock = std::time::Instant::now();
+    let mask = gain_mask();
+    let searched = optimise_pid_scaled(
+        &problem,
+        &modelled_policy(gains, params)?,
+        &mask,
+        &typical_gains(settings, params, &mask)?,
+        &search,
+    );
+    let search_seconds = clock.elapsed().as_secs_f64();
+    let searched = match searched {
+        Ok(found) => Ok(found),
+        Err(
+            e @ (msgp_core::MsgpError::NonFinite(_)
+            | msgp_core::MsgpError::NotPositiveDefinite { .. }),
+        ) => Err(e),
+        Err(msgp_core::MsgpError::Stopped { .. }) => return Err(stopped),
+        Err(e) => return Err(e.into()),
+    };
+    Ok(FitAndSearch {
+        model,
+        fit_report,
+        searched,
+        fit_seconds,
+        search_seconds,
+    })
+}
+
+/// The gains the search moves: `kp` and `kd` on both outputs, `ki` on the end effector.
+fn gain_mask() -> PidMask {
+    PidMask {
+        kp: DMatrix::from_element(1, 2, true),
+        ki: DMatrix::from_row_slice(1, 2, &[false, true]),
+        kd: DMatrix::from_element(1, 2, true),
+    }
+}
+
+/// The optimiser's coordinate scales: a gain near zero keeps its kind's typical magnitude
+/// ([`LearnSettings::gain_scale`]).
+fn typical_gains(
+    settings: &LearnSettings,
+    params: &PendulumParams,
+    mask: &PidMask,
+) -> Result<Vec<f64>, SimError> {
+    let s = settings.gain_scale;
+    let typical = initial_gains(&s);
+    Ok(mask
+        .pack(&modelled_policy(&typical, params)?)
+        .into_iter()
+        .map(f64::abs)
+        .collect())
+}
+
+/// The gains of the loop's first search: [`LearnSettings::gain_scale`] with the sine saturation.
+fn initial_gains(s: &[f64; 5]) -> PidPdGains {
+    PidPdGains {
+        kp_x: s[0],
+        ki_x: s[1],
+        kd_x: s[2],
+        kp_theta: s[3],
+        kd_theta: s[4],
+        saturation: Saturation::Sine,
+    }
 }
 
 /// A random policy's gains: each drawn uniformly in `[0, 2 scale]`, sine saturation.
