@@ -328,6 +328,19 @@ mod tests {
         fit(&[traj], &settings, &mut |_| {}).expect("fit").0
     }
 
+    /// The problem of driving the two outputs from an uncertain start off rest to zero over
+    /// `horizon` steps.
+    fn off_rest_problem(model: &Model, horizon: usize) -> PolicyProblem<'_> {
+        PolicyProblem {
+            model,
+            y0_mean: vec![0.2, -0.1],
+            y0_var: vec![0.01, 0.02],
+            u0: vec![0.0],
+            cost: SaturatingCost::with_widths(DVector::zeros(2), &[0.5, 0.5]).expect("cost"),
+            horizon,
+        }
+    }
+
     /// Zero PID gains on two outputs (one input, limit 2) and a mask freeing `kp` and `kd`.
     fn zero_pd_gains() -> (PidPolicy<f64>, PidMask) {
         let initial = PidPolicy::new(
@@ -364,14 +377,7 @@ mod tests {
             |t, _| 0.3 * (t as f64 * 0.31 - 0.4).sin(),
             MeanFunction::Linear,
         );
-        let problem = PolicyProblem {
-            model: &model,
-            y0_mean: vec![0.2, -0.1],
-            y0_var: vec![0.01, 0.02],
-            u0: vec![0.0],
-            cost: SaturatingCost::with_widths(DVector::zeros(2), &[0.5, 0.5]).expect("cost"),
-            horizon: 40,
-        };
+        let problem = off_rest_problem(&model, 40);
         let (initial, mask) = zero_pd_gains();
         let mut rng = StdRng::seed_from_u64(7);
         let drawn: Vec<Vec<f64>> = (0..40)
@@ -451,14 +457,7 @@ mod tests {
     fn search_gradient_matches_duals_and_finite_differences(mean: MeanFunction) {
         // outputs that follow the input, so the gains matter
         let model = two_output_model_with(|t, _| 0.3 * (t as f64 * 0.31 - 0.4).sin(), mean);
-        let problem = PolicyProblem {
-            model: &model,
-            y0_mean: vec![0.2, -0.1],
-            y0_var: vec![0.01, 0.02],
-            u0: vec![0.0],
-            cost: SaturatingCost::with_widths(DVector::zeros(2), &[0.5, 0.5]).expect("cost"),
-            horizon: 30,
-        };
+        let problem = off_rest_problem(&model, 30);
         let initial = PidPolicy::new(
             DMatrix::from_row_slice(1, 2, &[-0.3, 0.2]),
             DMatrix::from_row_slice(1, 2, &[0.05, -0.02]),
