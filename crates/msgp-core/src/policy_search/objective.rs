@@ -42,13 +42,14 @@ pub fn closed_loop_cost<T: MomentMatch>(
     cost: &SaturatingCost,
     log: &mut JitterLog,
 ) -> Result<RolloutCost<T>> {
-    let rc = closed_loop_cost_bounded(gp, spec, start, policy, (t0, horizon), cost, None, log)?;
-    rc.ok_or_else(|| MsgpError::NonFinite("an unbounded rollout cost stopped early".into()))
+    closed_loop_cost_bounded(gp, spec, start, policy, (t0, horizon), cost, None, log)
+        .map(|(rc, _)| rc)
 }
 
-/// [`closed_loop_cost`] that gives up (`None`) as soon as the running total exceeds `bound`:
-/// every step's expected saturating cost lies in `[0, 1]`, so the total can only grow from
-/// there, and a rollout already dearer than the bound is known to end dearer still.
+/// [`closed_loop_cost`] that stops as soon as the running total exceeds `bound` (the flag
+/// then says so and the cost covers the steps run): every step's expected saturating cost
+/// lies in `[0, 1]`, so the total can only grow from there, and a rollout already dearer than
+/// the bound is known to end dearer still.
 #[allow(clippy::too_many_arguments)]
 fn closed_loop_cost_bounded<T: MomentMatch>(
     gp: &PreparedGp<T>,
@@ -59,7 +60,7 @@ fn closed_loop_cost_bounded<T: MomentMatch>(
     cost: &SaturatingCost,
     bound: Option<f64>,
     log: &mut JitterLog,
-) -> Result<Option<RolloutCost<T>>> {
+) -> Result<(RolloutCost<T>, bool)> {
     let mut steps = Vec::with_capacity(horizon.saturating_sub(t0));
     let mut total = T::zero();
     let mut cost_log = JitterLog::default();
@@ -83,7 +84,7 @@ fn closed_loop_cost_bounded<T: MomentMatch>(
         },
     )?;
     log.merge(&cost_log);
-    Ok((!exceeded).then_some(RolloutCost { total, steps }))
+    Ok((RolloutCost { total, steps }, exceeded))
 }
 
 /// Relative slack of [`PolicyProblem::evaluate_bounded`]'s bound.
@@ -285,8 +286,7 @@ impl PolicyProblem<'_> {
 
     /// Expected total cost of `policy` and the per-step (mean, variance) of the cost.
     pub fn evaluate<T: MomentMatch>(&self, policy: &PidPolicy<T>) -> Result<(T, Vec<(T, T)>)> {
-        let rc = self.cost_of(policy, None)?;
-        let rc = rc.ok_or_else(|| MsgpError::NonFinite("an unbounded rollout stopped".into()))?;
+        let (rc, _) = self.cost_of(policy, None)?;
         Ok((rc.total, rc.steps.iter().map(|s| (s.mean, s.var)).collect()))
     }
 
@@ -294,14 +294,15 @@ impl PolicyProblem<'_> {
     /// running cost exceeds it (the rest of the rollout is then not computed: screening many
     /// candidates for the few cheapest needs only the ones below the running k-th best).
     pub fn evaluate_bounded(&self, policy: &PidPolicy<f64>, bound: f64) -> Result<Option<f64>> {
-        Ok(self.cost_of(policy, Some(bound))?.map(|rc| rc.total))
+        let (rc, exceeded) = self.cost_of(policy, Some(bound))?;
+        Ok((!exceeded).then_some(rc.total))
     }
 
     fn cost_of<T: MomentMatch>(
         &self,
         policy: &PidPolicy<T>,
         bound: Option<f64>,
-    ) -> Result<Option<RolloutCost<T>>> {
+    ) -> Result<(RolloutCost<T>, bool)> {
         let params = self.model.params.map(c::<T>);
         let mut log = JitterLog::default();
         let gp = PreparedGp::new(&params, &self.model.config, &mut log)?;

@@ -102,6 +102,19 @@ pub fn learn_policy_observed(
     observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
 ) -> Result<LearnOutcome, SimError> {
     params.validate()?;
+    let (cost, policy_horizon) = search_objective(settings, params)?;
+    let horizon = (settings.episode_seconds * params.control_rate_hz).round() as usize;
+    // an episode's samples after the model's window, the steps its cost is scored on (predicted
+    // and measured alike); a full episode has `horizon + 1` samples
+    let window = settings.fit.ly.max(settings.fit.lu);
+    let scored = (horizon + 1).saturating_sub(window);
+    if horizon == 0 || scored == 0 {
+        return Err(SimError::invalid(
+            "episode_seconds",
+            settings.episode_seconds,
+            "an episode needs at least one control step after the model's window",
+        ));
+    }
     let mut episodes: Vec<Episode> = Vec::new();
     let mut training: Vec<TrainingEpisode> = Vec::new();
     let mut seconds = 0.0;
@@ -148,23 +161,6 @@ pub fn learn_policy_observed(
                 .map(|traj| TrainingEpisode { traj, policy: None }),
         );
         episodes.push(ep);
-    }
-    let cost = SaturatingCost::with_widths(DVector::from_element(2, 0.0), &settings.cost_widths)?;
-    let horizon = (settings.episode_seconds * params.control_rate_hz).round() as usize;
-    // an episode's samples after the model's window, the steps its cost is scored on (predicted
-    // and measured alike); a full episode has `horizon + 1` samples
-    let window = settings.fit.ly.max(settings.fit.lu);
-    let scored = (horizon + 1).saturating_sub(window);
-    let policy_horizon =
-        (settings.policy_horizon_seconds * params.control_rate_hz).round() as usize;
-    if policy_horizon == 0 || horizon == 0 || scored == 0 {
-        return Err(SimError::invalid(
-            "policy_horizon_seconds",
-            settings
-                .policy_horizon_seconds
-                .min(settings.episode_seconds),
-            "the episode and the policy horizon need at least one control step",
-        ));
     }
     let mut gains = initial_gains(&settings.gain_scale);
     let mut reports = Vec::new();
@@ -354,9 +350,7 @@ pub fn fit_and_search(
         Err(e) => return Err(e.into()),
     };
     let fit_seconds = clock.elapsed().as_secs_f64();
-    let cost = SaturatingCost::with_widths(DVector::from_element(2, 0.0), &settings.cost_widths)?;
-    let policy_horizon =
-        (settings.policy_horizon_seconds * params.control_rate_hz).round() as usize;
+    let (cost, policy_horizon) = search_objective(settings, params)?;
     let problem = pendulum_problem(&model, params, cost, policy_horizon);
     let search = PolicySearchSettings {
         seed: settings
@@ -395,6 +389,25 @@ pub fn fit_and_search(
         fit_seconds,
         search_seconds,
     })
+}
+
+/// The cost the gains are optimised and scored on, and the policy horizon in control steps
+/// (at least one).
+fn search_objective(
+    settings: &LearnSettings,
+    params: &PendulumParams,
+) -> Result<(SaturatingCost, usize), SimError> {
+    let cost = SaturatingCost::with_widths(DVector::from_element(2, 0.0), &settings.cost_widths)?;
+    let policy_horizon =
+        (settings.policy_horizon_seconds * params.control_rate_hz).round() as usize;
+    if policy_horizon == 0 {
+        return Err(SimError::invalid(
+            "policy_horizon_seconds",
+            settings.policy_horizon_seconds,
+            "the policy horizon needs at least one control step",
+        ));
+    }
+    Ok((cost, policy_horizon))
 }
 
 /// The gains the search moves: `kp` and `kd` on both outputs, `ki` on the end effector.
