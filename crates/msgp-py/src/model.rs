@@ -9,7 +9,7 @@ use std::sync::Arc;
 use msgp_core::data::Trajectory;
 use msgp_core::fit::{FitOptimizer, FitOptions, FitReport, FitSettings, fit_observed};
 use msgp_core::loss::Likelihood;
-use msgp_core::model::{Method, Metrics, Model, pool, score};
+use msgp_core::model::{Method, Metrics, Model, Rollout, pool, score};
 use msgp_core::model_file::{FitRecord, ModelFile};
 use msgp_core::numeric::parallel::Threads;
 use nalgebra::DMatrix;
@@ -20,13 +20,14 @@ use crate::convert::{array1, array2, matrix, to_python, trajectories, with_overr
 use crate::error::{Error, Result, callable, detached, input, with_python};
 
 /// Settings that the constructor's own arguments set.
-const OWN_SETTINGS: [(&str, &str); 6] = [
+const OWN_SETTINGS: [(&str, &str); 7] = [
     ("method", "method"),
     ("ly", "history"),
     ("lu", "history"),
     ("inducing", "inducing"),
     ("iterations", "iterations"),
     ("seed", "seed"),
+    ("likelihood", "likelihood"),
 ];
 
 /// A non-negative integer argument.
@@ -57,6 +58,40 @@ pub fn method(name: &str) -> Result<Method> {
                 .join(", ")
         ))
     })
+}
+
+/// The likelihood an MSGP fit trains on, by name (`free-run`, `filter`); `None`: the
+/// default. Other methods have their own and refuse one.
+pub fn likelihood(m: Method, name: Option<&str>) -> Result<Option<Likelihood>> {
+    let Some(name) = name else { return Ok(None) };
+    if m != Method::Msgp {
+        return Err(input(format!(
+            "likelihood={name:?}: the likelihood of an MSGP fit; method {:?} has its own",
+            m.name()
+        )));
+    }
+    [Likelihood::FreeRun, Likelihood::Filter]
+        .into_iter()
+        .find(|l| l.name() == name)
+        .map(Some)
+        .ok_or_else(|| {
+            input(format!(
+                "unknown likelihood {name:?}: expected \"free-run\" or \"filter\""
+            ))
+        })
+}
+
+/// A rollout by name (`mm`, `mean`).
+fn rollout(name: &str) -> Result<Rollout> {
+    Rollout::ALL
+        .into_iter()
+        .find(|r| r.name() == name)
+        .ok_or_else(|| {
+            input(format!(
+                "unknown rollout {name:?}: expected \"mm\" (moment matching) or \"mean\" \
+                 (mean feedback)"
+            ))
+        })
 }
 
 /// A fitted or loaded model: the file as `msgp fit` writes it and the model it describes.
@@ -199,6 +234,38 @@ impl Msgp {
         );
         Ok(Trajectory::new(u, y)?)
     }
+
+    /// One measured trajectory `u`, `y`, checked against the model.
+    fn measured(model: &Model, u: &Bound<'_, PyAny>, y: &Bound<'_, PyAny>) -> Result<Trajectory> {
+        let u = matrix(u, "u")?;
+        let y = matrix(y, "y")?;
+        if u.nrows() != y.nrows() {
+            return Err(input(format!(
+                "u has {} samples but y has {}",
+                u.nrows(),
+                y.nrows()
+            )));
+        }
+        let traj = Trajectory::new(u, y)?;
+        Msgp::check_measured(model, &traj, "")?;
+        Ok(traj)
+    }
+
+    /// `traj`'s columns match the model and it is longer than the history; `prefix` names it.
+    fn check_measured(model: &Model, traj: &Trajectory, prefix: &str) -> Result<()> {
+        let spec = model.spec;
+        check_columns(model, traj.u.ncols(), traj.y.ncols(), prefix)?;
+        if traj.len() <= spec.warmup() {
+            return Err(input(format!(
+                "{prefix}{} samples; the history (l_y={}, l_u={}) needs more than {}",
+                traj.len(),
+                spec.ly,
+                spec.lu,
+                spec.warmup()
+            )));
+        }
+        Ok(())
+    }
 }
 
 /// Checks `du`, `dy` against the model; `prefix` names the trajectory.
@@ -250,8 +317,8 @@ fn metrics_dict<'py>(py: Python<'py>, m: &Metrics) -> PyResult<Bound<'py, PyDict
 impl Msgp {
     #[new]
     #[pyo3(
-        signature = (history = None, inducing = None, method = "msgp", seed = 0, iterations = None, settings = None),
-        text_signature = "(history=(2, 2), inducing=None, method='msgp', seed=0, iterations=None, settings=None)"
+        signature = (history = None, inducing = None, method = "msgp", seed = 0, iterations = None, settings = None, likelihood = None),
+        text_signature = "(history=(2, 2), inducing=None, method='msgp', seed=0, iterations=None, settings=None, likelihood=None)"
     )]
     fn new(
         history: Option<&Bound<'_, PyAny>>,
@@ -260,8 +327,10 @@ impl Msgp {
         seed: i128,
         iterations: Option<i128>,
         settings: Option<&Bound<'_, PyAny>>,
+        likelihood: Option<&str>,
     ) -> PyResult<Self> {
         let m = crate::model::method(method)?;
+        let likelihood = crate::model::likelihood(m, likelihood)?.unwrap_or_default();
         let (ly, lu) = match history.filter(|h| !h.is_none()) {
             None => (2, 2),
             Some(h) => {
@@ -299,7 +368,7 @@ impl Msgp {
             mean: None,
             integrators: Vec::new(),
             optimizer: FitOptimizer::Adam,
-            likelihood: Likelihood::FreeRun,
+            likelihood,
             threads: Threads::default(),
         };
         let overrides = match settings.filter(|s| !s.is_none()) {
@@ -459,34 +528,65 @@ impl Msgp {
     /// Free simulation driven by the inputs `u` (T samples) from the first
     /// `max(l_y, l_u)` measured outputs in `y_init` (further rows are ignored). Returns
     /// `(mean, var)`, each of shape (T − max(l_y, l_u), d_y): row `i` predicts sample
-    /// `max(l_y, l_u) + i`, variance including observation noise, original units.
+    /// `max(l_y, l_u) + i`, variance including observation noise, original units. `rollout`:
+    /// "mm" (moment matching, the default) or "mean" (mean feedback), as `msgp simulate
+    /// --rollout`.
+    #[pyo3(signature = (u, y_init, *, rollout = "mm"))]
     fn simulate<'py>(
         slf: &Bound<'py, Self>,
         u: &Bound<'py, PyAny>,
         y_init: &Bound<'py, PyAny>,
+        rollout: &str,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
         let py = slf.py();
+        let rollout = crate::model::rollout(rollout)?;
         let fitted = Msgp::shared(slf)?;
         let traj = Msgp::simulation_input(&fitted.model, u, y_init)?;
-        let sim = detached(py, move || Ok(fitted.model.simulate(&traj)?))?;
+        let sim = detached(py, move || Ok(fitted.model.simulate_as(&traj, rollout)?))?;
         Ok((
             array2(py, &sim.mean).into_any(),
             array2(py, &sim.var).into_any(),
         ))
     }
 
+    /// One-step-ahead filtered predictions of the measured trajectory `u`, `y` (T samples
+    /// each): row `i` is the predictive distribution of sample `max(l_y, l_u) + i` given the
+    /// inputs and every measured output before it, by the moment-matched filter of the filter
+    /// likelihood (`msgp simulate --filtered`). Returns `(mean, var)`, each (T − max(l_y,
+    /// l_u), d_y), original units, variance including observation noise. Not a free
+    /// simulation: every step has seen the measurements before it.
+    fn filtered<'py>(
+        slf: &Bound<'py, Self>,
+        u: &Bound<'py, PyAny>,
+        y: &Bound<'py, PyAny>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        let py = slf.py();
+        let fitted = Msgp::shared(slf)?;
+        let traj = Msgp::measured(&fitted.model, u, y)?;
+        let f = detached(py, move || Ok(fitted.model.filtered(&traj)?))?;
+        Ok((
+            array2(py, &f.mean).into_any(),
+            array2(py, &f.var).into_any(),
+        ))
+    }
+
     /// Free simulation of each trajectory of `u`, `y` from its first `max(l_y, l_u)` samples,
     /// scored against `y`: dict of `rmse`, `nll` (mean per step), `coverage_2sigma`, `steps`,
-    /// pooled over all trajectories like `msgp eval`.
+    /// pooled over all trajectories like `msgp eval`. `rollout` as in `simulate`; with
+    /// `filtered=True` the dict also holds `filtered`, the same metrics of the one-step-ahead
+    /// filtered predictions (`msgp eval --filtered`).
+    #[pyo3(signature = (u, y, *, rollout = "mm", filtered = false))]
     fn score<'py>(
         slf: &Bound<'py, Self>,
         u: &Bound<'py, PyAny>,
         y: &Bound<'py, PyAny>,
+        rollout: &str,
+        filtered: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let py = slf.py();
+        let rollout = crate::model::rollout(rollout)?;
         let fitted = Msgp::shared(slf)?;
         let trajs = trajectories(u, y)?;
-        let spec = fitted.model.spec;
         let several = trajs.len() > 1;
         for (k, t) in trajs.iter().enumerate() {
             let prefix = if several {
@@ -494,27 +594,29 @@ impl Msgp {
             } else {
                 String::new()
             };
-            check_columns(&fitted.model, t.u.ncols(), t.y.ncols(), &prefix)?;
-            if t.len() <= spec.warmup() {
-                return Err(input(format!(
-                    "{prefix}{} samples; the history (l_y={}, l_u={}) needs more than {}",
-                    t.len(),
-                    spec.ly,
-                    spec.lu,
-                    spec.warmup()
-                ))
-                .into());
-            }
+            Msgp::check_measured(&fitted.model, t, &prefix)?;
         }
-        let metrics = detached(py, move || {
+        let (metrics, filtered) = detached(py, move || {
             let model = &fitted.model;
-            let each = trajs
-                .iter()
-                .map(|t| Ok(score(&model.simulate(t)?, t)?))
-                .collect::<Result<Vec<Metrics>>>()?;
-            pool(&each, model.spec.dy).ok_or_else(|| input("nothing to score"))
+            let pooled = |predict: &dyn Fn(&Trajectory) -> msgp_core::Result<_>| {
+                let each = trajs
+                    .iter()
+                    .map(|t| Ok(score(&predict(t)?, t)?))
+                    .collect::<Result<Vec<Metrics>>>()?;
+                pool(&each, model.spec.dy).ok_or_else(|| input("nothing to score"))
+            };
+            let metrics = pooled(&|t| model.simulate_as(t, rollout))?;
+            let filtered = match filtered {
+                true => Some(pooled(&|t| model.filtered(t))?),
+                false => None,
+            };
+            Ok((metrics, filtered))
         })?;
-        metrics_dict(py, &metrics)
+        let d = metrics_dict(py, &metrics)?;
+        if let Some(f) = &filtered {
+            d.set_item("filtered", metrics_dict(py, f)?)?;
+        }
+        Ok(d)
     }
 
     /// Writes the model file (the JSON format of `msgp fit`, atomically).
@@ -586,6 +688,14 @@ impl Msgp {
     #[getter]
     fn seed(&self) -> u64 {
         self.options.seed
+    }
+
+    /// Likelihood of the MSGP fit ("free-run", the paper's, or "filter"); None for the
+    /// one-step baselines and linear-kf, which have their own. A loaded model reports what
+    /// its file records.
+    #[getter]
+    fn likelihood(&self) -> Option<&'static str> {
+        (self.options.method == Method::Msgp).then(|| self.options.likelihood.name())
     }
 
     /// `max(l_y, l_u)`: samples that start a simulation; predictions begin at this index.
@@ -686,6 +796,12 @@ impl Msgp {
             o.seed,
             opt(o.iterations)
         );
+        if o.method == Method::Msgp && o.likelihood != Likelihood::default() {
+            s.insert_str(
+                s.len() - 1,
+                &format!(", likelihood='{}'", o.likelihood.name()),
+            );
+        }
         if let Some(f) = &self.fitted {
             let t = &f.file.training;
             s.push_str(&format!(
@@ -720,6 +836,7 @@ impl Msgp {
                     Some(v) => crate::convert::from_json(py, v)?,
                     None => py.None().into_bound(py),
                 };
+                let likelihood = (o.method == Method::Msgp).then(|| o.likelihood.name());
                 let args = (
                     (o.ly, o.lu),
                     o.inducing,
@@ -727,6 +844,7 @@ impl Msgp {
                     o.seed,
                     o.iterations,
                     settings,
+                    likelihood,
                 )
                     .into_pyobject(py)?;
                 PyTuple::new(py, [cls.into_any(), args.into_any()])

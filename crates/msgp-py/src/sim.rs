@@ -3,8 +3,6 @@
 
 use msgp_core::data::{NoiseScale, SyntheticSystem};
 use msgp_core::fit::FitSettings;
-use msgp_core::loss::Likelihood;
-use msgp_core::model::Method;
 use msgp_core::numeric::parallel::Threads;
 use msgp_sim::learn::{LearnEvent, LearnSettings, episode_trajectory, learn_policy_observed};
 use msgp_sim::{
@@ -78,7 +76,7 @@ pub fn defaults<'py>(
     if likelihood.is_some() && what != "learn" {
         return Err(input(format!(
             "defaults({what:?}): likelihood applies to the \"learn\" defaults only (a fit's \
-             is settings={{\"likelihood\": ...}})"
+             is Msgp(likelihood=...))"
         ))
         .into());
     }
@@ -87,7 +85,7 @@ pub fn defaults<'py>(
         "stability" => to_python(py, &StabilityCriteria::default()),
         "learn" => {
             let m = crate::model::method(method.unwrap_or("msgp"))?;
-            let l = loop_likelihood(m, likelihood)?;
+            let l = crate::model::likelihood(m, likelihood)?;
             to_python(py, &LearnSettings::for_model(m, l))
         }
         "fit" => {
@@ -99,27 +97,6 @@ pub fn defaults<'py>(
         ))
         .into()),
     }
-}
-
-/// The likelihood an MSGP loop's fits train on (`None`: the loop's default); other methods
-/// have their own and refuse one.
-fn loop_likelihood(m: Method, name: Option<&str>) -> Result<Option<Likelihood>> {
-    let Some(name) = name else { return Ok(None) };
-    if m != Method::Msgp {
-        return Err(input(format!(
-            "likelihood={name:?}: the likelihood of an MSGP fit; method {:?} has its own",
-            m.name()
-        )));
-    }
-    [Likelihood::FreeRun, Likelihood::Filter]
-        .into_iter()
-        .find(|l| l.name() == name)
-        .map(Some)
-        .ok_or_else(|| {
-            input(format!(
-                "unknown likelihood {name:?}: expected \"free-run\" or \"filter\""
-            ))
-        })
 }
 
 fn plant(params: Option<&Bound<'_, PyAny>>) -> Result<PendulumParams> {
@@ -304,7 +281,7 @@ pub fn learn_policy<'py>(
 ) -> PyResult<Bound<'py, PyList>> {
     let progress = callable(progress, "one iteration's dict")?;
     let m = crate::model::method(method)?;
-    let l = loop_likelihood(m, likelihood)?;
+    let l = crate::model::likelihood(m, likelihood)?;
     let iterations = count(iterations, "iterations")?;
     let seed = uint(seed, "seed")?;
     let p = plant(params)?;

@@ -2,6 +2,7 @@
 seed, and read each other's model files."""
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -161,3 +162,62 @@ def test_python_model_evaluates_in_cli(sys4, sys4_fit, cli, tmp_path):
     mean, var = model.simulate(data["u_test"], data["y_test"])
     assert max_diff(table["y_mean"], mean[:, 0]) == 0.0
     assert max_diff(table["y_std"], np.sqrt(var[:, 0])) == 0.0
+
+
+def test_filtered_and_mean_feedback_predictions_match_the_cli(sys4, cli, tmp_path):
+    """`filtered`, `score(filtered=True)` and `rollout="mean"` are `msgp eval/simulate
+    --filtered` and `--rollout mean` on the saved model; the filtered score is the score of
+    `filtered`'s predictions, recomputed here in numpy."""
+    _, data = sys4
+    model = msgp.Msgp(history=data["history"], inducing=10, iterations=10, seed=0, likelihood="filter")
+    model.fit(data["u_train"], data["y_train"])
+    u, y = data["u_test"], data["y_test"]
+    path = tmp_path / "m.model.json"
+    model.save(path)
+    test_csv = tmp_path / "test.csv"
+    write_csv(test_csv, u, y)
+    base = ("--model", path, "--data", test_csv, "--json")
+
+    mine = model.score(u, y, filtered=True)
+    report = cli("eval", *base, "--filtered")
+    for k in METRICS:
+        assert abs(report[k] - mine[k]) <= TOL, k
+        assert abs(report["filtered"][k] - mine["filtered"][k]) <= TOL, k
+    assert "filtered" not in model.score(u, y)
+
+    mean, var = model.filtered(u, y)
+    w = model.warmup
+    assert mean.shape == var.shape == (len(y) - w, 1)
+    err = y[w:] - mean[:, 0]
+    f = mine["filtered"]
+    assert f["steps"] == len(err)
+    assert abs(f["rmse"] - math.sqrt(np.mean(err**2))) <= 1e-12
+    nll = np.mean(0.5 * (np.log(2 * math.pi * var[:, 0]) + err**2 / var[:, 0]))
+    assert abs(f["nll"] - nll) <= 1e-10
+    assert abs(f["coverage_2sigma"] - np.mean(np.abs(err) <= 2 * np.sqrt(var[:, 0]))) <= 1e-12
+    # each step has seen the measurements before it: far closer than the free simulation
+    assert f["rmse"] < 0.5 * mine["rmse"], (f["rmse"], mine["rmse"])
+
+    pred = tmp_path / "pred.csv"
+    cli("simulate", *base, "--filtered", "--out", pred)
+    table = np.genfromtxt(pred, delimiter=",", names=True)
+    assert max_diff(table["y_filtered_mean"], mean[:, 0]) == 0.0
+    assert max_diff(table["y_filtered_std"], np.sqrt(var[:, 0])) == 0.0
+
+    by_mean = model.score(u, y, rollout="mean")
+    report = cli("eval", *base, "--rollout", "mean")
+    for k in METRICS:
+        assert abs(report[k] - by_mean[k]) <= TOL, k
+    assert by_mean["rmse"] != mine["rmse"]
+    cli("simulate", *base, "--rollout", "mean", "--out", pred)
+    table = np.genfromtxt(pred, delimiter=",", names=True)
+    sim_mean, sim_var = model.simulate(u, y[:w], rollout="mean")
+    assert max_diff(table["y_mean"], sim_mean[:, 0]) == 0.0
+    assert max_diff(table["y_std"], np.sqrt(sim_var[:, 0])) == 0.0
+
+    with pytest.raises(ValueError, match='unknown rollout "exact"'):
+        model.simulate(u, y[:w], rollout="exact")
+    with pytest.raises(ValueError, match="needs more than"):
+        model.filtered(u[:w], y[:w])
+    with pytest.raises(ValueError, match=f"u has {len(u)} samples but y has {len(u) - 1}"):
+        model.filtered(u, y[:-1])

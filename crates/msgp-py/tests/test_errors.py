@@ -186,22 +186,32 @@ def test_bad_experiment_arguments():
         msgp.defaults("robot")
 
 
-def test_the_msgp_likelihood_is_a_setting():
-    """`settings={"likelihood": "filter"}` trains MSGP on the filter likelihood (recorded in the
-    saved model's training settings); another method refuses it by name; a bad value is named."""
+def test_the_msgp_likelihood_is_an_argument():
+    """`Msgp(likelihood="filter")` trains MSGP on the filter likelihood (recorded in the saved
+    model's training settings, read back by `load`, kept by pickling an unfitted model); another
+    method refuses it by name, as does `settings`; a bad value is named."""
     import json
+    import pickle
     d = msgp.synthetic_system(4, seed=0)
     u, y = d["u_train"][:120], d["y_train"][:120]
-    m = msgp.Msgp(history=(2, 1), inducing=8, iterations=5, settings={"likelihood": "filter"}).fit(u, y)
+    m = msgp.Msgp(history=(2, 1), inducing=8, iterations=5, likelihood="filter")
+    assert m.likelihood == "filter" and "likelihood='filter'" in repr(m)
+    assert pickle.loads(pickle.dumps(m)).likelihood == "filter"
+    m.fit(u, y)
     free = msgp.Msgp(history=(2, 1), inducing=8, iterations=5).fit(u, y)
+    assert free.likelihood == "free-run" and "likelihood" not in repr(free)
     doc = json.loads(m.to_json())
     assert doc["training"]["settings"]["likelihood"] == "filter"
+    assert msgp.Msgp.from_json(m.to_json()).likelihood == "filter"
     assert json.loads(free.to_json())["training"]["settings"]["likelihood"] == "free-run"
     assert m.params["pseudo_targets"].tolist() != free.params["pseudo_targets"].tolist()
-    with pytest.raises(ValueError, match=r'settings\["likelihood"\]: a setting of method msgp, not of gp-narx'):
-        msgp.Msgp(method="gp-narx", settings={"likelihood": "filter"})
-    with pytest.raises(ValueError, match="settings.likelihood"):
-        msgp.Msgp(settings={"likelihood": "kalman"})
+    assert msgp.Msgp(method="gp-narx").likelihood is None
+    with pytest.raises(ValueError, match='likelihood="filter": the likelihood of an MSGP fit; method "gp-narx"'):
+        msgp.Msgp(method="gp-narx", likelihood="filter")
+    with pytest.raises(ValueError, match=r'settings\["likelihood"\]: set it with the Msgp\(likelihood=...\) argument'):
+        msgp.Msgp(settings={"likelihood": "filter"})
+    with pytest.raises(ValueError, match='unknown likelihood "kalman"'):
+        msgp.Msgp(likelihood="kalman")
 
 
 def test_warnings_about_the_data_do_not_stop_a_fit(tmp_path):

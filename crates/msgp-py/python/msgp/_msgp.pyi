@@ -47,6 +47,9 @@ class Msgp:
         `{"mean": "linear", "integrators": [{"output": 0, "order": 2}]}` declares output 0 a
         pure double integrator (`msgp fit --integrating 0:2`; add `"linear": True` for
         `0:2:linear`); `{"optimizer": "lbfgs"}` fits by L-BFGS (`msgp fit --optimizer lbfgs`).
+    likelihood: of an MSGP fit, "free-run" (the paper's product of a free simulation's
+        per-step marginals, the default) or "filter" (the joint density of the observations by
+        the moment-matched filter) — `msgp fit --likelihood`; other methods refuse it.
     """
 
     def __init__(
@@ -57,6 +60,7 @@ class Msgp:
         seed: int = 0,
         iterations: Optional[int] = None,
         settings: Optional[Dict[str, Any]] = None,
+        likelihood: Optional[str] = None,
     ) -> None: ...
     def fit(
         self,
@@ -71,11 +75,22 @@ class Msgp:
         several trajectories); returns self. Releases the GIL. `progress` is called with a
         dict (stage, iteration, iterations, loss, validation, elapsed) after every training
         iteration of an MSGP fit; Ctrl-C or an exception it raises stops the fit and raises."""
-    def simulate(self, u: ArrayLike, y_init: ArrayLike) -> Tuple[Array, Array]:
+    def simulate(
+        self, u: ArrayLike, y_init: ArrayLike, *, rollout: str = "mm"
+    ) -> Tuple[Array, Array]:
         """Free simulation driven by `u` (T samples) from the first max(l_y, l_u) rows of
-        `y_init`; returns (mean, var), each (T − max(l_y, l_u), d_y), original units."""
-    def score(self, u: Data, y: Data) -> Dict[str, float]:
-        """Free-simulation metrics: rmse, nll (mean per step), coverage_2sigma, steps."""
+        `y_init`; returns (mean, var), each (T − max(l_y, l_u), d_y), original units.
+        rollout: "mm" (moment matching) or "mean" (mean feedback) — `msgp simulate --rollout`."""
+    def filtered(self, u: ArrayLike, y: ArrayLike) -> Tuple[Array, Array]:
+        """One-step-ahead filtered predictions of the measured `u`, `y`: row i predicts sample
+        max(l_y, l_u) + i given every measured output before it (`msgp simulate --filtered`);
+        returns (mean, var), original units. Not a free simulation."""
+    def score(
+        self, u: Data, y: Data, *, rollout: str = "mm", filtered: bool = False
+    ) -> Dict[str, Any]:
+        """Free-simulation metrics: rmse, nll (mean per step), coverage_2sigma, steps; with
+        filtered=True also "filtered", the same metrics of the one-step-ahead filtered
+        predictions (`msgp eval --filtered`)."""
     def save(self, path: PathLike) -> None:
         """Writes the model file of `msgp fit` (JSON, atomically)."""
     @staticmethod
@@ -96,6 +111,9 @@ class Msgp:
     def iterations(self) -> Optional[int]: ...
     @property
     def seed(self) -> int: ...
+    @property
+    def likelihood(self) -> Optional[str]:
+        """"free-run" or "filter" for MSGP; None for the other methods."""
     @property
     def warmup(self) -> int:
         """max(l_y, l_u): predictions start at this sample."""
