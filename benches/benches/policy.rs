@@ -24,7 +24,8 @@ use msgp_core::policy::{PidPolicy, PolicySpec};
 use msgp_core::policy_search::cost::SaturatingCost;
 use msgp_core::policy_search::{PidMask, PolicyProblem, PolicySearchSettings, optimise_pid_scaled};
 use msgp_sim::learn::{
-    LearnEvent, LearnSettings, episode_trajectory, fit_and_search, modelled_policy, segments,
+    LearnEvent, LearnSettings, ModelChoice, episode_trajectory, fit_and_search, modelled_policy,
+    segments,
 };
 use msgp_sim::{
     EpisodeConfig, PendulumParams, PidPdGains, PidPdPolicy, PlantTier, RandomExcitation,
@@ -235,7 +236,8 @@ fn bench_policy(c: &mut Criterion) {
 }
 
 /// One iteration of the default loop (`msgp learn-policy --sim pendulum`: the filtered MSGP,
-/// m = 30, warm-started fit, 10 s policy horizon, 12 Adam steps per search start), as the loop
+/// m = 30, warm-started fit, the linear competitor's warm fit and the prequential choice, 10 s
+/// policy horizon, 12 Adam steps per search start), as the loop
 /// runs it ([`msgp_sim::learn::fit_and_search`]), at the state of its fifth iteration on each plant tier:
 /// four random-excitation episodes and four feedback episodes of the hand-tuned gains (3 s
 /// each, whole, seeded), the previous model fitted (outside the timing) on all but the last
@@ -249,15 +251,41 @@ fn bench_loop_iteration(c: &mut Criterion) {
         let mut gains = PidPdGains::hand_tuned();
         gains.saturation = Saturation::Sine;
         let quiet = &mut |_: LearnEvent<'_>| ControlFlow::Continue(());
-        let previous = fit_and_search(&params, &settings, &data[..7], None, &gains, 4, quiet)
-            .expect("previous iteration")
-            .model;
+        // the previous iteration, whose models then predict the last episode (the
+        // prequential choice's score)
+        let mut choice = ModelChoice::new(&settings).expect("an MSGP loop");
+        let step = fit_and_search(
+            &params,
+            &settings,
+            &data[..7],
+            None,
+            &gains,
+            4,
+            Some(&mut choice),
+            quiet,
+        )
+        .expect("previous iteration");
+        let linear = step.linear.expect("the linear competitor");
+        choice
+            .score(&step.model, &linear, &data[7..])
+            .expect("held-out scores");
+        let previous = step.model;
         group.bench_function(format!("fit_and_search_{}_8_episodes", tier.name()), |b| {
             b.iter(|| {
                 let quiet = &mut |_: LearnEvent<'_>| ControlFlow::Continue(());
+                let mut choice = choice.clone();
                 black_box(
-                    fit_and_search(&params, &settings, &data, Some(&previous), &gains, 5, quiet)
-                        .expect("iteration"),
+                    fit_and_search(
+                        &params,
+                        &settings,
+                        &data,
+                        Some(&previous),
+                        &gains,
+                        5,
+                        Some(&mut choice),
+                        quiet,
+                    )
+                    .expect("iteration"),
                 )
             })
         });

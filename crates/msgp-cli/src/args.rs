@@ -386,8 +386,10 @@ pub struct BudgetArgs {
     /// Likelihood of the MSGP fits (free-run or filter; see `msgp fit --likelihood`)
     /// [default: filter, with the filtered loop's defaults: every fit starts from the
     /// linear-kf model of the data, m = 30, 100 L-BFGS iterations, warm starts,
-    /// 12 Adam steps per search start, 10 s policy horizon; free-run: the paper's loss with the
-    /// MSGP defaults].
+    /// 12 Adam steps per search start, 10 s policy horizon, and each search on the GP model
+    /// only while it predicts the episodes it had not seen better than the linear-kf model of
+    /// the same data (`--experimental prequential=false`: always); free-run: the paper's loss
+    /// with the MSGP defaults].
     #[arg(long, value_enum)]
     pub likelihood: Option<LikelihoodArg>,
     /// Random episodes before the first policy (random excitation, or random policies: see
@@ -442,7 +444,10 @@ pub struct BudgetArgs {
     /// each also stability-tested), trust-region=R (no gain moves further than R typical
     /// magnitudes per search, 1; 0: off), fit-optimizer=adam|lbfgs (solver of each MSGP fit),
     /// hold-margin=K (the search's gains replace the running ones only when predicted to pay
-    /// by K standard deviations of their predicted cost; 0: always).
+    /// by K standard deviations of their predicted cost; 0: always), prequential=true|false
+    /// (MSGP, on by default with the filter likelihood: each iteration also fits the linear
+    /// model of the data and the search runs on the GP model only while the GP predicts the
+    /// episodes it had not seen better).
     #[arg(long = "experimental", value_name = "KEY=VALUE", value_parser = Experiment::parse)]
     pub experimental: Vec<Experiment>,
 }

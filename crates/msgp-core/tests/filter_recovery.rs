@@ -194,3 +194,88 @@ fn the_filter_likelihood_predicts_feedback_gains_as_the_plant_has_them() {
         assert!(by_free[k] > 5.0 * plant[k], "gains {k}: {report}");
     }
 }
+
+/// What the filtered MSGP loop's prequential choice rests on (`msgp_sim::learn::ModelChoice`):
+/// on episodes neither model was trained on, the filter likelihood (`Model::filter_nll`) of the
+/// GP model (linear mean + GP, from the linear-kf start) beats the linear-kf model's where the
+/// plant has a nonlinearity a linear model cannot carry (a saturating input,
+/// `y_{t+1} = 0.7 y_t + 0.8 tanh(2 u_t)`), and does not where the plant is linear
+/// (`y_{t+1} = 0.7 y_t + 0.5 u_t`): there the GP can only fit the noise.
+#[test]
+fn held_out_filter_likelihood_prefers_the_gp_only_where_the_plant_is_nonlinear() {
+    use msgp_core::fit::LinearKfSettings;
+    let plant = |nonlinear: bool, seed: u64, count: usize| -> Vec<Trajectory> {
+        let mut rng = StdRng::seed_from_u64(seed);
+        (0..count)
+            .map(|_| {
+                let n = 120;
+                let phase: Vec<f64> = (0..4).map(|_| 3.0 * normal(&mut rng)).collect();
+                let u: Vec<f64> = (0..n)
+                    .map(|t| {
+                        (0..4)
+                            .map(|k| 0.6 * (0.07 * (k as f64 + 1.0) * t as f64 + phase[k]).sin())
+                            .sum::<f64>()
+                    })
+                    .collect();
+                let mut x = vec![0.0; n];
+                for t in 0..n - 1 {
+                    let drive = if nonlinear {
+                        0.8 * (2.0 * u[t]).tanh()
+                    } else {
+                        0.5 * u[t]
+                    };
+                    x[t + 1] = 0.7 * x[t] + drive + 0.01 * normal(&mut rng);
+                }
+                let y: Vec<f64> = x.iter().map(|v| v + 0.05 * normal(&mut rng)).collect();
+                Trajectory::siso(&u, &y).expect("trajectory")
+            })
+            .collect()
+    };
+    let base = FitSettings {
+        ly: 1,
+        lu: 1,
+        ..FitSettings::default()
+    };
+    let gp_settings = FitSettings {
+        method: MsgpSettings {
+            inducing: 20,
+            iterations: 100,
+            optimizer: FitOptimizer::Lbfgs,
+            likelihood: Likelihood::Filter,
+            validation_fraction: 0.0,
+            noise_floor: 1e-9,
+            mean: MeanFunction::Linear,
+            start: MsgpStart::LinearKf,
+            alternative: None,
+            ..MsgpSettings::default()
+        }
+        .into(),
+        ..base.clone()
+    };
+    let linear_settings = FitSettings {
+        method: LinearKfSettings { iterations: 300 }.into(),
+        ..base
+    };
+    let mut report = String::new();
+    for nonlinear in [true, false] {
+        let train = plant(nonlinear, 11, 6);
+        let test = plant(nonlinear, 12, 4);
+        let (gp, _) = fit(&train, &gp_settings, &mut |_| {}).expect("GP fit");
+        let (linear, _) = fit(&train, &linear_settings, &mut |_| {}).expect("linear fit");
+        let score = |m: &Model| -> f64 {
+            test.iter()
+                .map(|t| m.filter_nll(t).expect("filter").0)
+                .sum()
+        };
+        let (g, l) = (score(&gp), score(&linear));
+        report.push_str(&format!(
+            "nonlinear {nonlinear}: GP {g:.1}, linear {l:.1}\n"
+        ));
+        if nonlinear {
+            assert!(g < l - 50.0, "{report}");
+        } else {
+            assert!(g > l, "{report}");
+        }
+    }
+    eprintln!("{report}");
+}

@@ -76,6 +76,10 @@ def test_learn_policy_runs_and_reports():
     assert 0.0 < r["interaction_seconds"] <= 2.0
     assert np.isfinite(r["predicted_cost"]) and np.isfinite(r["actual_cost"])
     assert r["fit_seconds"] > 0.0 and r["search_seconds"] > 0.0
+    # the filtered MSGP loop's prequential choice: the first search on the linear model, both
+    # models scored on the episode that followed
+    assert r["search_model"] == "linear"
+    assert set(r["held_out"]) == {"gp_nll", "linear_nll", "steps"} and r["held_out"]["steps"] > 0
 
     def untimed(rs):
         return [{k: v for k, v in x.items() if k not in ("fit_seconds", "search_seconds")} for x in rs]
@@ -130,9 +134,11 @@ def test_learn_defaults_per_model():
     assert msgp_defaults["policy_horizon_seconds"] == 10.0
     assert msgp_defaults["fit"]["likelihood"] == "filter"
     assert msgp_defaults["fit"]["start"] == "linear-kf"
+    assert msgp_defaults["prequential_choice"] is True
     free = msgp.defaults("learn", likelihood="free-run")
     assert free["warm_start"] is None and free["policy_horizon_seconds"] == 5.0
     assert free["fit"]["likelihood"] == "free-run" and free["fit"]["start"] == "one-step"
+    assert "prequential_choice" not in free
     with pytest.raises(ValueError, match="likelihood"):
         msgp.defaults("learn", method="linear-kf", likelihood="filter")
     with pytest.raises(ValueError, match="free-run"):

@@ -444,3 +444,82 @@ fn a_hold_margin_keeps_the_running_gains_unless_the_model_predicts_a_gain() {
     );
     assert!(held.iterations.iter().all(|r| r.expected_cost.is_some()));
 }
+
+/// The prequential choice of the filtered MSGP loop: every iteration reports which model its
+/// search ran on and both models' filter likelihoods of the episode it then ran; the first
+/// search runs on the linear model (nothing predicted yet), each later one on the GP model
+/// exactly when the GP's held-out scores so far sum below the linear model's. The scores are
+/// of data neither model saw: the first iteration's, recomputed here from models fitted on the
+/// random episodes alone, are the reported ones bit for bit. Reproducible; off, nothing is
+/// reported.
+#[test]
+fn the_prequential_choice_searches_on_the_model_that_predicted_unseen_episodes_better() {
+    use msgp_core::fit::{TrainingEpisode, fit_episodes};
+    use msgp_core::model::Method;
+    use msgp_sim::learn::{ModelChoice, SearchModel, episode_trajectory};
+    let f = LearnSettings::filtered_msgp();
+    assert!(f.prequential_choice, "the filtered loop's default");
+    let settings = LearnSettings {
+        iterations: 3,
+        random_rollouts: 2,
+        episode_seconds: 1.0,
+        fit: f.fit.clone().with_inducing(10).with_solver_iterations(5),
+        search: PolicySearchSettings {
+            iterations: 3,
+            restarts: 0,
+            candidates: 4,
+            ..f.search
+        },
+        evaluation_episodes: 0,
+        ..f
+    };
+    let params = PendulumParams::tier(PlantTier::Noisy);
+    let a = learn_policy(&params, &settings, &mut |_| {}).expect("loop runs");
+    let mut advantage = 0.0;
+    for (k, r) in a.iterations.iter().enumerate() {
+        let expected = if k > 0 && advantage < 0.0 {
+            SearchModel::Gp
+        } else {
+            SearchModel::Linear
+        };
+        assert_eq!(r.search_model, Some(expected), "iteration {}", r.iteration);
+        let h = r.held_out.expect("scored");
+        assert!(h.gp_nll.is_finite() && h.linear_nll.is_finite() && h.steps > 0);
+        advantage += h.gp_nll - h.linear_nll;
+    }
+    // iteration 1: both models fitted on the random episodes, scored on the first feedback one
+    let training: Vec<TrainingEpisode> = a.episodes[..2]
+        .iter()
+        .map(|ep| TrainingEpisode {
+            traj: episode_trajectory(ep).expect("trajectory"),
+            policy: None,
+        })
+        .collect();
+    let newest = episode_trajectory(&a.episodes[2]).expect("trajectory");
+    let mut choice = ModelChoice::new(&settings).expect("an MSGP loop");
+    let linear = choice.fit(&training, 1).expect("linear fit");
+    let gp_settings = FitSettings {
+        seed: settings.seed + 1,
+        ..settings.fit.clone()
+    };
+    let (gp, _) = fit_episodes(&training, &gp_settings, &mut |_| {}).expect("GP fit");
+    let h = a.iterations[0].held_out.expect("scored");
+    assert_eq!(linear.filter_nll(&newest).expect("filter").0, h.linear_nll);
+    assert_eq!(gp.filter_nll(&newest).expect("filter").0, h.gp_nll);
+    assert_eq!(linear.method, Method::LinearKf);
+    let b = learn_policy(&params, &settings, &mut |_| {}).expect("loop runs");
+    assert_eq!(a.final_gains, b.final_gains);
+    for (x, y) in a.iterations.iter().zip(&b.iterations) {
+        assert_eq!((x.search_model, x.held_out), (y.search_model, y.held_out));
+    }
+    let off = LearnSettings {
+        prequential_choice: false,
+        iterations: 1,
+        ..settings
+    };
+    let c = learn_policy(&params, &off, &mut |_| {}).expect("loop runs");
+    assert_eq!(
+        (c.iterations[0].search_model, c.iterations[0].held_out),
+        (None, None)
+    );
+}

@@ -12,8 +12,8 @@ use std::time::Instant;
 use anyhow::Context;
 use msgp_core::model::Method;
 use msgp_sim::learn::{
-    IterationReport, LearnEvent, LearnOutcome, LearnSettings, learn_policy_observed, summary,
-    write_run_dir,
+    IterationReport, LearnEvent, LearnOutcome, LearnSettings, SearchModel, learn_policy_observed,
+    summary, write_run_dir,
 };
 use msgp_sim::{PendulumParams, SimError};
 
@@ -46,6 +46,18 @@ pub fn progress_line(r: &IterationReport, started: Instant) -> String {
     if let Some(why) = &r.search_failure {
         notes.push_str(&format!(
             "\n  policy search failed ({why}): the previous gains ran again"
+        ));
+    }
+    if let (Some(m), Some(h)) = (r.search_model, r.held_out) {
+        notes.push_str(&format!(
+            "\n  searched on the {} model; on the episode run, which neither model saw: GP {:.1}, \
+             linear {:.1} nats",
+            match m {
+                SearchModel::Gp => "GP",
+                SearchModel::Linear => "linear",
+            },
+            h.gp_nll,
+            h.linear_nll
         ));
     }
     let line = format!(

@@ -814,3 +814,53 @@ fn the_protocol_keeps_the_recipe_with_the_better_validation_nll() {
     let linear = linear.msgp().expect("msgp");
     assert_eq!((linear.recipe(), linear.alternative), (LINEAR_RECIPE, None));
 }
+
+/// `Model::filter_nll` in original units: for one output the joint density factors into the
+/// one-step predictive densities that `Model::filtered` returns (summed here by hand), and the
+/// same model and data in other units (outputs × 1024, offset by 5) score the same up to the
+/// Jacobian `steps · ln 1024`, so models with different normalisers compare on one scale.
+#[test]
+fn the_filter_nll_in_original_units_sums_the_filtered_predictive_densities() {
+    let train = first_order(0.3);
+    let settings = FitSettings {
+        ly: 2,
+        lu: 1,
+        method: MsgpSettings {
+            inducing: 8,
+            iterations: 20,
+            validation_fraction: 0.0,
+            likelihood: Likelihood::Filter,
+            ..MsgpSettings::default()
+        }
+        .into(),
+        ..FitSettings::default()
+    };
+    let (model, _) = fit(std::slice::from_ref(&train), &settings, &mut |_| {}).expect("fit");
+    let test = first_order(0.25);
+    let (nll, steps) = model.filter_nll(&test).expect("filter");
+    let f = model.filtered(&test).expect("filtered");
+    assert_eq!(steps, f.mean.nrows());
+    let by_hand: f64 = (0..steps)
+        .map(|i| {
+            let (r, v) = (test.y[(f.start + i, 0)] - f.mean[(i, 0)], f.var[(i, 0)]);
+            0.5 * ((2.0 * std::f64::consts::PI * v).ln() + r * r / v)
+        })
+        .sum();
+    assert!(
+        (nll - by_hand).abs() <= 1e-10 * by_hand.abs().max(1.0),
+        "{nll} against {by_hand}"
+    );
+    let mut scaled = model.clone();
+    scaled.normalizer.y_std[0] *= 1024.0;
+    scaled.normalizer.y_mean[0] = scaled.normalizer.y_mean[0] * 1024.0 + 5.0;
+    let y = test.y.map(|v| v * 1024.0 + 5.0);
+    let other_units = Trajectory::new(test.u.clone(), y).expect("finite");
+    let (nll_other, _) = scaled.filter_nll(&other_units).expect("filter");
+    let expected = nll + steps as f64 * 1024f64.ln();
+    // the offset's rounding (1e-16) passes through a filter with a near-singular window
+    // covariance; a wrong Jacobian would be off by `steps · ln 1024` ≈ 530
+    assert!(
+        (nll_other - expected).abs() <= 1e-6 * expected.abs(),
+        "{nll_other} against {expected}"
+    );
+}

@@ -208,6 +208,22 @@ impl Model {
         })
     }
 
+    /// The filter likelihood of `traj` under this model in original units: `Σ_t −log p(y_t |
+    /// y_{<t}, u)` over `t ≥ max(l_y, l_u)` (the joint density of the outputs the filter
+    /// likelihood trains on, [`crate::loss::filter_nll`], with the normaliser's Jacobian
+    /// `Σ_j log σ_{y,j}` per step), and the number of scored steps. Models with different
+    /// normalisers score the same data on the same scale, so two models' values on data
+    /// neither was trained on compare their predictions of it.
+    pub fn filter_nll(&self, traj: &Trajectory) -> Result<(f64, usize)> {
+        traj.check(&self.spec)?;
+        let norm = self.normalizer.apply(traj);
+        let mut log = JitterLog::default();
+        let gp = PreparedGp::new(&self.params, &self.config, &mut log)?;
+        let f = crate::loss::filter_nll(&gp, &self.spec, &norm, &mut log)?;
+        let jacobian: f64 = self.normalizer.y_std.iter().map(|s| s.ln()).sum();
+        Ok((f.nll + f.steps as f64 * jacobian, f.steps))
+    }
+
     /// [`filtered`](Self::filtered) predictions of every part, with their metrics.
     pub fn filtered_parts(&self, parts: &[Part]) -> Result<Vec<Simulated>> {
         self.parts_by(parts, "filtering", |traj| self.filtered(traj))

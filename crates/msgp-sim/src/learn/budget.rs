@@ -42,10 +42,14 @@ pub enum Experiment {
     /// `hold-margin=K`: the search's gains replace the running ones only when predicted to
     /// pay by K standard deviations of their predicted cost; 0: always.
     HoldMargin(f64),
+    /// `prequential=true|false` (MSGP): the search runs on the GP model only while its
+    /// predictions of the episodes it had not seen beat the linear model's
+    /// ([`LearnSettings::prequential_choice`]).
+    Prequential(bool),
 }
 
 /// The keys of [`Experiment`], as written on the command line.
-pub const EXPERIMENT_KEYS: [&str; 8] = [
+pub const EXPERIMENT_KEYS: [&str; 9] = [
     "start-smoothing",
     "fb-segment",
     "free-position",
@@ -54,6 +58,7 @@ pub const EXPERIMENT_KEYS: [&str; 8] = [
     "trust-region",
     "fit-optimizer",
     "hold-margin",
+    "prequential",
 ];
 
 impl Experiment {
@@ -68,6 +73,7 @@ impl Experiment {
             Experiment::TrustRegion(_) => 5,
             Experiment::FitOptimizer(_) => 6,
             Experiment::HoldMargin(_) => 7,
+            Experiment::Prequential(_) => 8,
         }]
     }
 
@@ -88,14 +94,16 @@ impl Experiment {
                 .parse::<f64>()
                 .map_err(|_| format!("{key} needs a number, got `{value}`"))
         };
+        let flag = || {
+            value
+                .parse::<bool>()
+                .map_err(|_| format!("{key} is true or false, got `{value}`"))
+        };
         Ok(match key {
             "start-smoothing" => Experiment::StartSmoothing(count()?),
             "fb-segment" => Experiment::FbSegment(count()?),
-            "free-position" => Experiment::FreePosition(
-                value
-                    .parse::<bool>()
-                    .map_err(|_| format!("{key} is true or false, got `{value}`"))?,
-            ),
+            "free-position" => Experiment::FreePosition(flag()?),
+            "prequential" => Experiment::Prequential(flag()?),
             "excitation-max-hz" => Experiment::ExcitationMaxHz(number()?),
             "random-policies" => Experiment::RandomPolicies(count()?),
             "trust-region" => Experiment::TrustRegion(number()?),
@@ -250,10 +258,13 @@ impl Budget {
         let mut trust_region = d.search.trust_region;
         let mut optimizer = msgp_defaults.optimizer;
         let mut hold_margin = d.hold_margin;
+        let mut prequential_choice = d.prequential_choice;
         for e in &self.experimental {
             if matches!(
                 e,
-                Experiment::StartSmoothing(_) | Experiment::FitOptimizer(_)
+                Experiment::StartSmoothing(_)
+                    | Experiment::FitOptimizer(_)
+                    | Experiment::Prequential(true)
             ) && method != Method::Msgp
             {
                 return Err(invalid(
@@ -273,6 +284,7 @@ impl Budget {
                 Experiment::TrustRegion(r) => trust_region = r,
                 Experiment::FitOptimizer(o) => optimizer = o,
                 Experiment::HoldMargin(k) => hold_margin = k,
+                Experiment::Prequential(b) => prequential_choice = b,
             }
         }
         if !(trust_region.is_finite() && trust_region >= 0.0) {
@@ -348,6 +360,7 @@ impl Budget {
             excitation,
             cost_widths,
             hold_margin,
+            prequential_choice,
             seed,
             fit,
             warm_start: match self.warm_start {
@@ -457,7 +470,7 @@ mod tests {
             r#"{"fit-optimizer":"lbfgs"}"#
         );
         for (k, key) in EXPERIMENT_KEYS.iter().enumerate() {
-            let value = ["4", "4", "true", "5", "1", "0.5", "adam", "1"][k];
+            let value = ["4", "4", "true", "5", "1", "0.5", "adam", "1", "false"][k];
             let e = Experiment::parse(&format!("{key}={value}")).expect("parses");
             assert_eq!(e.key(), *key);
             let back: Experiment =

@@ -14,6 +14,7 @@
 //! applies when its gains say `saturation: sine`.
 
 mod budget;
+mod choice;
 mod episodes;
 mod problem;
 mod record;
@@ -21,6 +22,7 @@ mod report;
 mod settings;
 
 pub use budget::{Budget, EXPERIMENT_KEYS, Experiment};
+pub use choice::{HeldOut, ModelChoice, SearchModel};
 pub use episodes::{episode_trajectory, segments};
 use episodes::{expected_cost, feedback_episode, interact, msgp_segments};
 use problem::gains_from;
@@ -165,6 +167,10 @@ pub fn learn_policy_observed(
     let mut gains = initial_gains(&settings.gain_scale);
     let mut reports = Vec::new();
     let mut previous_model: Option<Model> = None;
+    let mut choice = match settings.prequential_choice {
+        true => Some(ModelChoice::new(settings)?),
+        false => None,
+    };
     for it in 1..=settings.iterations {
         let step = fit_and_search(
             params,
@@ -173,6 +179,7 @@ pub fn learn_policy_observed(
             previous_model.as_ref(),
             &gains,
             it,
+            choice.as_mut(),
             observe,
         )?;
         // a one-step fallback model is not continued: the next fit starts over
@@ -182,11 +189,17 @@ pub fn learn_policy_observed(
         let FitAndSearch {
             model,
             mut fit_report,
+            linear,
+            search_model,
             searched,
             fit_seconds,
             search_seconds,
         } = step;
-        let problem = pendulum_problem(&model, params, cost.clone(), policy_horizon);
+        let searched_on = match (search_model, &linear) {
+            (Some(SearchModel::Linear), Some(l)) => l,
+            _ => &model,
+        };
+        let problem = pendulum_problem(searched_on, params, cost.clone(), policy_horizon);
         let mut held = false;
         let (predicted, var, search_failure) = match searched {
             Ok(result) => {
@@ -231,6 +244,14 @@ pub fn learn_policy_observed(
             .wrapping_add(500 + it as u64);
         let (ep, entries) = feedback_episode(params, &gains, settings, seed, &mut seconds)?;
         let actual = episode_cost(&ep, &cost, window, scored);
+        // both models of this iteration predict the episode neither was trained on (a
+        // one-step fallback model is not the loop's model and is not scored)
+        let held_out = match (choice.as_mut(), &linear) {
+            (Some(c), Some(l)) if model.method == settings.method() => {
+                Some(c.score(&model, l, &entries)?)
+            }
+            _ => None,
+        };
         training.extend(entries);
         episodes.push(ep);
         let stable =
@@ -243,6 +264,8 @@ pub fn learn_policy_observed(
             actual_cost: actual,
             expected_cost: expected,
             held,
+            search_model,
+            held_out,
             interaction_seconds: seconds,
             stable,
             fit_seconds,
@@ -272,10 +295,14 @@ pub struct FitAndSearch {
     pub model: Model,
     /// The fit's report.
     pub fit_report: FitReport,
+    /// Under the prequential choice, the linear competitor fitted on the same data.
+    pub linear: Option<Model>,
+    /// Under the prequential choice, the model the search ran on.
+    pub search_model: Option<SearchModel>,
     /// The search's best gains, or why every start failed numerically (the model's rollouts
     /// diverge whatever the gains: it predicts failure).
     pub searched: Result<PolicySearchResult, msgp_core::MsgpError>,
-    /// Wall seconds of the fit.
+    /// Wall seconds of the fit (both fits under the prequential choice).
     pub fit_seconds: f64,
     /// Wall seconds of the search.
     pub search_seconds: f64,
@@ -295,6 +322,7 @@ pub fn fit_and_search(
     previous: Option<&Model>,
     gains: &PidPdGains,
     iteration: usize,
+    choice: Option<&mut ModelChoice>,
     observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
 ) -> Result<FitAndSearch, SimError> {
     let it = iteration;
@@ -349,9 +377,17 @@ pub fn fit_and_search(
         Err(msgp_core::MsgpError::Stopped { .. }) => return Err(stopped),
         Err(e) => return Err(e.into()),
     };
+    let (linear, search_model) = match choice {
+        Some(c) => (Some(c.fit(training, it)?), Some(c.search_model())),
+        None => (None, None),
+    };
     let fit_seconds = clock.elapsed().as_secs_f64();
     let (cost, policy_horizon) = search_objective(settings, params)?;
-    let problem = pendulum_problem(&model, params, cost, policy_horizon);
+    let searched_on = match (search_model, &linear) {
+        (Some(SearchModel::Linear), Some(l)) => l,
+        _ => &model,
+    };
+    let problem = pendulum_problem(searched_on, params, cost, policy_horizon);
     let search = PolicySearchSettings {
         seed: settings
             .search
@@ -385,6 +421,8 @@ pub fn fit_and_search(
     Ok(FitAndSearch {
         model,
         fit_report,
+        linear,
+        search_model,
         searched,
         fit_seconds,
         search_seconds,

@@ -2,6 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::choice::{HeldOut, SearchModel};
 use crate::controller::PidPdGains;
 use crate::episode::Episode;
 
@@ -29,6 +30,14 @@ pub struct IterationReport {
     /// gains ran again (and `predicted_cost` is theirs).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub held: bool,
+    /// Under the prequential choice ([`super::choice`]), the model this iteration's search
+    /// ran on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub search_model: Option<SearchModel>,
+    /// Under the prequential choice, both models' scores on the episode this iteration ran
+    /// (data neither was trained on).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out: Option<HeldOut>,
     /// Interaction time so far, random rollouts included \[s\].
     pub interaction_seconds: f64,
     /// Whether the gains passed the simulator's stability test.

@@ -74,6 +74,12 @@ pub struct LearnSettings {
     /// search's gains run.
     #[serde(default)]
     pub hold_margin: f64,
+    /// The prequential choice of the MSGP loop ([`super::choice`]): every iteration also fits
+    /// the linear model of the data (linear-kf), scores both on the episode that follows, and
+    /// runs the search on the GP model only while its predictions of episodes it had not seen
+    /// beat the linear model's in total. `false`: always the GP model.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub prequential_choice: bool,
     /// Feed-forward (random-excitation) episodes enter the model loss as overlapping segments
     /// of this many samples (stride half of it); `None` keeps them whole. MSGP only. The pendulum is
     /// open-loop unstable: a free-running prediction from an episode's first samples carries no
@@ -145,6 +151,7 @@ impl Default for LearnSettings {
             cost_widths: [0.1, 0.3],
             evaluation_episodes: EVALUATION_EPISODES,
             hold_margin: 0.0,
+            prequential_choice: false,
             ff_segment: Some(30),
             fb_segment: None,
             gain_scale: [1.0, 0.3, 1.0, 10.0, 2.0],
@@ -215,7 +222,9 @@ impl LearnSettings {
     /// uncentred units) with a GP of [`LEARN_INDUCING`] pseudo-inputs that starts at zero.
     /// Everything the linear-kf loop needs it gets too: the end effector kinematic, noise
     /// floors far below the sensor's ([`FILTER_NOISE_FLOOR`]), whole episodes (the filter
-    /// restarts nothing), a 10 s policy horizon and warm starts.
+    /// restarts nothing), a 10 s policy horizon and warm starts. Its searches run on the GP
+    /// model only while the GP predicts the episodes it had not seen better than the linear
+    /// model of the same data ([`LearnSettings::prequential_choice`]).
     pub fn filtered_msgp() -> Self {
         let mut s = Self::for_method(Method::LinearKf);
         let mut fit = Self::default().fit;
@@ -237,6 +246,7 @@ impl LearnSettings {
         s.ff_segment = None;
         s.warm_start = Some(FILTERED_MSGP_ITERATIONS);
         s.search.iterations = FILTERED_MSGP_SEARCH_ITERATIONS;
+        s.prequential_choice = true;
         s
     }
 

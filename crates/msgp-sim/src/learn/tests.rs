@@ -10,6 +10,8 @@ fn report(iteration: usize, actual_cost: f64, stable: bool) -> IterationReport {
         actual_cost,
         expected_cost: None,
         held: false,
+        search_model: None,
+        held_out: None,
         interaction_seconds: 12.0 + 3.0 * iteration as f64,
         stable,
         fit_seconds: 1.0,

@@ -1,0 +1,169 @@
+//! The prequential choice between the GP model and the linear model of the same data.
+//!
+//! Every iteration fits, beside the filtered MSGP model (a linear prior mean under a GP), the
+//! linear-Gaussian window model alone (linear-kf: the same window, the same filter likelihood,
+//! no GP). The episode the iteration then runs is data neither model was trained on, so both
+//! predict it honestly: each model's filter likelihood of it (the joint density of its
+//! outputs given its inputs, [`msgp_core::model::Model::filter_nll`], in original units) is
+//! the model's score on that episode. Summed over the episodes so far this is Dawid's
+//! *prequential* comparison: the GP model earns the policy search only while its predictions of
+//! episodes it had not seen are, in total, better than the linear model's. Until then (and at the
+//! first iteration, with nothing yet predicted) the search runs on the linear model: a GP must
+//! pay for its freedom in predictions, because a model that explains noise by structure ranks
+//! nearby gains wrongly (`docs/design.md`). Nothing is fitted twice: the linear model is the
+//! competitor, warm-started from its own previous fit, and costs a fraction of the GP's fit.
+
+use std::ops::ControlFlow;
+
+use msgp_core::fit::{FitSettings, TrainingEpisode, fit_episodes_observed};
+use msgp_core::model::{Method, Model};
+use serde::{Deserialize, Serialize};
+
+use super::settings::LearnSettings;
+use crate::error::SimError;
+
+/// Which model a search ran on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SearchModel {
+    /// The loop's own model (the GP model).
+    Gp,
+    /// The linear competitor of the prequential choice.
+    Linear,
+}
+
+/// One held-out episode's scores: each model's filter likelihood of the episode it had not
+/// seen (original units, summed over its scored steps).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HeldOut {
+    /// The GP model's negative log-likelihood of the episode.
+    pub gp_nll: f64,
+    /// The linear model's.
+    pub linear_nll: f64,
+    /// Scored steps.
+    pub steps: usize,
+}
+
+/// What a model that cannot predict a held-out episode (its filter fails numerically) loses
+/// it by.
+const LOST: f64 = 1e9;
+
+/// A model's filter likelihood of one held-out entry; infinite when its filter fails
+/// numerically on it (the model predicts the episode impossible).
+fn held_out_nll(model: &Model, e: &TrainingEpisode) -> Result<(f64, usize), SimError> {
+    match model.filter_nll(&e.traj) {
+        Ok(v) => Ok(v),
+        Err(
+            msgp_core::MsgpError::NonFinite(_) | msgp_core::MsgpError::NotPositiveDefinite { .. },
+        ) => Ok((f64::INFINITY, 0)),
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// The running prequential comparison and the linear competitor's state.
+#[derive(Clone, Debug)]
+pub struct ModelChoice {
+    /// The linear model's fit settings (the linear-kf loop's, on the GP model's history).
+    settings: FitSettings,
+    /// Solver iterations of a continued linear fit.
+    warm_start: Option<usize>,
+    /// The linear model of the last iteration.
+    previous: Option<Model>,
+    /// `Σ (GP NLL − linear NLL)` over the held-out episodes so far: negative favours the GP.
+    advantage: f64,
+    /// Held-out episodes scored so far.
+    scored: usize,
+}
+
+impl ModelChoice {
+    /// The choice for the loop of `settings` (an MSGP loop: the competitor takes the
+    /// linear-kf loop's defaults on the same history, outputs and threads).
+    pub fn new(settings: &LearnSettings) -> Result<Self, SimError> {
+        if settings.method() != Method::Msgp {
+            return Err(SimError::invalid(
+                "prequential_choice",
+                1.0,
+                "the choice between a GP model and its linear part needs an MSGP loop",
+            ));
+        }
+        let linear = LearnSettings::for_model(Method::LinearKf, None);
+        let fit = FitSettings {
+            seed: settings.seed,
+            ly: settings.fit.ly,
+            lu: settings.fit.lu,
+            threads: settings.fit.threads,
+            ..linear.fit
+        };
+        Ok(Self {
+            settings: fit,
+            warm_start: linear.warm_start,
+            previous: None,
+            advantage: 0.0,
+            scored: 0,
+        })
+    }
+
+    /// Fits the linear model of `training` for iteration `it` (seeded by the loop's seed and
+    /// the iteration, as the GP model's fit), continuing the previous one when the linear-kf loop would.
+    pub fn fit(&mut self, training: &[TrainingEpisode], it: usize) -> Result<Model, SimError> {
+        let seeded = FitSettings {
+            seed: self.settings.seed.wrapping_add(it as u64),
+            ..self.settings.clone()
+        };
+        let warm = self.warm_start.zip(self.previous.as_ref());
+        let settings = match warm {
+            Some((n, _)) => seeded.with_solver_iterations(n),
+            None => seeded,
+        };
+        let (model, _) =
+            fit_episodes_observed(training, &settings, warm.map(|(_, m)| m), &mut |_| {
+                ControlFlow::Continue(())
+            })?;
+        self.previous = Some(model.clone());
+        Ok(model)
+    }
+
+    /// The model the next search runs on: the GP model once its held-out predictions beat
+    /// the linear model's in total, the linear model before.
+    pub fn search_model(&self) -> SearchModel {
+        if self.scored > 0 && self.advantage < 0.0 {
+            SearchModel::Gp
+        } else {
+            SearchModel::Linear
+        }
+    }
+
+    /// Scores both models of an iteration on the episode that iteration ran (`newest`: its
+    /// training entries, which neither model saw) and adds the difference to the comparison.
+    pub fn score(
+        &mut self,
+        gp: &Model,
+        linear: &Model,
+        newest: &[TrainingEpisode],
+    ) -> Result<HeldOut, SimError> {
+        let (mut g, mut l, mut steps) = (0.0, 0.0, 0);
+        for e in newest {
+            let (gn, n) = held_out_nll(gp, e)?;
+            let (ln, _) = held_out_nll(linear, e)?;
+            g += gn;
+            l += ln;
+            steps += n;
+        }
+        let held = HeldOut {
+            gp_nll: g,
+            linear_nll: l,
+            steps,
+        };
+        // a model that cannot predict the episode loses it by more than any finite score
+        // (an episode's NLL is a few hundred nats); both failing decides nothing
+        let diff = match (g.is_finite(), l.is_finite()) {
+            (true, true) => g - l,
+            (false, true) => LOST,
+            (true, false) => -LOST,
+            (false, false) => 0.0,
+        };
+        self.advantage += diff;
+        self.scored += 1;
+        Ok(held)
+    }
+}
