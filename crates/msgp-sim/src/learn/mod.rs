@@ -8,6 +8,8 @@
 //! the simulator for one episode → repeat. After every iteration the simulator's stability test
 //! judges the gains; it is neither interaction time nor training data. Optionally, from the
 //! second iteration on, an MSGP fit continues the previous model ([`LearnSettings::warm_start`]).
+//! In the filtered MSGP loop the search runs on the GP model only while it predicts the episodes
+//! it had not seen better than the linear model of the same data ([`choice`]).
 //!
 //! Outputs are `[θ, x]` (measured), the input is the commanded acceleration; the modelled policy
 //! is [`msgp_core::policy::PidPolicy`] with the sine saturation that the simulator's policy
@@ -195,11 +197,12 @@ pub fn learn_policy_observed(
             fit_seconds,
             search_seconds,
         } = step;
-        let searched_on = match (search_model, &linear) {
-            (Some(SearchModel::Linear), Some(l)) => l,
-            _ => &model,
-        };
-        let problem = pendulum_problem(searched_on, params, cost.clone(), policy_horizon);
+        let problem = pendulum_problem(
+            searched_on(&model, linear.as_ref(), search_model),
+            params,
+            cost.clone(),
+            policy_horizon,
+        );
         let mut held = false;
         let (predicted, var, search_failure) = match searched {
             Ok(result) => {
@@ -383,11 +386,12 @@ pub fn fit_and_search(
     };
     let fit_seconds = clock.elapsed().as_secs_f64();
     let (cost, policy_horizon) = search_objective(settings, params)?;
-    let searched_on = match (search_model, &linear) {
-        (Some(SearchModel::Linear), Some(l)) => l,
-        _ => &model,
-    };
-    let problem = pendulum_problem(searched_on, params, cost, policy_horizon);
+    let problem = pendulum_problem(
+        searched_on(&model, linear.as_ref(), search_model),
+        params,
+        cost,
+        policy_horizon,
+    );
     let search = PolicySearchSettings {
         seed: settings
             .search
@@ -427,6 +431,19 @@ pub fn fit_and_search(
         fit_seconds,
         search_seconds,
     })
+}
+
+/// The model a search runs on: the linear competitor when the prequential choice says so, else
+/// the loop's own model.
+fn searched_on<'a>(
+    model: &'a Model,
+    linear: Option<&'a Model>,
+    choice: Option<SearchModel>,
+) -> &'a Model {
+    match (choice, linear) {
+        (Some(SearchModel::Linear), Some(l)) => l,
+        _ => model,
+    }
 }
 
 /// The cost the gains are optimised and scored on, and the policy horizon in control steps
