@@ -413,7 +413,7 @@ fn render(
         provenance.machine,
         provenance.date
     );
-    s.push_str("## Summary\n\n| model | stable within the budget | iterations to first stable policy (per seed) | interaction s to stable (median) | kept: later iterations stable | calibrated: iterations ≥ 3 with the predicted cost within 2× of the expected (mean of the evaluation episodes) | … within 2× of the one episode run | fit + search s per iteration (median) | searches on the GP model (prequential choice) |\n|---|---:|---|---:|---:|---:|---:|---:|---:|\n");
+    s.push_str("## Summary\n\n| model | stable within the budget | iterations to first stable policy (per seed) | interaction s to stable (median) | kept: later iterations stable | calibrated: iterations ≥ 3 with the predicted cost within 2× of the expected (mean of the evaluation episodes) | … within 2× of the one episode run | searches on the GP model (prequential choice) | fit + search s per iteration (median) |\n|---|---:|---|---:|---:|---:|---:|---:|---:|\n");
     for &m in &plan.models {
         let mine: Vec<&Run> = runs.iter().filter(|r| r.unit.model == m).collect();
         let firsts: Vec<Option<&IterationReport>> = mine.iter().map(|r| r.first_stable()).collect();
@@ -481,10 +481,10 @@ fn render(
             fraction(kept, later),
             fraction(calibrated, scored),
             fraction(single, episodes),
+            fraction(on_gp, chosen),
             per_iteration
                 .get(per_iteration.len() / 2)
-                .map_or_else(|| "—".to_string(), |t| format!("{t:.1}")),
-            fraction(on_gp, chosen)
+                .map_or_else(|| "—".to_string(), |t| format!("{t:.1}"))
         );
     }
     s.push_str("\n## Runs\n\n| model | seed | first stable iteration | interaction s to stable | stable iterations | lowest actual cost | last actual cost | wall s |\n|---|---:|---:|---:|---|---:|---:|---:|\n");
