@@ -43,20 +43,47 @@ fn normal(rng: &mut StdRng) -> f64 {
     StandardNormal.sample(rng)
 }
 
+/// `n` samples of a smooth random input: `count` sines of amplitude `amplitude` at the
+/// frequencies `step, 2 step, …` (rad per sample), random phases.
+fn random_sines(rng: &mut StdRng, n: usize, count: usize, amplitude: f64, step: f64) -> Vec<f64> {
+    let phase: Vec<f64> = (0..count).map(|_| 3.0 * normal(rng)).collect();
+    (0..n)
+        .map(|t| {
+            (0..count)
+                .map(|k| amplitude * (step * (k as f64 + 1.0) * t as f64 + phase[k]).sin())
+                .sum::<f64>()
+        })
+        .collect()
+}
+
+/// The filtered MSGP fit of the pendulum loop (filter likelihood, L-BFGS, from the linear-kf
+/// start under a GP of `inducing` pseudo-inputs) on `base`'s history.
+fn filter_fit(base: &FitSettings, inducing: usize) -> FitSettings {
+    FitSettings {
+        method: MsgpSettings {
+            inducing,
+            iterations: 100,
+            optimizer: FitOptimizer::Lbfgs,
+            likelihood: Likelihood::Filter,
+            validation_fraction: 0.0,
+            noise_floor: 1e-9,
+            mean: MeanFunction::Linear,
+            start: MsgpStart::LinearKf,
+            alternative: None,
+            ..MsgpSettings::default()
+        }
+        .into(),
+        ..base.clone()
+    }
+}
+
 /// Open-loop episodes under smooth random inputs (sums of six sines, random phases).
 fn episodes(seed: u64, count: usize) -> Vec<Trajectory> {
     let mut rng = StdRng::seed_from_u64(seed);
     (0..count)
         .map(|_| {
             let n = 150;
-            let phase: Vec<f64> = (0..6).map(|_| 3.0 * normal(&mut rng)).collect();
-            let u: Vec<f64> = (0..n)
-                .map(|t| {
-                    (0..6)
-                        .map(|k| 0.5 * (0.05 * (k as f64 + 1.0) * t as f64 + phase[k]).sin())
-                        .sum::<f64>()
-                })
-                .collect();
+            let u = random_sines(&mut rng, n, 6, 0.5, 0.05);
             let mut th = vec![START_STD * normal(&mut rng); n];
             let mut len = n;
             for t in 1..n - 1 {
@@ -156,22 +183,7 @@ fn the_filter_likelihood_predicts_feedback_gains_as_the_plant_has_them() {
         .into(),
         ..base.clone()
     };
-    let filter = FitSettings {
-        method: MsgpSettings {
-            inducing: 30,
-            iterations: 100,
-            optimizer: FitOptimizer::Lbfgs,
-            likelihood: Likelihood::Filter,
-            validation_fraction: 0.0,
-            noise_floor: 1e-9,
-            mean: MeanFunction::Linear,
-            start: MsgpStart::LinearKf,
-            alternative: None,
-            ..MsgpSettings::default()
-        }
-        .into(),
-        ..base
-    };
+    let filter = filter_fit(&base, 30);
     let (free_model, _) = fit(&data, &free_run, &mut |_| {}).expect("free-run fit");
     let (filter_model, _) = fit(&data, &filter, &mut |_| {}).expect("filter fit");
     // weakly damped, well damped, barely stabilising
@@ -209,14 +221,7 @@ fn held_out_filter_likelihood_prefers_the_gp_only_where_the_plant_is_nonlinear()
         (0..count)
             .map(|_| {
                 let n = 120;
-                let phase: Vec<f64> = (0..4).map(|_| 3.0 * normal(&mut rng)).collect();
-                let u: Vec<f64> = (0..n)
-                    .map(|t| {
-                        (0..4)
-                            .map(|k| 0.6 * (0.07 * (k as f64 + 1.0) * t as f64 + phase[k]).sin())
-                            .sum::<f64>()
-                    })
-                    .collect();
+                let u = random_sines(&mut rng, n, 4, 0.6, 0.07);
                 let mut x = vec![0.0; n];
                 for t in 0..n - 1 {
                     let drive = if nonlinear {
@@ -236,22 +241,7 @@ fn held_out_filter_likelihood_prefers_the_gp_only_where_the_plant_is_nonlinear()
         lu: 1,
         ..FitSettings::default()
     };
-    let gp_settings = FitSettings {
-        method: MsgpSettings {
-            inducing: 20,
-            iterations: 100,
-            optimizer: FitOptimizer::Lbfgs,
-            likelihood: Likelihood::Filter,
-            validation_fraction: 0.0,
-            noise_floor: 1e-9,
-            mean: MeanFunction::Linear,
-            start: MsgpStart::LinearKf,
-            alternative: None,
-            ..MsgpSettings::default()
-        }
-        .into(),
-        ..base.clone()
-    };
+    let gp_settings = filter_fit(&base, 20);
     let linear_settings = FitSettings {
         method: LinearKfSettings { iterations: 300 }.into(),
         ..base

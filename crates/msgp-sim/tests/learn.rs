@@ -36,6 +36,25 @@ fn small(iterations: usize) -> LearnSettings {
     }
 }
 
+/// `iterations` of the filtered MSGP loop's defaults, small: two 1 s random rollouts, m = 10,
+/// 5 fit iterations, 3 Adam steps from one start after 4 candidates.
+fn small_filtered(iterations: usize) -> LearnSettings {
+    let f = LearnSettings::filtered_msgp();
+    LearnSettings {
+        iterations,
+        random_rollouts: 2,
+        episode_seconds: 1.0,
+        fit: f.fit.clone().with_inducing(10).with_solver_iterations(5),
+        search: PolicySearchSettings {
+            iterations: 3,
+            restarts: 0,
+            candidates: 4,
+            ..f.search
+        },
+        ..f
+    }
+}
+
 #[test]
 fn one_small_iteration_runs_and_is_reproducible() {
     let settings = small(1);
@@ -304,19 +323,7 @@ fn filtered_msgp_defaults_start_from_the_kalman_fit_and_run() {
     assert_eq!(f.search.iterations, FILTERED_MSGP_SEARCH_ITERATIONS);
     let free = LearnSettings::for_model(Method::Msgp, Some(Likelihood::FreeRun));
     assert_eq!(free, LearnSettings::for_method(Method::Msgp));
-    let settings = LearnSettings {
-        iterations: 2,
-        random_rollouts: 2,
-        episode_seconds: 1.0,
-        fit: f.fit.clone().with_inducing(10).with_solver_iterations(5),
-        search: PolicySearchSettings {
-            iterations: 3,
-            restarts: 0,
-            candidates: 4,
-            ..f.search
-        },
-        ..f
-    };
+    let settings = small_filtered(2);
     let params = PendulumParams::tier(PlantTier::Noisy);
     let a = learn_policy(&params, &settings, &mut |_| {}).expect("loop runs");
     let b = learn_policy(&params, &settings, &mut |_| {}).expect("loop runs");
@@ -457,21 +464,13 @@ fn the_prequential_choice_searches_on_the_model_that_predicted_unseen_episodes_b
     use msgp_core::fit::{TrainingEpisode, fit_episodes};
     use msgp_core::model::Method;
     use msgp_sim::learn::{ModelChoice, SearchModel, episode_trajectory};
-    let f = LearnSettings::filtered_msgp();
-    assert!(f.prequential_choice, "the filtered loop's default");
+    assert!(
+        LearnSettings::filtered_msgp().prequential_choice,
+        "the filtered loop's default"
+    );
     let settings = LearnSettings {
-        iterations: 3,
-        random_rollouts: 2,
-        episode_seconds: 1.0,
-        fit: f.fit.clone().with_inducing(10).with_solver_iterations(5),
-        search: PolicySearchSettings {
-            iterations: 3,
-            restarts: 0,
-            candidates: 4,
-            ..f.search
-        },
         evaluation_episodes: 0,
-        ..f
+        ..small_filtered(3)
     };
     let params = PendulumParams::tier(PlantTier::Noisy);
     let a = learn_policy(&params, &settings, &mut |_| {}).expect("loop runs");
