@@ -133,6 +133,7 @@ fn a_model_fitted_on_a_simulator_log_predicts_another_excitation() {
         integrators: Vec::new(),
         optimizer: FitOptimizer::Adam,
         likelihood: Default::default(),
+        start: Default::default(),
         threads: Threads::available(),
     }
     .settings(&train)

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use msgp_core::data::table::TimeSource;
-use msgp_core::fit::FitOptimizer;
+use msgp_core::fit::{FitOptimizer, MsgpStart};
 use msgp_core::gp::MeanFunction;
 use msgp_core::gp::integrator::Integrator;
 use msgp_core::loss::Likelihood;
@@ -149,6 +149,24 @@ impl From<OptimizerArg> for FitOptimizer {
     }
 }
 
+/// Where an MSGP fit starts, on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum StartArg {
+    /// The one-step sparse GP-NARX fit.
+    OneStep,
+    /// The linear-kf model under a GP that starts at zero.
+    LinearKf,
+}
+
+impl From<StartArg> for MsgpStart {
+    fn from(s: StartArg) -> Self {
+        match s {
+            StartArg::OneStep => MsgpStart::OneStep,
+            StartArg::LinearKf => MsgpStart::LinearKf,
+        }
+    }
+}
+
 /// The MSGP fit's likelihood on the command line.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum LikelihoodArg {
@@ -244,6 +262,12 @@ pub struct FitArgs {
     /// filter) [default: free-run].
     #[arg(long, value_enum)]
     pub likelihood: Option<LikelihoodArg>,
+    /// Where the MSGP training starts: one-step (the sparse GP-NARX fit, the paper's) or
+    /// linear-kf (the linear-Gaussian window model by the Kalman-filter likelihood under a GP
+    /// that starts at zero, as the filtered policy-learning loop fits; implies `--mean linear`)
+    /// [default: one-step].
+    #[arg(long, value_enum)]
+    pub start: Option<StartArg>,
     /// Prior mean of the GP [default: msgp trains a zero-mean and a linear-mean recipe and
     /// keeps the one with the lower validation NLL; the baselines: zero].
     #[arg(long, value_enum)]

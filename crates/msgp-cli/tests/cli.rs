@@ -1025,6 +1025,70 @@ fn the_msgp_likelihood_is_an_option_of_fit() {
     );
 }
 
+/// `--start linear-kf` starts MSGP from the linear-kf model of the data (as the filtered
+/// policy-learning loop does): the model file records the start and the linear mean it implies,
+/// and the model differs from the one-step start's; a zero mean and another method are refused.
+#[test]
+fn the_msgp_start_is_an_option_of_fit() {
+    let dir = Scratch::new("start");
+    dir.write("s.csv", &system_csv(120, None));
+    let model = |extra: &[&str], out: &str| -> Value {
+        let mut a = vec![
+            "fit",
+            "--data",
+            "s.csv",
+            "--likelihood",
+            "filter",
+            "--out",
+            out,
+        ];
+        a.extend_from_slice(extra);
+        ok(&dir, &args(&a, &FAST));
+        let text = std::fs::read_to_string(dir.path(out)).expect("model file written");
+        serde_json::from_str(&text).expect("model file")
+    };
+    let kalman = model(&["--start", "linear-kf"], "k.json");
+    let one_step = model(&["--mean", "linear"], "o.json");
+    let settings = &kalman["training"]["settings"];
+    assert_eq!(settings["start"], "linear-kf");
+    assert_eq!(settings["mean"], "linear");
+    assert_eq!(settings["alternative"], Value::Null);
+    assert_eq!(one_step["training"]["settings"]["start"], "one-step");
+    assert_ne!(kalman["gp"], one_step["gp"]);
+    fails(
+        &dir,
+        &args(
+            &[
+                "fit",
+                "--data",
+                "s.csv",
+                "--start",
+                "linear-kf",
+                "--mean",
+                "zero",
+            ],
+            &FAST,
+        ),
+        &["linear-kf start", "mean: linear"],
+    );
+    fails(
+        &dir,
+        &args(
+            &[
+                "fit",
+                "--data",
+                "s.csv",
+                "--method",
+                "gp-narx",
+                "--start",
+                "linear-kf",
+            ],
+            &FAST,
+        ),
+        &["--start", "gp-narx"],
+    );
+}
+
 /// `--plant` picks the measurement-noise tier: the Apollo LQR gains, at the edge on the noisy
 /// tier (their derivative term turns 5 mrad of angle noise into command noise), pass the
 /// stability test on the Apollo tier; individual flags and a params file override the tier.

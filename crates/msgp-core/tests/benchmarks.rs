@@ -202,6 +202,7 @@ fn a_linear_mean_on_drives_does_not_diverge() {
         integrators: Vec::new(),
         optimizer: FitOptimizer::Adam,
         likelihood: Default::default(),
+        start: Default::default(),
         threads: Default::default(),
     }
     .settings(std::slice::from_ref(&bench.train))

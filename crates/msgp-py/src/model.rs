@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use msgp_core::data::Trajectory;
-use msgp_core::fit::{FitOptimizer, FitOptions, FitReport, FitSettings, fit_observed};
+use msgp_core::fit::{FitOptimizer, FitOptions, FitReport, FitSettings, MsgpStart, fit_observed};
 use msgp_core::loss::Likelihood;
 use msgp_core::model::{Method, Metrics, Model, Rollout, pool, score};
 use msgp_core::model_file::{FitRecord, ModelFile};
@@ -20,7 +20,7 @@ use crate::convert::{array1, array2, matrix, to_python, trajectories, with_overr
 use crate::error::{Error, Result, callable, detached, input, with_python};
 
 /// Settings that the constructor's own arguments set.
-const OWN_SETTINGS: [(&str, &str); 7] = [
+const OWN_SETTINGS: [(&str, &str); 8] = [
     ("method", "method"),
     ("ly", "history"),
     ("lu", "history"),
@@ -28,6 +28,7 @@ const OWN_SETTINGS: [(&str, &str); 7] = [
     ("iterations", "iterations"),
     ("seed", "seed"),
     ("likelihood", "likelihood"),
+    ("start", "start"),
 ];
 
 /// A non-negative integer argument.
@@ -79,6 +80,27 @@ pub fn likelihood(m: Method, name: Option<&str>) -> Result<Option<Likelihood>> {
                 "unknown likelihood {name:?}: expected \"free-run\" or \"filter\""
             ))
         })
+}
+
+/// Where an MSGP fit starts, by name (`one-step`, `linear-kf`); `None`: the default. Other
+/// methods have their own fits and refuse one.
+fn start(m: Method, name: Option<&str>) -> Result<MsgpStart> {
+    let Some(name) = name else {
+        return Ok(MsgpStart::default());
+    };
+    if m != Method::Msgp {
+        return Err(input(format!(
+            "start={name:?}: where an MSGP fit starts; method {:?} has its own fit",
+            m.name()
+        )));
+    }
+    match name {
+        "one-step" => Ok(MsgpStart::OneStep),
+        "linear-kf" => Ok(MsgpStart::LinearKf),
+        _ => Err(input(format!(
+            "unknown start {name:?}: expected \"one-step\" or \"linear-kf\""
+        ))),
+    }
 }
 
 /// A rollout by name (`mm`, `mean`).
@@ -178,6 +200,12 @@ impl Msgp {
                     .training
                     .settings
                     .get("likelihood")
+                    .and_then(|v| serde_json::from_value(v.clone()).ok())
+                    .unwrap_or_default(),
+                start: file
+                    .training
+                    .settings
+                    .get("start")
                     .and_then(|v| serde_json::from_value(v.clone()).ok())
                     .unwrap_or_default(),
                 threads: Threads::default(),
@@ -317,8 +345,8 @@ fn metrics_dict<'py>(py: Python<'py>, m: &Metrics) -> PyResult<Bound<'py, PyDict
 impl Msgp {
     #[new]
     #[pyo3(
-        signature = (history = None, inducing = None, method = "msgp", seed = 0, iterations = None, settings = None, likelihood = None),
-        text_signature = "(history=(2, 2), inducing=None, method='msgp', seed=0, iterations=None, settings=None, likelihood=None)"
+        signature = (history = None, inducing = None, method = "msgp", seed = 0, iterations = None, settings = None, likelihood = None, start = None),
+        text_signature = "(history=(2, 2), inducing=None, method='msgp', seed=0, iterations=None, settings=None, likelihood=None, start=None)"
     )]
     fn new(
         history: Option<&Bound<'_, PyAny>>,
@@ -328,9 +356,11 @@ impl Msgp {
         iterations: Option<i128>,
         settings: Option<&Bound<'_, PyAny>>,
         likelihood: Option<&str>,
+        start: Option<&str>,
     ) -> PyResult<Self> {
         let m = crate::model::method(method)?;
         let likelihood = crate::model::likelihood(m, likelihood)?.unwrap_or_default();
+        let start = crate::model::start(m, start)?;
         let (ly, lu) = match history.filter(|h| !h.is_none()) {
             None => (2, 2),
             Some(h) => {
@@ -369,6 +399,7 @@ impl Msgp {
             integrators: Vec::new(),
             optimizer: FitOptimizer::Adam,
             likelihood,
+            start,
             threads: Threads::default(),
         };
         let overrides = match settings.filter(|s| !s.is_none()) {
@@ -802,6 +833,9 @@ impl Msgp {
                 &format!(", likelihood='{}'", o.likelihood.name()),
             );
         }
+        if o.method == Method::Msgp && o.start == MsgpStart::LinearKf {
+            s.insert_str(s.len() - 1, ", start='linear-kf'");
+        }
         if let Some(f) = &self.fitted {
             let t = &f.file.training;
             s.push_str(&format!(
@@ -836,7 +870,12 @@ impl Msgp {
                     Some(v) => crate::convert::from_json(py, v)?,
                     None => py.None().into_bound(py),
                 };
-                let likelihood = (o.method == Method::Msgp).then(|| o.likelihood.name());
+                let msgp = o.method == Method::Msgp;
+                let likelihood = msgp.then(|| o.likelihood.name());
+                let start = msgp.then_some(match o.start {
+                    MsgpStart::OneStep => "one-step",
+                    MsgpStart::LinearKf => "linear-kf",
+                });
                 let args = (
                     (o.ly, o.lu),
                     o.inducing,
@@ -845,6 +884,7 @@ impl Msgp {
                     o.iterations,
                     settings,
                     likelihood,
+                    start,
                 )
                     .into_pyobject(py)?;
                 PyTuple::new(py, [cls.into_any(), args.into_any()])

@@ -214,6 +214,28 @@ def test_the_msgp_likelihood_is_an_argument():
         msgp.Msgp(likelihood="kalman")
 
 
+def test_the_msgp_start_is_an_argument():
+    """`Msgp(start="linear-kf")` starts MSGP from the linear-kf model (recorded in the model
+    file with the linear mean it implies, kept by pickling an unfitted model), as `msgp fit
+    --start linear-kf`; another method and an unknown start are refused by name."""
+    import json
+    import pickle
+    d = msgp.synthetic_system(4, seed=0)
+    u, y = d["u_train"][:120], d["y_train"][:120]
+    m = msgp.Msgp(history=(2, 1), inducing=8, iterations=5, likelihood="filter", start="linear-kf")
+    assert "start='linear-kf'" in repr(m)
+    assert "start='linear-kf'" in repr(pickle.loads(pickle.dumps(m)))
+    m.fit(u, y)
+    settings = json.loads(m.to_json())["training"]["settings"]
+    assert (settings["start"], settings["mean"], settings["alternative"]) == ("linear-kf", "linear", None)
+    with pytest.raises(ValueError, match='start="linear-kf": where an MSGP fit starts; method "gp-narx"'):
+        msgp.Msgp(method="gp-narx", start="linear-kf")
+    with pytest.raises(ValueError, match='unknown start "kalman"'):
+        msgp.Msgp(start="kalman")
+    with pytest.raises(ValueError, match=r'settings\["start"\]: set it with the Msgp\(start=...\) argument'):
+        msgp.Msgp(settings={"start": "linear-kf"})
+
+
 def test_warnings_about_the_data_do_not_stop_a_fit(tmp_path):
     """Too few training windows for the pseudo-inputs and an irregular time step are warnings
     that say what was done, in Python and on the command line (stderr and --json)."""

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use msgp_core::data::Trajectory;
-use msgp_core::fit::{FitOptimizer, FitOptions, FitProgress, fit};
+use msgp_core::fit::{FitOptimizer, FitOptions, FitProgress, MsgpStart, fit};
 use msgp_core::loss::Likelihood;
 use msgp_core::model::Method;
 use msgp_core::model_file::{FitRecord, ModelFile};
@@ -63,6 +63,12 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             method.name()
         );
     }
+    if let (Some(_), false) = (args.start, method == Method::Msgp) {
+        bail!(
+            "--start: where an MSGP fit starts; --method {} has its own fit",
+            method.name()
+        );
+    }
     let trajs: Vec<Trajectory> = train.iter().map(|p| p.traj.clone()).collect();
     // the same settings as the Python `msgp.Msgp` for the same options
     let options = FitOptions {
@@ -76,6 +82,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         integrators: args.integrating.clone(),
         optimizer: args.optimizer.into(),
         likelihood: args.likelihood.map_or(Likelihood::default(), Into::into),
+        start: args.start.map_or(MsgpStart::default(), Into::into),
         threads: Threads::from_env()?,
     };
     let settings = options.settings(&trajs)?;

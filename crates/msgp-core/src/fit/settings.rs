@@ -545,6 +545,9 @@ pub struct FitOptions {
     pub optimizer: FitOptimizer,
     /// The MSGP fit's likelihood.
     pub likelihood: Likelihood,
+    /// Where the MSGP training starts ([`MsgpStart`]); the linear-kf start is a linear prior
+    /// mean, so it trains the linear recipe alone (a zero `mean` is refused).
+    pub start: MsgpStart,
     /// Threads of the fit ([`FitSettings::threads`]); front ends take it from
     /// [`Threads::from_env`].
     pub threads: Threads,
@@ -614,8 +617,12 @@ impl FitOptions {
             mean,
             ..OneStepFitSettings::default()
         };
-        // a mean the user chose is not second-guessed: its recipe trains alone
+        // a mean the user chose is not second-guessed: its recipe trains alone; the linear-kf
+        // start is a linear mean (a zero one is refused by `validate`)
         let defaults = match self.mean {
+            None if self.start == MsgpStart::LinearKf => {
+                MsgpSettings::default().with_recipe(LINEAR_RECIPE)
+            }
             None => MsgpSettings::default(),
             Some(MeanFunction::Linear) => MsgpSettings::default().with_recipe(LINEAR_RECIPE),
             Some(MeanFunction::Zero) => MsgpSettings {
@@ -628,6 +635,7 @@ impl FitOptions {
                 inducing,
                 optimizer: self.optimizer,
                 likelihood: self.likelihood,
+                start: self.start,
                 ..defaults
             }),
             Method::GpNarx => MethodSettings::GpNarx(one_step),

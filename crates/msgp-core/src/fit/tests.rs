@@ -26,6 +26,7 @@ fn options(method: Method, inducing: Option<usize>, iterations: Option<usize>) -
         integrators: Vec::new(),
         optimizer: FitOptimizer::Adam,
         likelihood: Likelihood::FreeRun,
+        start: MsgpStart::OneStep,
         threads: Threads::default(),
     }
 }
@@ -813,6 +814,30 @@ fn the_protocol_keeps_the_recipe_with_the_better_validation_nll() {
     .expect("settings");
     let linear = linear.msgp().expect("msgp");
     assert_eq!((linear.recipe(), linear.alternative), (LINEAR_RECIPE, None));
+    // the linear-kf start: the linear recipe alone, without being asked for the mean; a zero
+    // mean is refused by name
+    let from_kalman = FitOptions {
+        ly: 2,
+        lu: 1,
+        mean: None,
+        start: MsgpStart::LinearKf,
+        ..options(Method::Msgp, Some(12), Some(10))
+    };
+    let s = from_kalman
+        .settings(std::slice::from_ref(&traj))
+        .expect("settings");
+    let s = s.msgp().expect("msgp");
+    assert_eq!(
+        (s.recipe(), s.alternative, s.start),
+        (LINEAR_RECIPE, None, MsgpStart::LinearKf)
+    );
+    let zero = FitOptions {
+        mean: Some(MeanFunction::Zero),
+        ..from_kalman
+    }
+    .settings(std::slice::from_ref(&traj))
+    .expect_err("a zero mean");
+    assert!(zero.to_string().contains("linear-kf start"), "{zero}");
 }
 
 /// `Model::filter_nll` in original units: for one output the joint density factors into the

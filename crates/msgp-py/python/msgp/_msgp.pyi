@@ -50,6 +50,9 @@ class Msgp:
     likelihood: of an MSGP fit, "free-run" (the paper's product of a free simulation's
         per-step marginals, the default) or "filter" (the joint density of the observations by
         the moment-matched filter) — `msgp fit --likelihood`; other methods refuse it.
+    start: where an MSGP fit starts, "one-step" (the sparse GP-NARX fit, the default) or
+        "linear-kf" (the linear Kalman-filter model under a GP that starts at zero; implies the
+        linear mean) — `msgp fit --start`.
     """
 
     def __init__(
@@ -61,6 +64,7 @@ class Msgp:
         iterations: Optional[int] = None,
         settings: Optional[Dict[str, Any]] = None,
         likelihood: Optional[str] = None,
+        start: Optional[str] = None,
     ) -> None: ...
     def fit(
         self,
