@@ -977,6 +977,15 @@ fn the_simulator_takes_the_command_saturation() {
     );
 }
 
+/// `msgp fit` of `s.csv` in `dir` with `extra` options and the fast settings, written to
+/// `out`; the model file it wrote.
+fn fitted_model(dir: &Scratch, extra: &[&str], out: &str) -> Value {
+    let base = [&["fit", "--data", "s.csv", "--out", out][..], extra].concat();
+    ok(dir, &args(&base, &FAST));
+    let text = std::fs::read_to_string(dir.path(out)).expect("model file written");
+    serde_json::from_str(&text).expect("model file")
+}
+
 /// `--likelihood filter` fits MSGP on the filter's joint density: the model file records it,
 /// the model differs from the free-run one, and another method refuses the option.
 #[test]
@@ -984,23 +993,7 @@ fn the_msgp_likelihood_is_an_option_of_fit() {
     let dir = Scratch::new("likelihood");
     dir.write("s.csv", &system_csv(120, None));
     let model = |likelihood: &str, out: &str| -> Value {
-        ok(
-            &dir,
-            &args(
-                &[
-                    "fit",
-                    "--data",
-                    "s.csv",
-                    "--likelihood",
-                    likelihood,
-                    "--out",
-                    out,
-                ],
-                &FAST,
-            ),
-        );
-        let text = std::fs::read_to_string(dir.path(out)).expect("model file written");
-        serde_json::from_str(&text).expect("model file")
+        fitted_model(&dir, &["--likelihood", likelihood], out)
     };
     let filter = model("filter", "f.json");
     let free = model("free-run", "r.json");
@@ -1033,19 +1026,7 @@ fn the_msgp_start_is_an_option_of_fit() {
     let dir = Scratch::new("start");
     dir.write("s.csv", &system_csv(120, None));
     let model = |extra: &[&str], out: &str| -> Value {
-        let mut a = vec![
-            "fit",
-            "--data",
-            "s.csv",
-            "--likelihood",
-            "filter",
-            "--out",
-            out,
-        ];
-        a.extend_from_slice(extra);
-        ok(&dir, &args(&a, &FAST));
-        let text = std::fs::read_to_string(dir.path(out)).expect("model file written");
-        serde_json::from_str(&text).expect("model file")
+        fitted_model(&dir, &[&["--likelihood", "filter"], extra].concat(), out)
     };
     let kalman = model(&["--start", "linear-kf"], "k.json");
     let one_step = model(&["--mean", "linear"], "o.json");
