@@ -430,7 +430,7 @@ pub struct BudgetArgs {
     pub fit_iters: Option<usize>,
     /// From the second iteration on, continue the previous MSGP or linear-kf model for N solver
     /// iterations (same normaliser and pseudo-inputs) instead of fitting from scratch; 0: always
-    /// from scratch [default: 100 for msgp on the filter likelihood, 0 for msgp on the free-run
+    /// from scratch [default: 40 for msgp on the filter likelihood, 0 for msgp on the free-run
     /// one and for gp-narx, 300 for linear-kf].
     #[arg(long, value_name = "N")]
     pub warm_start: Option<usize>,
@@ -628,6 +628,10 @@ pub struct Figure4Args {
     #[arg(long, value_name = "MODEL,...", value_delimiter = ',', value_parser = model4,
           default_values = ["msgp", "msgp-filter", "gp-narx", "linear-kf"])]
     pub models: Vec<Figure4Model>,
+    /// Runs at a time, the threads (`MSGP_THREADS`, else the machine's cores) shared between
+    /// them; results do not depend on it [default: the threads].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
+    pub jobs: Option<u16>,
     /// No progress lines on stderr.
     #[arg(long)]
     pub quiet: bool,

@@ -249,6 +249,88 @@ fn figure4_writes_its_section_and_keeps_the_others() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `--jobs 2` runs two units at a time, one thread each: every run's iterations (wall-clock
+/// fields aside) equal those of the runs one at a time on the default threads, the report
+/// lists them in the plan's order, and one line per started and finished run is printed.
+#[test]
+fn figure4_runs_side_by_side_give_the_runs_of_one_at_a_time() {
+    let dir = scratch("fig4jobs");
+    let args = |jobs: &'static str, out: &'static str| -> Vec<&'static str> {
+        let head = [
+            "reproduce",
+            "figure4",
+            "--seeds",
+            "2",
+            "--iterations",
+            "2",
+            "--models",
+            "msgp-filter,linear-kf",
+            "--dir",
+            out,
+            "--out",
+            "R.md",
+            "--jobs",
+            jobs,
+        ];
+        [&head[..], &TINY[..]].concat()
+    };
+    let one = run(&dir, &args("1", "one"));
+    assert!(
+        one.status.success(),
+        "{}",
+        String::from_utf8_lossy(&one.stderr)
+    );
+    let two = run(&dir, &args("2", "two"));
+    assert!(
+        two.status.success(),
+        "{}",
+        String::from_utf8_lossy(&two.stderr)
+    );
+    let log = String::from_utf8_lossy(&two.stderr);
+    for unit in [
+        "msgp-filter-seed0",
+        "msgp-filter-seed1",
+        "linear-kf-seed0",
+        "linear-kf-seed1",
+    ] {
+        assert!(log.contains(&format!("== {unit}: started")), "{log}");
+        assert!(log.contains(&format!("== {unit}: done in")), "{log}");
+        let iterations = |folder: &str| {
+            let path = dir.join(folder).join(unit).join("summary.json");
+            let v: Value = serde_json::from_str(&std::fs::read_to_string(&path).expect("summary"))
+                .expect("JSON");
+            without_timings(&v["iterations"])
+        };
+        let (a, b) = (iterations("one"), iterations("two"));
+        assert_eq!(a.len(), 2, "{unit}");
+        assert_eq!(a, b, "{unit}");
+    }
+    // the report's runs in the plan's order: models as given, seeds ascending
+    let md = std::fs::read_to_string(dir.join("R.md")).expect("results");
+    let rows: Vec<(String, u64)> = md
+        .lines()
+        .filter_map(|l| {
+            let cells: Vec<&str> = l.split('|').map(str::trim).collect();
+            let model = *cells.get(1)?;
+            let seed = cells.get(2)?.parse().ok()?;
+            ["msgp-filter", "linear-kf"]
+                .contains(&model)
+                .then(|| (model.to_string(), seed))
+        })
+        .collect();
+    let expected: Vec<(String, u64)> = [("msgp-filter", 0), ("msgp-filter", 1)]
+        .into_iter()
+        .chain([("linear-kf", 0), ("linear-kf", 1)])
+        .map(|(m, k)| (m.to_string(), k))
+        .collect();
+    assert_eq!(rows, expected, "{md}");
+    // no runs at a time is refused by name
+    let zero = run(&dir, &args("0", "zero"));
+    assert!(!zero.status.success());
+    assert!(String::from_utf8_lossy(&zero.stderr).contains("--jobs"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn figure4_reuses_a_run_only_when_every_setting_matches() {
     let dir = scratch("fig4reuse");
@@ -428,7 +510,7 @@ fn an_unstable_msgp_loop_points_at_linear_kf() {
     let s = &default["settings"];
     assert_eq!(s["fit"]["likelihood"], "filter", "{s}");
     assert_eq!(s["fit"]["start"], "linear-kf", "{s}");
-    assert_eq!(s["warm_start"], 100);
+    assert_eq!(s["warm_start"], 40);
     assert_eq!(s["policy_horizon_seconds"], 10.0);
     assert_eq!(
         default["plant"]["sigma_theta"], 5.1985e-5,

@@ -130,7 +130,7 @@ def test_learn_defaults_per_model():
     msgp_defaults = msgp.defaults("learn")
     assert msgp_defaults == msgp.defaults("learn", method="msgp")
     assert msgp_defaults == msgp.defaults("learn", method="msgp", likelihood="filter")
-    assert msgp_defaults["warm_start"] == 100
+    assert msgp_defaults["warm_start"] == 40
     assert msgp_defaults["policy_horizon_seconds"] == 10.0
     assert msgp_defaults["fit"]["likelihood"] == "filter"
     assert msgp_defaults["fit"]["start"] == "linear-kf"

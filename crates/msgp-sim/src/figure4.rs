@@ -23,8 +23,9 @@ use serde::{Deserialize, Serialize};
 use crate::error::SimError;
 use crate::learn::{
     Budget, FILTERED_MSGP_INDUCING, FILTERED_MSGP_ITERATIONS, FILTERED_MSGP_SEARCH_ITERATIONS,
-    FinishedRun, IterationReport, LEARN_INDUCING, LINEAR_KF_POLICY_HORIZON_SECONDS,
-    LINEAR_KF_WARM_START, LearnSettings, SearchModel, finished_run,
+    FILTERED_MSGP_WARM_START, FinishedRun, IterationReport, LEARN_INDUCING,
+    LINEAR_KF_POLICY_HORIZON_SECONDS, LINEAR_KF_WARM_START, LearnSettings, SearchModel,
+    finished_run,
 };
 use crate::params::PendulumParams;
 use crate::plot::{CostPoint, plot_cost_bands};
@@ -276,8 +277,10 @@ pub fn report(plan: &Plan, runs: &[Run], provenance: &Provenance) -> Result<Stri
         })
         .collect();
     plot_cost_bands(&plot, &bands)?;
+    // the free-run MSGP loop's settings: the line "model fit" describes its fits and
+    // GP-NARX's (msgp-filter and linear-kf get their own words)
     let learned = Budget {
-        likelihood: None,
+        likelihood: Some(Likelihood::FreeRun),
         ..plan.budget.clone()
     }
     .settings(Method::Msgp, 0, plan.iterations)?;
@@ -306,8 +309,8 @@ fn fraction(k: usize, n: usize) -> String {
     }
 }
 
-/// The markdown section; `learned` holds the loop's settings (of an MSGP run: what the budget
-/// and the experiment switches resolved to).
+/// The markdown section; `learned` holds the loop's settings (of a free-run MSGP run: what the
+/// budget and the experiment switches resolved to).
 fn render(
     plan: &Plan,
     learned: &LearnSettings,
@@ -375,7 +378,7 @@ fn render(
             d.fit_iters.unwrap_or(FILTERED_MSGP_ITERATIONS),
             match d.warm_start {
                 Some(0) => "each fit from scratch".to_string(),
-                n => format!("at most {}", n.unwrap_or(FILTERED_MSGP_ITERATIONS)),
+                n => format!("at most {}", n.unwrap_or(FILTERED_MSGP_WARM_START)),
             },
             d.search_iters.unwrap_or(FILTERED_MSGP_SEARCH_ITERATIONS),
         ),

@@ -304,7 +304,7 @@ fn filtered_msgp_defaults_start_from_the_kalman_fit_and_run() {
     use msgp_core::model::Method;
     use msgp_sim::learn::{
         FILTERED_MSGP_INDUCING, FILTERED_MSGP_ITERATIONS, FILTERED_MSGP_SEARCH_ITERATIONS,
-        LINEAR_KF_POLICY_HORIZON_SECONDS,
+        FILTERED_MSGP_WARM_START, LINEAR_KF_POLICY_HORIZON_SECONDS,
     };
     let f = LearnSettings::for_model(Method::Msgp, Some(Likelihood::Filter));
     assert_eq!(f, LearnSettings::filtered_msgp());
@@ -317,7 +317,7 @@ fn filtered_msgp_defaults_start_from_the_kalman_fit_and_run() {
         LearnSettings::for_method(Method::LinearKf).fit.integrators
     );
     assert_eq!(f.policy_horizon_seconds, LINEAR_KF_POLICY_HORIZON_SECONDS);
-    assert_eq!(f.warm_start, Some(FILTERED_MSGP_ITERATIONS));
+    assert_eq!(f.warm_start, Some(FILTERED_MSGP_WARM_START));
     assert_eq!(m.iterations, FILTERED_MSGP_ITERATIONS);
     assert_eq!(m.inducing, FILTERED_MSGP_INDUCING);
     assert_eq!(f.search.iterations, FILTERED_MSGP_SEARCH_ITERATIONS);

@@ -1,13 +1,17 @@
-//! `msgp reproduce figure4`: the paper's Figure 4 on the simulated pendulum, its runs one after
-//! another (`msgp_sim::figure4`: plan → units → runs' folders → report); finished runs in the
+//! `msgp reproduce figure4`: the paper's Figure 4 on the simulated pendulum, `--jobs` of its runs
+//! at a time (`msgp_sim::figure4`: plan → units → runs' folders → report); finished runs in the
 //! folder are reused, so runs can be split over processes (`msgp learn-policy --out`) or
 //! machines (`python -m msgp.sweep figure4`) and collected here.
 
 use std::time::Instant;
 
-use anyhow::Context;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use anyhow::{Context, anyhow};
+use msgp_core::numeric::parallel::Threads;
 use msgp_core::reproduce::results::{Provenance, machine, today, update_section};
-use msgp_sim::figure4::{self, Plan, Run};
+use msgp_sim::figure4::{self, Plan, Run, Unit};
 use msgp_sim::learn::{summary, write_run_dir};
 
 use crate::args::Figure4Args;
@@ -27,34 +31,48 @@ pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
         args.dir.clone(),
     )
     .map_err(flagged)?;
-    let mut runs = Vec::new();
-    for unit in plan.units() {
-        let run_dir = plan.run_dir(&unit);
-        if let Some(done) = plan.finished(&unit)? {
-            if !args.quiet {
-                eprintln!(
-                    "== {}: reusing {}",
-                    unit.name(),
-                    run_dir.join("summary.json").display()
-                );
+    let mut done: Vec<Option<Run>> = Vec::new();
+    let mut todo = Vec::new();
+    for (k, unit) in plan.units().into_iter().enumerate() {
+        match plan.finished(&unit)? {
+            Some(run) => {
+                if !args.quiet {
+                    eprintln!(
+                        "== {}: reusing {}",
+                        unit.name(),
+                        plan.run_dir(&unit).join("summary.json").display()
+                    );
+                }
+                done.push(Some(Run { unit, run }));
             }
-            runs.push(Run { unit, run: done });
-            continue;
+            None => {
+                done.push(None);
+                todo.push((k, unit));
+            }
         }
-        if !args.quiet {
-            eprintln!("== {}", unit.name());
-        }
-        let settings = plan.settings(&unit)?;
-        let (outcome, seconds) = learn(&plan.plant, &settings, args.quiet)?;
-        let summary = summary(&outcome, &settings, &plan.plant, seconds);
-        let label = format!("{} seed {}", unit.model.name(), unit.seed);
-        write_run_dir(&run_dir, &outcome, &settings, &summary, &label)
-            .with_context(|| format!("writing {}", run_dir.display()))?;
-        let done = plan
-            .finished(&unit)?
-            .with_context(|| format!("{} does not read back", run_dir.display()))?;
-        runs.push(Run { unit, run: done });
     }
+    let threads = Threads::from_env()?.get();
+    let jobs = args
+        .jobs
+        .map_or(threads, usize::from)
+        .clamp(1, todo.len().max(1));
+    let ran = if jobs == 1 {
+        let mut ran = Vec::new();
+        for (k, unit) in todo {
+            if !args.quiet {
+                eprintln!("== {}", unit.name());
+            }
+            let run = run_unit(&plan, unit, None, args.quiet)?;
+            ran.push((k, run));
+        }
+        ran
+    } else {
+        run_side_by_side(&plan, todo, jobs, threads, args.quiet)?
+    };
+    for (k, run) in ran {
+        done[k] = Some(run);
+    }
+    let runs: Vec<Run> = done.into_iter().flatten().collect();
     let provenance = Provenance {
         command: format!(
             "`cargo run --release --locked --bin msgp -- {}`",
@@ -67,6 +85,98 @@ pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
     let markdown = figure4::report(&plan, &runs, &provenance)?;
     update_section(&args.out, &plan.section(), &markdown)?;
     crate::render::output::out(&markdown)
+}
+
+/// One unit's run, written to its folder and read back; on `threads` threads when given (the
+/// settings' own otherwise: results do not depend on them).
+fn run_unit(plan: &Plan, unit: Unit, threads: Option<Threads>, quiet: bool) -> anyhow::Result<Run> {
+    let run_dir = plan.run_dir(&unit);
+    let mut settings = plan.settings(&unit)?;
+    if let Some(t) = threads {
+        settings.fit.threads = t;
+        settings.search.threads = t;
+    }
+    let (outcome, seconds) = learn(&plan.plant, &settings, quiet)?;
+    // the folder records the plan's settings: a rerun on other threads reuses it
+    let settings = plan.settings(&unit)?;
+    let summary = summary(&outcome, &settings, &plan.plant, seconds);
+    let label = format!("{} seed {}", unit.model.name(), unit.seed);
+    write_run_dir(&run_dir, &outcome, &settings, &summary, &label)
+        .with_context(|| format!("writing {}", run_dir.display()))?;
+    let run = plan
+        .finished(&unit)?
+        .with_context(|| format!("{} does not read back", run_dir.display()))?;
+    Ok(Run { unit, run })
+}
+
+/// The units of `todo` (with their places in the plan) on `jobs` workers that share `threads`
+/// threads, each taking the next unit when its last is done; one line per started and finished
+/// run (the runs' own progress would interleave). The first failure stops the workers from
+/// starting further runs and is returned once the running ones end.
+fn run_side_by_side(
+    plan: &Plan,
+    todo: Vec<(usize, Unit)>,
+    jobs: usize,
+    threads: usize,
+    quiet: bool,
+) -> anyhow::Result<Vec<(usize, Run)>> {
+    let per_run = Threads::new((threads / jobs).max(1))?;
+    let queue = Mutex::new(todo.into_iter());
+    let failed = AtomicBool::new(false);
+    let clock = Instant::now();
+    let worker = || -> anyhow::Result<Vec<(usize, Run)>> {
+        let mut ran = Vec::new();
+        loop {
+            if failed.load(Ordering::Relaxed) {
+                return Ok(ran);
+            }
+            let next = queue.lock().map_err(|_| anyhow!("a run panicked"))?.next();
+            let Some((k, unit)) = next else {
+                return Ok(ran);
+            };
+            let name = unit.name();
+            if !quiet {
+                eprintln!(
+                    "== {name}: started ({:.0} s)",
+                    clock.elapsed().as_secs_f64()
+                );
+            }
+            match run_unit(plan, unit, Some(per_run), true) {
+                Ok(run) => {
+                    if !quiet {
+                        let first = run
+                            .run
+                            .iterations
+                            .iter()
+                            .find(|r| r.stable)
+                            .map_or("none".to_string(), |r| r.iteration.to_string());
+                        eprintln!(
+                            "== {name}: done in {:.0} s, first stable iteration {first} ({:.0} s)",
+                            run.run.seconds,
+                            clock.elapsed().as_secs_f64()
+                        );
+                    }
+                    ran.push((k, run));
+                }
+                Err(e) => {
+                    failed.store(true, Ordering::Relaxed);
+                    return Err(e.context(format!("run {name}")));
+                }
+            }
+        }
+    };
+    let results: Vec<anyhow::Result<Vec<(usize, Run)>>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..jobs).map(|_| scope.spawn(worker)).collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().unwrap_or_else(|_| Err(anyhow!("a run panicked"))))
+            .collect()
+    });
+    let mut ran = Vec::new();
+    for r in results {
+        ran.extend(r?);
+    }
+    Ok(ran)
 }
 
 /// This process's arguments after the binary, quoted for a POSIX shell where needed: the
