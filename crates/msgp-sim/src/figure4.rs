@@ -236,7 +236,8 @@ pub struct Run {
 }
 
 impl Run {
-    fn first_stable(&self) -> Option<&IterationReport> {
+    /// The run's first iteration whose gains passed the stability test.
+    pub fn first_stable(&self) -> Option<&IterationReport> {
         self.run.iterations.iter().find(|r| r.stable)
     }
 }

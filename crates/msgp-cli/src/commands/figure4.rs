@@ -3,10 +3,9 @@
 //! folder are reused, so runs can be split over processes (`msgp learn-policy --out`) or
 //! machines (`python -m msgp.sweep figure4`) and collected here.
 
-use std::time::Instant;
-
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
 
 use anyhow::{Context, anyhow};
 use msgp_core::numeric::parallel::Threads;
@@ -91,14 +90,14 @@ pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
 /// settings' own otherwise: results do not depend on them).
 fn run_unit(plan: &Plan, unit: Unit, threads: Option<Threads>, quiet: bool) -> anyhow::Result<Run> {
     let run_dir = plan.run_dir(&unit);
-    let mut settings = plan.settings(&unit)?;
-    if let Some(t) = threads {
-        settings.fit.threads = t;
-        settings.search.threads = t;
-    }
-    let (outcome, seconds) = learn(&plan.plant, &settings, quiet)?;
     // the folder records the plan's settings: a rerun on other threads reuses it
     let settings = plan.settings(&unit)?;
+    let mut running = settings.clone();
+    if let Some(t) = threads {
+        running.fit.threads = t;
+        running.search.threads = t;
+    }
+    let (outcome, seconds) = learn(&plan.plant, &running, quiet)?;
     let summary = summary(&outcome, &settings, &plan.plant, seconds);
     let label = format!("{} seed {}", unit.model.name(), unit.seed);
     write_run_dir(&run_dir, &outcome, &settings, &summary, &label)
@@ -145,10 +144,7 @@ fn run_side_by_side(
                 Ok(run) => {
                     if !quiet {
                         let first = run
-                            .run
-                            .iterations
-                            .iter()
-                            .find(|r| r.stable)
+                            .first_stable()
                             .map_or("none".to_string(), |r| r.iteration.to_string());
                         eprintln!(
                             "== {name}: done in {:.0} s, first stable iteration {first} ({:.0} s)",
