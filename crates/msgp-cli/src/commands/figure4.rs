@@ -55,20 +55,7 @@ pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
         .jobs
         .map_or(threads, usize::from)
         .clamp(1, todo.len().max(1));
-    let ran = if jobs == 1 {
-        let mut ran = Vec::new();
-        for (k, unit) in todo {
-            if !args.quiet {
-                eprintln!("== {}", unit.name());
-            }
-            let run = run_unit(&plan, unit, None, args.quiet)?;
-            ran.push((k, run));
-        }
-        ran
-    } else {
-        run_side_by_side(&plan, todo, jobs, threads, args.quiet)?
-    };
-    for (k, run) in ran {
+    for (k, run) in run_side_by_side(&plan, todo, jobs, threads, args.quiet)? {
         done[k] = Some(run);
     }
     let runs: Vec<Run> = done.into_iter().flatten().collect();
@@ -110,8 +97,9 @@ fn run_unit(plan: &Plan, unit: Unit, threads: Option<Threads>, quiet: bool) -> a
 
 /// The units of `todo` (with their places in the plan) on `jobs` workers that share `threads`
 /// threads, each taking the next unit when its last is done; one line per started and finished
-/// run (the runs' own progress would interleave). The first failure stops the workers from
-/// starting further runs and is returned once the running ones end.
+/// run, and with one job the run's own progress too (with more it would interleave). The first
+/// failure stops the workers from starting further runs and is returned once the running ones
+/// end.
 fn run_side_by_side(
     plan: &Plan,
     todo: Vec<(usize, Unit)>,
@@ -119,7 +107,11 @@ fn run_side_by_side(
     threads: usize,
     quiet: bool,
 ) -> anyhow::Result<Vec<(usize, Run)>> {
-    let per_run = Threads::new((threads / jobs).max(1))?;
+    // one job keeps the settings' threads and shows the run's progress
+    let per_run = (jobs > 1)
+        .then(|| Threads::new((threads / jobs).max(1)))
+        .transpose()?;
+    let run_quiet = quiet || jobs > 1;
     let queue = Mutex::new(todo.into_iter());
     let failed = AtomicBool::new(false);
     let clock = Instant::now();
@@ -140,7 +132,7 @@ fn run_side_by_side(
                     clock.elapsed().as_secs_f64()
                 );
             }
-            match run_unit(plan, unit, Some(per_run), true) {
+            match run_unit(plan, unit, per_run, run_quiet) {
                 Ok(run) => {
                     if !quiet {
                         let first = run
