@@ -424,8 +424,8 @@ pub struct BudgetArgs {
     #[arg(long, default_value_t = Budget::default().episode_seconds)]
     pub episode_seconds: f64,
     /// Solver iterations of each model fit [default: 100 L-BFGS for msgp on the filter
-    /// likelihood, 300 Adam on the free-run one; the one-step fit's 300 Adam iterations for
-    /// gp-narx; at most 300 L-BFGS iterations from each of two starts for linear-kf].
+    /// likelihood, 300 Adam on the free-run one; at most 300 L-BFGS iterations of the one-step
+    /// fit for gp-narx, and from each of two starts for linear-kf].
     #[arg(long, value_name = "N")]
     pub fit_iters: Option<usize>,
     /// From the second iteration on, continue the previous MSGP or linear-kf model for N solver

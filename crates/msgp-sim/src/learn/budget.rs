@@ -5,7 +5,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use msgp_core::fit::{FitOptimizer, FitSettings, MethodSettings};
+use msgp_core::fit::{FitOptimizer, FitSettings, MethodSettings, OneStepSolver};
 use msgp_core::gp::MeanFunction;
 use msgp_core::loss::Likelihood;
 use msgp_core::model::Method;
@@ -46,10 +46,13 @@ pub enum Experiment {
     /// predictions of the episodes it had not seen beat the linear model's
     /// ([`LearnSettings::prequential_choice`]).
     Prequential(bool),
+    /// `one-step-solver=adam|lbfgs` (GP models): how the one-step marginal likelihood is
+    /// minimised — GP-NARX's whole fit, MSGP's start ([`OneStepSolver`]).
+    OneStepSolver(OneStepSolver),
 }
 
 /// The keys of [`Experiment`], as written on the command line.
-pub const EXPERIMENT_KEYS: [&str; 9] = [
+pub const EXPERIMENT_KEYS: [&str; 10] = [
     "start-smoothing",
     "fb-segment",
     "free-position",
@@ -59,6 +62,7 @@ pub const EXPERIMENT_KEYS: [&str; 9] = [
     "fit-optimizer",
     "hold-margin",
     "prequential",
+    "one-step-solver",
 ];
 
 impl Experiment {
@@ -74,6 +78,7 @@ impl Experiment {
             Experiment::FitOptimizer(_) => 6,
             Experiment::HoldMargin(_) => 7,
             Experiment::Prequential(_) => 8,
+            Experiment::OneStepSolver(_) => 9,
         }]
     }
 
@@ -112,6 +117,13 @@ impl Experiment {
                 Experiment::FitOptimizer(match value.to_ascii_lowercase().as_str() {
                     "adam" => FitOptimizer::Adam,
                     "lbfgs" => FitOptimizer::Lbfgs,
+                    _ => return Err(format!("{key} is adam or lbfgs, got `{value}`")),
+                })
+            }
+            "one-step-solver" => {
+                Experiment::OneStepSolver(match value.to_ascii_lowercase().as_str() {
+                    "adam" => OneStepSolver::Adam,
+                    "lbfgs" => OneStepSolver::Lbfgs,
                     _ => return Err(format!("{key} is adam or lbfgs, got `{value}`")),
                 })
             }
@@ -259,6 +271,7 @@ impl Budget {
         let mut optimizer = msgp_defaults.optimizer;
         let mut hold_margin = d.hold_margin;
         let mut prequential_choice = d.prequential_choice;
+        let mut one_step_solver = None;
         for e in &self.experimental {
             if matches!(
                 e,
@@ -266,11 +279,16 @@ impl Budget {
                     | Experiment::FitOptimizer(_)
                     | Experiment::Prequential(true)
             ) && method != Method::Msgp
+                || matches!(e, Experiment::OneStepSolver(_)) && method == Method::LinearKf
             {
+                let fit = match e {
+                    Experiment::OneStepSolver(_) => "a GP fit",
+                    _ => "the MSGP fit",
+                };
                 return Err(invalid(
                     &format!("experimental {}", e.key()),
                     format!(
-                        "a setting of the MSGP fit; the {} model does not have it",
+                        "a setting of {fit}; the {} model does not have it",
                         method.name()
                     ),
                 ));
@@ -285,6 +303,7 @@ impl Budget {
                 Experiment::FitOptimizer(o) => optimizer = o,
                 Experiment::HoldMargin(k) => hold_margin = k,
                 Experiment::Prequential(b) => prequential_choice = b,
+                Experiment::OneStepSolver(o) => one_step_solver = Some(o),
             }
         }
         if !(trust_region.is_finite() && trust_region >= 0.0) {
@@ -342,8 +361,16 @@ impl Budget {
                 if let Some(l) = self.likelihood {
                     s.likelihood = l;
                 }
+                if let Some(o) = one_step_solver {
+                    s.one_step_solver = o;
+                }
             }
-            MethodSettings::GpNarx(s) | MethodSettings::PilcoNarx(s) => s.mean = self.mean,
+            MethodSettings::GpNarx(s) | MethodSettings::PilcoNarx(s) => {
+                s.mean = self.mean;
+                if let Some(o) = one_step_solver {
+                    s.solver = o;
+                }
+            }
             MethodSettings::LinearKf(_) => {}
         }
         let fit = match self.fit_iters {
@@ -409,7 +436,15 @@ mod tests {
 
     #[test]
     fn options_out_of_range_name_the_option() {
-        let cases: [(Budget, Method, &str); 5] = [
+        let cases: [(Budget, Method, &str); 6] = [
+            (
+                Budget {
+                    experimental: vec![Experiment::OneStepSolver(OneStepSolver::Lbfgs)],
+                    ..Budget::default()
+                },
+                Method::LinearKf,
+                "experimental one-step-solver: a setting of a GP fit",
+            ),
             (
                 Budget {
                     episode_seconds: -1.0,
@@ -462,6 +497,45 @@ mod tests {
     }
 
     #[test]
+    fn the_one_step_solver_switch_reaches_gp_narx_and_the_msgp_start() {
+        // GP-NARX's default is L-BFGS, MSGP's start Adam: each switched to the other
+        let budget = Budget {
+            experimental: vec![Experiment::OneStepSolver(OneStepSolver::Adam)],
+            ..Budget::default()
+        };
+        let s = budget.settings(Method::GpNarx, 0, 1).expect("valid");
+        let mut fit = s.fit.clone();
+        match &mut fit.method {
+            MethodSettings::GpNarx(o) => {
+                assert_eq!(o.solver, OneStepSolver::Adam);
+                o.solver = OneStepSolver::Lbfgs;
+            }
+            other => panic!("{other:?}"),
+        }
+        let mut default = LearnSettings::for_model(Method::GpNarx, None).fit;
+        default.threads = fit.threads;
+        assert_eq!(
+            fit, default,
+            "the switch changes the solver and nothing else"
+        );
+        let budget = Budget {
+            likelihood: Some(Likelihood::FreeRun),
+            experimental: vec![Experiment::OneStepSolver(OneStepSolver::Lbfgs)],
+            ..Budget::default()
+        };
+        let d = LearnSettings::for_model(Method::Msgp, Some(Likelihood::FreeRun));
+        assert_eq!(
+            d.fit.msgp().map(|m| m.one_step_solver),
+            Some(OneStepSolver::Adam)
+        );
+        let s = budget.settings(Method::Msgp, 0, 1).expect("valid");
+        assert_eq!(
+            s.fit.msgp().map(|m| m.one_step_solver),
+            Some(OneStepSolver::Lbfgs)
+        );
+    }
+
+    #[test]
     fn experiments_parse_and_serialise_with_the_command_lines_keys() {
         let e = Experiment::parse("fit-optimizer=LBFGS").expect("parses");
         assert_eq!(e, Experiment::FitOptimizer(FitOptimizer::Lbfgs));
@@ -470,7 +544,9 @@ mod tests {
             r#"{"fit-optimizer":"lbfgs"}"#
         );
         for (k, key) in EXPERIMENT_KEYS.iter().enumerate() {
-            let value = ["4", "4", "true", "5", "1", "0.5", "adam", "1", "false"][k];
+            let value = [
+                "4", "4", "true", "5", "1", "0.5", "adam", "1", "false", "lbfgs",
+            ][k];
             let e = Experiment::parse(&format!("{key}={value}")).expect("parses");
             assert_eq!(e.key(), *key);
             let back: Experiment =
@@ -486,6 +562,7 @@ mod tests {
             "fb-segment=x",
             "free-position=1",
             "trust-region",
+            "one-step-solver=newton",
         ] {
             assert!(Experiment::parse(bad).is_err(), "{bad}");
         }
