@@ -104,6 +104,12 @@ impl Experiment {
                 .parse::<bool>()
                 .map_err(|_| format!("{key} is true or false, got `{value}`"))
         };
+        // the two solver switches' values; true: adam
+        let adam_or_lbfgs = || match value.to_ascii_lowercase().as_str() {
+            "adam" => Ok(true),
+            "lbfgs" => Ok(false),
+            _ => Err(format!("{key} is adam or lbfgs, got `{value}`")),
+        };
         Ok(match key {
             "start-smoothing" => Experiment::StartSmoothing(count()?),
             "fb-segment" => Experiment::FbSegment(count()?),
@@ -113,20 +119,14 @@ impl Experiment {
             "random-policies" => Experiment::RandomPolicies(count()?),
             "trust-region" => Experiment::TrustRegion(number()?),
             "hold-margin" => Experiment::HoldMargin(number()?),
-            "fit-optimizer" => {
-                Experiment::FitOptimizer(match value.to_ascii_lowercase().as_str() {
-                    "adam" => FitOptimizer::Adam,
-                    "lbfgs" => FitOptimizer::Lbfgs,
-                    _ => return Err(format!("{key} is adam or lbfgs, got `{value}`")),
-                })
-            }
-            "one-step-solver" => {
-                Experiment::OneStepSolver(match value.to_ascii_lowercase().as_str() {
-                    "adam" => OneStepSolver::Adam,
-                    "lbfgs" => OneStepSolver::Lbfgs,
-                    _ => return Err(format!("{key} is adam or lbfgs, got `{value}`")),
-                })
-            }
+            "fit-optimizer" => Experiment::FitOptimizer(match adam_or_lbfgs()? {
+                true => FitOptimizer::Adam,
+                false => FitOptimizer::Lbfgs,
+            }),
+            "one-step-solver" => Experiment::OneStepSolver(match adam_or_lbfgs()? {
+                true => OneStepSolver::Adam,
+                false => OneStepSolver::Lbfgs,
+            }),
             other => {
                 return Err(format!(
                     "unknown experiment `{other}` (known: {})",

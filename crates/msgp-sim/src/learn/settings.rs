@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use msgp_core::fit::{
     FitOptimizer, FitSettings, LinearKfSettings, MethodSettings, MsgpSettings, MsgpStart,
-    OneStepFitSettings, OneStepSolver,
+    OneStepFitSettings,
 };
 use msgp_core::gp::MeanFunction;
 use msgp_core::gp::integrator::Integrator;
@@ -172,11 +172,10 @@ impl LearnSettings {
         let one_step = OneStepFitSettings {
             inducing: LEARN_INDUCING,
             mean: MeanFunction::Linear,
-            // GP-NARX's hyperparameters at the marginal likelihood's optimum, as Table 1's
-            // baseline and PILCO's own training (`minimize` to convergence) have them: on the
-            // apollo tier 2.6× faster than the 300 Adam steps used until 2026-12-04, 4 of 5
-            // seeds stable against 5 of 5 (`docs/design.md`). MSGP's one-step start keeps Adam.
-            solver: OneStepSolver::Lbfgs,
+            // the default solver, L-BFGS: GP-NARX's hyperparameters at the marginal
+            // likelihood's optimum, as Table 1's baseline and PILCO's own training (`minimize`
+            // to convergence) have them; on the apollo tier 2.6× faster than the 300 Adam steps
+            // used until 2026-12-04, 4 of 5 seeds stable against 5 of 5 (`docs/design.md`)
             ..OneStepFitSettings::default()
         };
         s.fit.method = match method {
