@@ -47,7 +47,8 @@ pub enum Experiment {
     /// ([`LearnSettings::prequential_choice`]).
     Prequential(bool),
     /// `one-step-solver=adam|lbfgs` (GP models): how the one-step marginal likelihood is
-    /// minimised — GP-NARX's whole fit, MSGP's start ([`OneStepSolver`]).
+    /// minimised — GP-NARX's whole fit, the free-run MSGP's start ([`OneStepSolver`]); the
+    /// filtered MSGP starts from the linear-kf model and has no one-step fit to change.
     OneStepSolver(OneStepSolver),
 }
 
