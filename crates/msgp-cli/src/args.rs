@@ -250,8 +250,9 @@ pub struct FitArgs {
     /// Training method.
     #[arg(long, value_enum, default_value_t = MethodArg::Msgp)]
     pub method: MethodArg,
-    /// Solver iterations: on the trajectory likelihood for msgp [default: 400]; Adam
-    /// iterations on the one-step marginal likelihood for gp-narx and pilco-narx [default: 300].
+    /// Solver iterations: on the trajectory likelihood for msgp [default: 400]; at most this
+    /// many L-BFGS iterations on the one-step marginal likelihood for gp-narx and pilco-narx
+    /// (it stops by itself when converged) [default: 300].
     #[arg(long, value_name = "N")]
     pub iters: Option<usize>,
     /// Solver of the MSGP loss.
