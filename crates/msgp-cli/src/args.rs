@@ -93,7 +93,7 @@ pub const DEFAULT_TRAIN_FRAC: f64 = 0.5;
 pub enum MethodArg {
     /// Multi-step GP: trajectory likelihood (the paper's method).
     Msgp,
-    /// One-step GP-NARX, marginal likelihood.
+    /// One-step GP-NARX: a sparse GP by its marginal likelihood (the variational bound).
     GpNarx,
     /// One-step GP-NARX with PILCO's hyperparameter penalties.
     PilcoNarx,

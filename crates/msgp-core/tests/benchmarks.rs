@@ -218,3 +218,34 @@ fn a_linear_mean_on_drives_does_not_diverge() {
     // paper MSGP 0.4217; the zero-mean recipe 0.47
     assert!(m.rmse < 0.6, "drives with a linear mean: RMSE {}", m.rmse);
 }
+
+/// The one-step baselines read as the paper ran them (appendix A.1.1, `docs/design.md`):
+/// GP-NARX a sparse GP of 100 pseudo-inputs by its own likelihood (the variational bound), PILCO's
+/// GP-NARX the full GP's penalised likelihood, then sparsified. On actuator the two differ by 2×,
+/// and each lands within 10 % of its column of Table 1 (seed 0, moment matching; the exact fit
+/// gives GP-NARX 1.45, the bound PILCO's variant ≈ 0.7).
+#[test]
+fn the_baselines_match_their_table_1_columns_on_actuator_and_furnace() {
+    let Some(dir) = real_data() else { return };
+    let actuator = RealSeries::Actuator.load(&dir).expect("load actuator");
+    let narx = run(&actuator, Method::GpNarx, 0);
+    assert!(
+        narx.rmse <= 1.1 * 0.6376,
+        "actuator GP-NARX RMSE {}",
+        narx.rmse
+    );
+    let pilco = run(&actuator, Method::PilcoNarx, 0);
+    assert!(
+        (pilco.rmse / 1.3767 - 1.0).abs() <= 0.1,
+        "actuator PILCO GP-NARX RMSE {}",
+        pilco.rmse
+    );
+    // the exact fit's 1.28 is 7 % above the paper's 1.1996
+    let furnace = RealSeries::Furnace.load(&dir).expect("load furnace");
+    let narx = run(&furnace, Method::GpNarx, 0);
+    assert!(
+        narx.rmse <= 1.02 * 1.1996,
+        "furnace GP-NARX RMSE {}",
+        narx.rmse
+    );
+}

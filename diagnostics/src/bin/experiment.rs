@@ -4,7 +4,8 @@
 //! `cargo run --release -p msgp-diagnostics --bin experiment -- [system] [method] [iters] [seed]
 //! [complexity] [noise] [lr=F] [lbfgs=true] [every=N] [patience=N] [valfrac=F] [floor=F]
 //! [inducing=N] [freeze_x=true] [free_x=true] [nstart=full] [onestep=N] [filter=true] [dump=true]
-//! [threads=N] [ly=N] [lu=N] [mean=linear] [init=adam|lbfgs] [alt=false]`
+//! [threads=N] [ly=N] [lu=N] [mean=linear] [init=adam|lbfgs] [alt=false] [sparse=exact|vfe]
+//!`
 //!
 //! Positional: `system` `sys1`…`sys5` or a real series (`actuator`, `ballbeam`, `drives`,
 //! `furnace`, `dryer`; read from `MSGP_DATA_DIR`), default `sys4`; `method` `msgp` (default),
@@ -17,7 +18,8 @@
 //! freeze the pseudo-inputs, `free_x=true` let them move, `nstart=full` start both noises at
 //! the one-step noise (default: split it between them), `ly`/`lu` override the benchmark's
 //! history, `mean=linear` the linear prior mean, `init` the one-step start's solver,
-//! `alt=false` train the settings' recipe alone (default: the protocol's linear-mean recipe
+//! `sparse=exact|vfe` the one-step baselines' objective (`OneStepFitSettings::objective`),
+//! `init_sparse=exact|vfe` that of MSGP's one-step start (`MsgpSettings::one_step_objective`), `alt=false` train the settings' recipe alone (default: the protocol's linear-mean recipe
 //! beside it, `MsgpSettings::alternative`), `onestep` the one-step iterations, `filter=true` train on the
 //! filter likelihood instead of the free run's, `dump=true` print the settings
 //! (JSON, stderr), `threads` the fit's threads (default every core; results do not depend on it).
@@ -26,7 +28,9 @@ use std::path::Path;
 
 use msgp_core::data::real::{RealSeries, data_dir};
 use msgp_core::data::{NoiseScale, SyntheticSystem};
-use msgp_core::fit::{FitSettings, MethodSettings, MsgpSettings, OneStepFitSettings, fit};
+use msgp_core::fit::{
+    FitSettings, MethodSettings, MsgpSettings, OneStepFitSettings, OneStepObjective, fit,
+};
 use msgp_core::loss::Complexity;
 use msgp_core::model::Method;
 use msgp_diagnostics::{Switches, usage_error};
@@ -35,11 +39,31 @@ const USAGE: &str = "experiment [sys1..sys5|actuator|ballbeam|drives|furnace|dry
     [msgp|gp-narx|pilco-narx] [iters] [seed] [pseudo|none|neg|pos] [var|std] [lr=F] [lbfgs=true] \
     [every=N] [patience=N] [valfrac=F] [floor=F] [inducing=N] [freeze_x=true] [free_x=true] \
     [nstart=split|full] [onestep=N] \
-    [filter=true] [dump=true] [threads=N]";
+    [filter=true] [dump=true] [threads=N] [sparse=exact|vfe] \
+    [init_sparse=exact|vfe]";
 
 const SWITCHES: &[&str] = &[
-    "lr", "lbfgs", "every", "patience", "valfrac", "floor", "inducing", "freeze_x", "free_x",
-    "nstart", "onestep", "filter", "dump", "threads", "ly", "lu", "mean", "init", "alt",
+    "lr",
+    "lbfgs",
+    "every",
+    "patience",
+    "valfrac",
+    "floor",
+    "inducing",
+    "freeze_x",
+    "free_x",
+    "nstart",
+    "onestep",
+    "filter",
+    "dump",
+    "threads",
+    "ly",
+    "lu",
+    "mean",
+    "init",
+    "alt",
+    "sparse",
+    "init_sparse",
 ];
 
 enum Bench {
@@ -147,12 +171,27 @@ fn options() -> Result<Options, String> {
     if sw.get("filter")? == Some(true) {
         msgp.likelihood = msgp_core::loss::Likelihood::Filter;
     }
-    let one_step = OneStepFitSettings {
+    let mut one_step = OneStepFitSettings {
         inducing: msgp.inducing,
         mean: msgp.mean,
         iterations: msgp.one_step_iterations,
-        ..OneStepFitSettings::default()
+        ..match method {
+            Method::PilcoNarx => OneStepFitSettings::pilco(),
+            _ => OneStepFitSettings::default(),
+        }
     };
+    match sw.get::<String>("init_sparse")?.as_deref() {
+        None => {}
+        Some("exact") => msgp.one_step_objective = OneStepObjective::Exact,
+        Some("vfe") => msgp.one_step_objective = OneStepObjective::Vfe,
+        Some(other) => return Err(format!("unknown sparse start `{other}`")),
+    }
+    match sw.get::<String>("sparse")?.as_deref() {
+        None => {}
+        Some("exact") => one_step.objective = OneStepObjective::Exact,
+        Some("vfe") => one_step.objective = OneStepObjective::Vfe,
+        Some(other) => return Err(format!("unknown sparse fit `{other}`")),
+    }
     let settings = FitSettings {
         seed: sw.arg(3, "seed")?.unwrap_or(0),
         threads: sw.threads()?,

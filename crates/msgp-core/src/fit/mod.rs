@@ -14,12 +14,13 @@ pub mod linear_kf;
 mod msgp;
 pub mod one_step;
 mod settings;
+mod vfe;
 
 pub use divergence::{DIVERGENCE_RANGES, check_divergence};
 pub use settings::{
     DEFAULT_MAX_INDUCING, DEFAULT_ONE_STEP_ITERATIONS, FIT_LBFGS, FitOptimizer, FitOptions,
     FitSettings, LINEAR_RECIPE, LinearKfSettings, MethodSettings, MsgpSettings, MsgpStart,
-    NoiseStart, OneStepFitSettings, OneStepSolver, Recipe,
+    NoiseStart, OneStepFitSettings, OneStepObjective, OneStepSolver, Recipe,
 };
 
 use std::ops::ControlFlow;
@@ -310,6 +311,7 @@ fn fit_unchecked(
             let one_step = OneStepSettings {
                 iterations: msgp.one_step_iterations,
                 solver: msgp.one_step_solver,
+                objective: msgp.one_step_objective,
                 threads: settings.threads,
                 ..OneStepSettings::default()
             };
@@ -334,6 +336,7 @@ fn fit_unchecked(
         &OneStepSettings {
             iterations: one_step.iterations,
             solver: one_step.solver,
+            objective: one_step.objective,
             pilco_penalty,
             threads: settings.threads,
             ..OneStepSettings::default()

@@ -3,11 +3,14 @@
 //! (appendix A.1.1; PILCO's `hypCurb`: `Σ_d ((log ℓ_d − log std(x_d)) / log 100)^30 +
 //! ((log σ_f − log σ_n) / log 500)^30`).
 //!
-//! The fitted full GP is then made sparse for moment-matching rollouts: `m` pseudo-inputs from
-//! seeded k-means over the training windows and pseudo-targets chosen so that the sparse mean
+//! Two objectives ([`OneStepObjective`]). `Exact` (MSGP's start, PILCO's variant): the full GP's
+//! marginal likelihood, then the fitted GP is made sparse for moment-matching rollouts: `m`
+//! pseudo-inputs from seeded k-means over the training windows. `Vfe` (the GP-NARX baseline): the
+//! hyperparameters and the pseudo-inputs (from the same k-means start) by the variational
+//! sparse GP's bound ([`super::vfe`]). Either way the pseudo-targets are chosen so that the sparse mean
 //! `k(x)ᵀ K̃_m⁻¹ ȳ` equals the DTC/projected-process mean
 //! `k(x)ᵀ (σ_n² K_mm + K_mn K_nm)⁻¹ K_mn y`, i.e. `ȳ = K̃_m (σ_n² K_mm + K_mn K_nm)⁻¹ K_mn y`.
-//! This sparse GP-NARX is also MSGP's initialisation, as in the paper.
+//! The exact objective's sparse GP-NARX is MSGP's initialisation, as in the paper.
 //!
 //! With a linear prior mean ([`MeanFunction::Linear`]) the map `A` is an instrumental-variables
 //! ARX fit of the targets on the windows (see [`OneStepData`]), and the GP is fitted to what it
@@ -27,7 +30,9 @@ use crate::numeric::linalg::JitterLog;
 use crate::numeric::parallel::Threads;
 use crate::optim::{Adam, Flow, Lbfgs, Objective, Solver, minimize};
 
-pub use super::settings::OneStepSolver;
+use super::vfe::Vfe;
+
+pub use super::settings::{OneStepObjective, OneStepSolver};
 
 const LN_2PI: f64 = 1.837_877_066_409_345_3;
 
@@ -157,13 +162,13 @@ pub struct Hyper {
 }
 
 impl Hyper {
-    fn to_vec(&self) -> Vec<f64> {
+    pub(crate) fn to_vec(&self) -> Vec<f64> {
         let mut v = self.log_lengthscales.clone();
         v.push(self.log_signal_var);
         v.push(self.log_noise);
         v
     }
-    fn from_vec(v: &[f64]) -> Self {
+    pub(crate) fn from_vec(v: &[f64]) -> Self {
         let d = v.len() - 2;
         Self {
             log_lengthscales: v[..d].to_vec(),
@@ -172,7 +177,7 @@ impl Hyper {
         }
     }
     /// `1/ℓ_d²`.
-    fn inv_l2(&self) -> Vec<f64> {
+    pub(crate) fn inv_l2(&self) -> Vec<f64> {
         self.log_lengthscales
             .iter()
             .map(|l| (-2.0 * l).exp())
@@ -181,7 +186,7 @@ impl Hyper {
 }
 
 /// Negative log marginal likelihood (eq. 5) of one output, optionally with PILCO's penalties.
-struct Marginal {
+pub(crate) struct Marginal {
     /// The inputs, each column centred (the SE kernel sees only differences).
     xc: DMatrix<f64>,
     y: DVector<f64>,
@@ -192,7 +197,7 @@ struct Marginal {
 }
 
 impl Marginal {
-    fn new(
+    pub(crate) fn new(
         x: &DMatrix<f64>,
         y: DVector<f64>,
         config: GpConfig,
@@ -263,23 +268,32 @@ impl Objective for Marginal {
         let tr_w: f64 = (0..n).map(|i| alpha[i] * alpha[i] - kdiag[i]).sum();
         grad[d + 1] = -0.5 * tr_w * h.log_noise.exp();
         if let Some(std) = &self.pilco_std {
-            let p30 = |z: f64| z.powi(30);
-            let dp30 = |z: f64| 30.0 * z.powi(29);
-            let lls = 100f64.ln();
-            for dd in 0..d {
-                let z = (h.log_lengthscales[dd] - std[dd].ln()) / lls;
-                value += p30(z);
-                grad[dd] += dp30(z) / lls;
-            }
-            let lsnr = 500f64.ln();
-            // log σ_f − log σ_n, with σ_n² = floor + e^θ
-            let z = (0.5 * h.log_signal_var - 0.5 * sn2.ln()) / lsnr;
-            value += p30(z);
-            grad[d] += dp30(z) * 0.5 / lsnr;
-            grad[d + 1] -= dp30(z) * 0.5 / lsnr * h.log_noise.exp() / sn2;
+            value += pilco_penalty(&h, std, sn2, &mut grad);
         }
         Ok((value, grad))
     }
+}
+
+/// PILCO's penalties (`hypCurb`) at `h` with `σ_n² = sn2`: their value, their gradient added
+/// to `grad` (laid out as [`Hyper::to_vec`]).
+pub(crate) fn pilco_penalty(h: &Hyper, std: &[f64], sn2: f64, grad: &mut [f64]) -> f64 {
+    let d = h.log_lengthscales.len();
+    let p30 = |z: f64| z.powi(30);
+    let dp30 = |z: f64| 30.0 * z.powi(29);
+    let mut value = 0.0;
+    let lls = 100f64.ln();
+    for dd in 0..d {
+        let z = (h.log_lengthscales[dd] - std[dd].ln()) / lls;
+        value += p30(z);
+        grad[dd] += dp30(z) / lls;
+    }
+    let lsnr = 500f64.ln();
+    // log σ_f − log σ_n, with σ_n² = floor + e^θ
+    let z = (0.5 * h.log_signal_var - 0.5 * sn2.ln()) / lsnr;
+    value += p30(z);
+    grad[d] += dp30(z) * 0.5 / lsnr;
+    grad[d + 1] -= dp30(z) * 0.5 / lsnr * h.log_noise.exp() / sn2;
+    value
 }
 
 /// The L-BFGS of [`OneStepSolver::Lbfgs`]: it reaches the marginal likelihood's optimum in a
@@ -307,6 +321,8 @@ pub struct OneStepSettings {
     /// Most solver iterations on the marginal likelihood ([`ONE_STEP_LBFGS`] stops by itself
     /// when converged, typically after 30–100; Adam runs them all).
     pub iterations: usize,
+    /// The hyperparameters' objective and the pseudo-inputs' source.
+    pub objective: OneStepObjective,
     /// Add PILCO's penalties.
     pub pilco_penalty: bool,
     /// Most one-step pairs used for hyperparameters (an evenly spaced subset beyond that).
@@ -319,6 +335,7 @@ impl Default for OneStepSettings {
     fn default() -> Self {
         Self {
             solver: OneStepSolver::Lbfgs,
+            objective: OneStepObjective::Exact,
             iterations: 300,
             pilco_penalty: false,
             max_pairs: 1000,
@@ -476,12 +493,99 @@ pub fn fit_one_step(
         })
         .collect();
 
-    let pseudo = if m >= n {
+    let start = if m >= n {
         gx.clone()
     } else {
         kmeans(&gx, m, 30, seed)?
     };
-    let mm = pseudo.nrows();
+    let mm = start.nrows();
+    let solver = match settings.solver {
+        OneStepSolver::Lbfgs => Solver::Lbfgs(ONE_STEP_LBFGS),
+        OneStepSolver::Adam => Solver::Adam(Adam {
+            learning_rate: ONE_STEP_ADAM_STEP,
+            ..Adam::default()
+        }),
+    };
+    // each output's targets on the hyperparameters' subset, and the start of its fit
+    let subset = |a: usize| DVector::from_fn(idx.len(), |i, _| targets[(idx[i], a)]);
+    let start_hyper = |a: usize| -> Hyper {
+        let ys = subset(a);
+        let var_y = {
+            let mean = ys.mean();
+            ys.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (ys.len() as f64 - 1.0).max(1.0)
+        }
+        .max(1e-6);
+        let log_lengthscales = std.iter().map(|s| s.ln()).collect();
+        if structure.without_gp.contains(&a) {
+            // no GP: what the linear mean leaves over is noise (pseudo-targets stay zero)
+            Hyper {
+                log_lengthscales,
+                log_signal_var: NO_GP_SIGNAL_VAR.ln(),
+                log_noise: (var_y - config.noise_floor)
+                    .max(1e-3 * config.noise_floor)
+                    .ln(),
+            }
+        } else {
+            Hyper {
+                log_lengthscales,
+                log_signal_var: var_y.ln(),
+                log_noise: (0.05 * var_y).ln(),
+            }
+        }
+    };
+    // the variational sparse GP: hyperparameters of every output and the shared pseudo-inputs
+    // in one bound (with every window a pseudo-input it is the exact GP's likelihood)
+    let vfe_fit = match settings.objective {
+        OneStepObjective::Vfe if mm < idx.len() => {
+            let ys = (0..e)
+                .map(|a| (!structure.without_gp.contains(&a)).then(|| subset(a)))
+                .collect();
+            let mut objective = Vfe::new(
+                &xs,
+                ys,
+                mm,
+                *config,
+                settings.pilco_penalty.then(|| std.clone()),
+            );
+            let hypers: Vec<Hyper> = (0..e).map(start_hyper).collect();
+            let x0 = objective.pack(&hypers, &start);
+            let mut active = Vec::with_capacity(x0.len());
+            for a in 0..e {
+                let gp = !structure.without_gp.contains(&a);
+                active.extend((0..d + 2).map(|k| gp && !structure.ignored.contains(&k)));
+            }
+            for k in 0..d {
+                active.extend(std::iter::repeat_n(!structure.ignored.contains(&k), mm));
+            }
+            let mut best = (f64::INFINITY, x0.clone());
+            let (x, v) = minimize(
+                &mut objective,
+                &solver,
+                x0,
+                &active,
+                settings.iterations,
+                |_, v, x| {
+                    if v < best.0 {
+                        best = (v, x.to_vec());
+                    }
+                    Ok(Flow::Continue)
+                },
+            )?;
+            let x = if v.is_finite() && v < best.0 {
+                x
+            } else {
+                best.1
+            };
+            log.merge(&objective.log);
+            let hypers: Vec<Hyper> = (0..e).map(|a| objective.hyper(&x, a)).collect();
+            Some((hypers, objective.pseudo_inputs(&x)))
+        }
+        _ => None,
+    };
+    let pseudo = match &vfe_fit {
+        Some((_, z)) => z.clone(),
+        None => start,
+    };
     let mut params = GpParams {
         pseudo_inputs: pseudo.clone(),
         pseudo_targets: DMatrix::zeros(mm, e),
@@ -496,65 +600,46 @@ pub fn fit_one_step(
     let outputs: Vec<usize> = (0..e).collect();
     let fit_output = |_: usize, &a: &usize| -> Result<(Hyper, DVector<f64>, JitterLog)> {
         let mut log = JitterLog::default();
-        let ys = DVector::from_fn(idx.len(), |i, _| targets[(idx[i], a)]);
-        let var_y = {
-            let mean = ys.mean();
-            ys.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (ys.len() as f64 - 1.0).max(1.0)
-        }
-        .max(1e-6);
+        let h = if let Some((hypers, _)) = &vfe_fit {
+            hypers[a].clone()
+        } else if structure.without_gp.contains(&a) {
+            return Ok((start_hyper(a), DVector::zeros(mm), log));
+        } else {
+            let init = start_hyper(a);
+            let mut objective = Marginal::new(
+                &xs,
+                subset(a),
+                *config,
+                settings.pilco_penalty.then(|| std.clone()),
+            );
+            let mut active = vec![true; d + 2];
+            for &k in &structure.ignored {
+                active[k] = false;
+            }
+            let mut best = (f64::INFINITY, init.to_vec());
+            let (x, v) = minimize(
+                &mut objective,
+                &solver,
+                init.to_vec(),
+                &active,
+                settings.iterations,
+                |_, v, x| {
+                    if v < best.0 {
+                        best = (v, x.to_vec());
+                    }
+                    Ok(Flow::Continue)
+                },
+            )?;
+            log.merge(&objective.log);
+            if v.is_finite() && v < best.0 {
+                Hyper::from_vec(&x)
+            } else {
+                Hyper::from_vec(&best.1)
+            }
+        };
         if structure.without_gp.contains(&a) {
-            // no GP: what the linear mean leaves over is noise (pseudo-targets stay zero)
-            let h = Hyper {
-                log_lengthscales: std.iter().map(|s| s.ln()).collect(),
-                log_signal_var: NO_GP_SIGNAL_VAR.ln(),
-                log_noise: (var_y - config.noise_floor)
-                    .max(1e-3 * config.noise_floor)
-                    .ln(),
-            };
             return Ok((h, DVector::zeros(mm), log));
         }
-        let init = Hyper {
-            log_lengthscales: std.iter().map(|s| s.ln()).collect(),
-            log_signal_var: var_y.ln(),
-            log_noise: (0.05 * var_y).ln(),
-        };
-        let mut objective = Marginal::new(
-            &xs,
-            ys,
-            *config,
-            settings.pilco_penalty.then(|| std.clone()),
-        );
-        let solver = match settings.solver {
-            OneStepSolver::Lbfgs => Solver::Lbfgs(ONE_STEP_LBFGS),
-            OneStepSolver::Adam => Solver::Adam(Adam {
-                learning_rate: ONE_STEP_ADAM_STEP,
-                ..Adam::default()
-            }),
-        };
-        let mut active = vec![true; d + 2];
-        for &k in &structure.ignored {
-            active[k] = false;
-        }
-        let mut best = (f64::INFINITY, init.to_vec());
-        let (x, v) = minimize(
-            &mut objective,
-            &solver,
-            init.to_vec(),
-            &active,
-            settings.iterations,
-            |_, v, x| {
-                if v < best.0 {
-                    best = (v, x.to_vec());
-                }
-                Ok(Flow::Continue)
-            },
-        )?;
-        let h = if v.is_finite() && v < best.0 {
-            Hyper::from_vec(&x)
-        } else {
-            Hyper::from_vec(&best.1)
-        };
-        log.merge(&objective.log);
 
         // project onto the pseudo-inputs (DTC mean)
         let inv_l2 = h.inv_l2();

@@ -478,12 +478,20 @@ fn options_default_inducing_and_iterations() {
         mean: MeanFunction::Zero,
         iterations,
         solver: OneStepSolver::Lbfgs,
+        objective: OneStepObjective::Vfe,
     };
     assert_eq!(s.method, MethodSettings::GpNarx(one_step(100, 30)));
     let s = options(Method::PilcoNarx, Some(5), None)
         .settings(&[traj(4)])
         .expect("settings");
-    assert_eq!(s.method, MethodSettings::PilcoNarx(one_step(5, 300)));
+    // PILCO's variant keeps the exact GP's likelihood (`OneStepFitSettings::pilco`)
+    assert_eq!(
+        s.method,
+        MethodSettings::PilcoNarx(OneStepFitSettings {
+            objective: OneStepObjective::Exact,
+            ..one_step(5, 300)
+        })
+    );
     let s = options(Method::LinearKf, Some(5), Some(12))
         .settings(&[traj(40)])
         .expect("settings");
@@ -560,11 +568,12 @@ fn settings_serialise_with_the_methods_own_keys() {
     msgp_1_2.push("one_step_solver");
     msgp_1_2.push("alternative");
     msgp_1_2.push("start");
+    msgp_1_2.push("one_step_objective");
     assert_eq!(keys(&FitSettings::new(Method::Msgp)), with(&msgp_1_2));
     for m in [Method::GpNarx, Method::PilcoNarx] {
         assert_eq!(
             keys(&FitSettings::new(m)),
-            with(&["inducing", "iterations", "mean", "solver"])
+            with(&["inducing", "iterations", "mean", "objective", "solver"])
         );
     }
     assert_eq!(
@@ -588,8 +597,27 @@ fn settings_serialise_with_the_methods_own_keys() {
     let mut v = serde_json::to_value(FitSettings::new(Method::Msgp)).expect("json");
     assert_eq!(v["start"], "one-step");
     v.as_object_mut().expect("object").remove("start");
+    v.as_object_mut()
+        .expect("object")
+        .remove("one_step_objective");
     let back: FitSettings = serde_json::from_value(v).expect("reads back");
     assert_eq!(back.msgp().map(|s| s.start), Some(MsgpStart::OneStep));
+    // and records from before the variational bound as exact fits
+    assert_eq!(
+        back.msgp().map(|s| s.one_step_objective),
+        Some(OneStepObjective::Exact)
+    );
+    let mut v = serde_json::to_value(FitSettings::new(Method::GpNarx)).expect("json");
+    assert_eq!(v["objective"], "vfe");
+    v.as_object_mut().expect("object").remove("objective");
+    let back: FitSettings = serde_json::from_value(v).expect("reads back");
+    assert!(matches!(
+        back.method,
+        MethodSettings::GpNarx(OneStepFitSettings {
+            objective: OneStepObjective::Exact,
+            ..
+        })
+    ));
 }
 
 /// An MSGP fit on the filter likelihood lowers the filter loss of its training data from the

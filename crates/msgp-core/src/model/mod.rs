@@ -20,7 +20,8 @@ pub use metrics::{Metrics, pool, score, score_output};
 /// How the model was trained.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Method {
-    /// One-step GP-NARX, marginal likelihood (eq. 5).
+    /// One-step GP-NARX: a sparse GP of the one-step pairs by its marginal likelihood (the
+    /// variational bound, [`crate::fit::OneStepObjective::Vfe`]).
     GpNarx,
     /// One-step GP-NARX with PILCO's hyperparameter penalties.
     PilcoNarx,

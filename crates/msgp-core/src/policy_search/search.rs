@@ -295,7 +295,9 @@ fn cheapest_candidates(
 mod tests {
     use super::*;
     use crate::data::Trajectory;
-    use crate::fit::{FitSettings, MethodSettings, OneStepFitSettings, OneStepSolver, fit};
+    use crate::fit::{
+        FitSettings, MethodSettings, OneStepFitSettings, OneStepObjective, OneStepSolver, fit,
+    };
     use crate::gp::MeanFunction;
     use crate::model::Model;
     use crate::policy_search::{SaturatingCost, policy_gradient_duals};
@@ -322,6 +324,7 @@ mod tests {
                 // a one-step fit stopped short: on these noise-free outputs the optimum's noise
                 // sits at the floor and the rollouts lose the digits these tests compare
                 solver: OneStepSolver::Adam,
+                objective: OneStepObjective::Exact,
             }),
             ..FitSettings::default()
         };

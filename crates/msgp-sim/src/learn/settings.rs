@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use msgp_core::fit::{
     FitOptimizer, FitSettings, LinearKfSettings, MethodSettings, MsgpSettings, MsgpStart,
-    OneStepFitSettings,
+    OneStepFitSettings, OneStepObjective,
 };
 use msgp_core::gp::MeanFunction;
 use msgp_core::gp::integrator::Integrator;
@@ -175,7 +175,10 @@ impl LearnSettings {
             // the default solver, L-BFGS: GP-NARX's hyperparameters at the marginal
             // likelihood's optimum, as Table 1's baseline and PILCO's own training (`minimize`
             // to convergence) have them; on the apollo tier 2.6× faster than the 300 Adam steps
-            // used until 2026-12-04, 4 of 5 seeds stable against 5 of 5 (`docs/design.md`)
+            // used until 2026-12-04, 4 of 5 seeds stable against 5 of 5 (`docs/design.md`).
+            // The exact GP's marginal likelihood, then the projection: the loop's GP-NARX is
+            // PILCO's model (the paper's Figure 4), which fits the full GP before it sparsifies
+            objective: OneStepObjective::Exact,
             ..OneStepFitSettings::default()
         };
         s.fit.method = match method {
