@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use msgp_core::data::table::TimeSource;
-use msgp_core::fit::{FitOptimizer, MsgpStart};
+use msgp_core::fit::{FitOptimizer, MsgpStart, OneStepObjective};
 use msgp_core::gp::MeanFunction;
 use msgp_core::gp::integrator::Integrator;
 use msgp_core::loss::Likelihood;
@@ -167,6 +167,24 @@ impl From<StartArg> for MsgpStart {
     }
 }
 
+/// The objective of a one-step fit on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum OneStepArg {
+    /// The full GP's marginal likelihood, then projected onto k-means pseudo-inputs.
+    Exact,
+    /// The variational sparse GP's bound: hyperparameters and pseudo-inputs jointly.
+    Vfe,
+}
+
+impl From<OneStepArg> for OneStepObjective {
+    fn from(o: OneStepArg) -> Self {
+        match o {
+            OneStepArg::Exact => OneStepObjective::Exact,
+            OneStepArg::Vfe => OneStepObjective::Vfe,
+        }
+    }
+}
+
 /// The MSGP fit's likelihood on the command line.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum LikelihoodArg {
@@ -269,6 +287,12 @@ pub struct FitArgs {
     /// [default: one-step].
     #[arg(long, value_enum)]
     pub start: Option<StartArg>,
+    /// How the one-step fit (gp-narx, pilco-narx, and msgp's one-step start) gets its
+    /// hyperparameters and pseudo-inputs: vfe (the variational sparse GP's bound, both jointly)
+    /// or exact (the full GP's marginal likelihood, then k-means pseudo-inputs) [default: vfe for
+    /// gp-narx, exact for pilco-narx and for msgp's start].
+    #[arg(long = "one-step", value_enum, value_name = "OBJECTIVE")]
+    pub one_step: Option<OneStepArg>,
     /// Prior mean of the GP [default: msgp trains a zero-mean and a linear-mean recipe and
     /// keeps the one with the lower validation NLL; the baselines: zero].
     #[arg(long, value_enum)]

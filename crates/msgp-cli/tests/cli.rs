@@ -1070,6 +1070,44 @@ fn the_msgp_start_is_an_option_of_fit() {
     );
 }
 
+/// `--one-step` picks the one-step fit's objective: gp-narx defaults to the variational bound
+/// (its pseudo-inputs move from the k-means start), pilco-narx and MSGP's start to the exact GP;
+/// the model file records the choice, and linear-kf (no one-step fit) refuses the option.
+#[test]
+fn the_one_step_objective_is_an_option_of_fit() {
+    let dir = Scratch::new("one-step");
+    dir.write("s.csv", &system_csv(120, None));
+    let vfe = fitted_model(&dir, &["--method", "gp-narx"], "v.json");
+    let exact = fitted_model(
+        &dir,
+        &["--method", "gp-narx", "--one-step", "exact"],
+        "e.json",
+    );
+    assert_eq!(vfe["training"]["settings"]["objective"], "vfe");
+    assert_eq!(exact["training"]["settings"]["objective"], "exact");
+    assert_ne!(vfe["gp"]["pseudo_inputs"], exact["gp"]["pseudo_inputs"]);
+    let pilco = fitted_model(&dir, &["--method", "pilco-narx"], "p.json");
+    assert_eq!(pilco["training"]["settings"]["objective"], "exact");
+    let msgp = fitted_model(&dir, &["--one-step", "vfe"], "m.json");
+    assert_eq!(msgp["training"]["settings"]["one_step_objective"], "vfe");
+    fails(
+        &dir,
+        &args(
+            &[
+                "fit",
+                "--data",
+                "s.csv",
+                "--method",
+                "linear-kf",
+                "--one-step",
+                "vfe",
+            ],
+            &FAST,
+        ),
+        &["--one-step", "linear-kf"],
+    );
+}
+
 /// `--plant` picks the measurement-noise tier: the Apollo LQR gains, at the edge on the noisy
 /// tier (their derivative term turns 5 mrad of angle noise into command noise), pass the
 /// stability test on the Apollo tier; individual flags and a params file override the tier.

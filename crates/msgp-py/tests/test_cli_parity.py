@@ -98,6 +98,28 @@ def test_dryer_linear_kf_matches_cli(dryer, cli, tmp_path):
     assert np.all(np.asarray(loaded.params["pseudo_targets"]) == 0.0)
 
 
+def test_dryer_gp_narx_by_the_exact_gp_matches_cli(dryer, cli, tmp_path):
+    """`settings={"objective": "exact"}` in Python is `--one-step exact` on the command line;
+    the default GP-NARX (the variational bound) is a different model."""
+    path, u, y = dryer
+    out = tmp_path / "dryer.model.json"
+    report = cli_fit(
+        cli, path, out, 500, (2, 2), method="gp-narx", iters=30, inducing=20,
+        extra=("--one-step", "exact"),
+    )
+    model = msgp.Msgp(
+        method="gp-narx", inducing=20, iterations=30, seed=0, settings={"objective": "exact"}
+    ).fit(u[:500], y[:500])
+    report = report()
+    assert json.loads(model.to_json())["training"]["settings"]["objective"] == "exact"
+    assert_same_fit(report, model, model.score(u[500:], y[500:]), out)
+    default = msgp.Msgp(method="gp-narx", inducing=20, iterations=30, seed=0).fit(u[:500], y[:500])
+    assert json.loads(default.to_json())["training"]["settings"]["objective"] == "vfe"
+    assert not np.array_equal(
+        np.asarray(default.params["pseudo_inputs"]), np.asarray(model.params["pseudo_inputs"])
+    )
+
+
 def test_dryer_gp_narx_default_inducing_matches_cli(dryer, cli, tmp_path):
     """No --inducing: both take min(100, training windows / 2) = 100 pseudo-inputs."""
     path, u, y = dryer

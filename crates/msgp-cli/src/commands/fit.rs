@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use msgp_core::data::Trajectory;
-use msgp_core::fit::{FitOptimizer, FitOptions, FitProgress, MsgpStart, fit};
+use msgp_core::fit::{FitOptimizer, FitOptions, FitProgress, MethodSettings, MsgpStart, fit};
 use msgp_core::loss::Likelihood;
 use msgp_core::model::Method;
 use msgp_core::model_file::{FitRecord, ModelFile};
@@ -85,7 +85,24 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         start: args.start.map_or(MsgpStart::default(), Into::into),
         threads: Threads::from_env()?,
     };
-    let settings = options.settings(&trajs)?;
+    let mut settings = options.settings(&trajs)?;
+    if let Some(o) = args.one_step {
+        match &mut settings.method {
+            MethodSettings::GpNarx(s) | MethodSettings::PilcoNarx(s) => s.objective = o.into(),
+            MethodSettings::Msgp(s) if s.start == MsgpStart::OneStep => {
+                s.one_step_objective = o.into()
+            }
+            _ => bail!(
+                "--one-step: the objective of a one-step fit; --method {}{} has none",
+                method.name(),
+                if method == Method::Msgp {
+                    " --start linear-kf"
+                } else {
+                    ""
+                }
+            ),
+        }
+    }
     warnings.extend(options.inducing_warning(&trajs));
     for w in &warnings {
         eprintln!("warning: {w}");

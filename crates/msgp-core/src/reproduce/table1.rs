@@ -649,10 +649,13 @@ pub fn render(plan: &Plan, rows: &[Row], provenance: &Provenance) -> String {
          seed, training noise `N(0, s)` read as a standard deviation (`docs/design.md`), \
          noise-free test outputs. Real series: the paper's Table 3 splits and history lengths \
          (first samples train, the rest test; only the fits' seeds vary). Every method: m = {m} \
-         pseudo-inputs; MSGP: the default protocol of `msgp_core::fit::MsgpSettings` with at \
-         most {iters} {solver} iterations. MM: moment-matching simulation (the paper's method \
-         and our default); mean: the predicted means fed back, no uncertainty propagated \
-         (`msgp eval --rollout mean`), the reading that matches the paper's baseline columns.\n",
+         pseudo-inputs; GP-NARX: a sparse GP by the variational bound (hyperparameters and \
+         pseudo-inputs jointly); PILCO GP-NARX: the full GP's penalised marginal likelihood, \
+         then projected onto k-means pseudo-inputs; MSGP: the default protocol of \
+         `msgp_core::fit::MsgpSettings` with at most {iters} {solver} iterations. MM: \
+         moment-matching simulation (the paper's method for every column and our default); \
+         mean: the predicted means fed back, no uncertainty propagated (`msgp eval --rollout \
+         mean`).\n",
         seeds = seeds.join(", "),
         m = plan.inducing,
         iters = plan.iters.unwrap_or(MsgpSettings::default().iterations),
