@@ -10,6 +10,7 @@
 //! [`FitOptions`].
 
 mod divergence;
+mod hyper;
 pub mod linear_kf;
 mod msgp;
 pub mod one_step;

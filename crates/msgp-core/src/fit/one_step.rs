@@ -1,7 +1,6 @@
 //! The one-step baselines: GP-NARX trained by the marginal likelihood (eq. 5) on one-step pairs,
 //! and PILCO's variant with penalties on the signal-to-noise ratio and extreme length-scales
-//! (appendix A.1.1; PILCO's `hypCurb`: `Σ_d ((log ℓ_d − log std(x_d)) / log 100)^30 +
-//! ((log σ_f − log σ_n) / log 500)^30`).
+//! (appendix A.1.1; [`super::hyper`]).
 //!
 //! Two objectives ([`OneStepObjective`]). `Exact` (MSGP's start, PILCO's variant): the full GP's
 //! marginal likelihood, then the fitted GP is made sparse for moment-matching rollouts: `m`
@@ -31,6 +30,9 @@ use crate::numeric::parallel::Threads;
 use crate::optim::{Adam, Flow, Lbfgs, Objective, Solver, minimize};
 
 use super::vfe::Vfe;
+
+pub use super::hyper::Hyper;
+use super::hyper::pilco_penalty;
 
 pub use super::settings::{OneStepObjective, OneStepSolver};
 
@@ -150,41 +152,6 @@ pub fn stabilize_linear_mean(a: &mut DMatrix<f64>, ly: usize) -> Option<f64> {
     Some(rho)
 }
 
-/// Hyperparameters of one output's full GP.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Hyper {
-    /// `log ℓ_d`.
-    pub log_lengthscales: Vec<f64>,
-    /// `log σ_f²`.
-    pub log_signal_var: f64,
-    /// `log(σ_n² − floor)`.
-    pub log_noise: f64,
-}
-
-impl Hyper {
-    pub(crate) fn to_vec(&self) -> Vec<f64> {
-        let mut v = self.log_lengthscales.clone();
-        v.push(self.log_signal_var);
-        v.push(self.log_noise);
-        v
-    }
-    pub(crate) fn from_vec(v: &[f64]) -> Self {
-        let d = v.len() - 2;
-        Self {
-            log_lengthscales: v[..d].to_vec(),
-            log_signal_var: v[d],
-            log_noise: v[d + 1],
-        }
-    }
-    /// `1/ℓ_d²`.
-    pub(crate) fn inv_l2(&self) -> Vec<f64> {
-        self.log_lengthscales
-            .iter()
-            .map(|l| (-2.0 * l).exp())
-            .collect()
-    }
-}
-
 /// Negative log marginal likelihood (eq. 5) of one output, optionally with PILCO's penalties.
 pub(crate) struct Marginal {
     /// The inputs, each column centred (the SE kernel sees only differences).
@@ -272,28 +239,6 @@ impl Objective for Marginal {
         }
         Ok((value, grad))
     }
-}
-
-/// PILCO's penalties (`hypCurb`) at `h` with `σ_n² = sn2`: their value, their gradient added
-/// to `grad` (laid out as [`Hyper::to_vec`]).
-pub(crate) fn pilco_penalty(h: &Hyper, std: &[f64], sn2: f64, grad: &mut [f64]) -> f64 {
-    let d = h.log_lengthscales.len();
-    let p30 = |z: f64| z.powi(30);
-    let dp30 = |z: f64| 30.0 * z.powi(29);
-    let mut value = 0.0;
-    let lls = 100f64.ln();
-    for dd in 0..d {
-        let z = (h.log_lengthscales[dd] - std[dd].ln()) / lls;
-        value += p30(z);
-        grad[dd] += dp30(z) / lls;
-    }
-    let lsnr = 500f64.ln();
-    // log σ_f − log σ_n, with σ_n² = floor + e^θ
-    let z = (0.5 * h.log_signal_var - 0.5 * sn2.ln()) / lsnr;
-    value += p30(z);
-    grad[d] += dp30(z) * 0.5 / lsnr;
-    grad[d + 1] -= dp30(z) * 0.5 / lsnr * h.log_noise.exp() / sn2;
-    value
 }
 
 /// The L-BFGS of [`OneStepSolver::Lbfgs`]: it reaches the marginal likelihood's optimum in a
@@ -680,6 +625,49 @@ pub fn fit_one_step(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The variational bound against the exact marginal likelihood it generalises.
+    mod bound {
+        use super::super::*;
+        use crate::fit::vfe::tests as vfe_tests;
+
+        /// With every input a pseudo-input (and no jitter on `K_mm`) the bound is the exact negative
+        /// log marginal likelihood (`Q = K_nn`, no trace term). Short length-scales keep `K_nn`
+        /// well conditioned.
+        #[test]
+        fn with_every_input_as_pseudo_input_the_bound_is_the_marginal_likelihood() {
+            let (x, y) = vfe_tests::problem(30);
+            let config = GpConfig::default();
+            let short = Hyper {
+                log_lengthscales: vec![-1.8, -1.5, -1.6],
+                ..vfe_tests::hyper()
+            };
+            let mut vfe = Vfe::new(&x, vec![Some(y.clone())], 30, config, None);
+            vfe.kmm_jitter = 0.0;
+            let p = vfe.pack(std::slice::from_ref(&short), &x);
+            let (v, g) = vfe.value_and_gradient(&p).expect("bound");
+            let mut exact = Marginal::new(&x, y, config, None);
+            let (e, ge) = exact.value_and_gradient(&short.to_vec()).expect("exact");
+            assert!(
+                (v - e).abs() <= 1e-8 * e.abs().max(1.0),
+                "bound {v} vs exact {e}"
+            );
+            // at Z = X the bound is the marginal likelihood for every hyperparameter: so are
+            // their derivatives
+            for (i, (a, b)) in g.iter().zip(&ge).enumerate() {
+                assert!(
+                    (a - b).abs() <= 1e-6 * b.abs().max(1.0),
+                    "hyper {i}: {a} vs {b}"
+                );
+            }
+            // fewer pseudo-inputs: a bound, strictly above the exact value
+            let z = x.rows(0, 8).into_owned();
+            let mut sparse = Vfe::new(&x, vec![Some(vfe_tests::problem(30).1)], 8, config, None);
+            let p = sparse.pack(&[short], &z);
+            let (vs, _) = sparse.value_and_gradient(&p).expect("bound");
+            assert!(vs > e + 1e-3, "sparse bound {vs} not above exact {e}");
+        }
+    }
 
     /// The stabilisation scales every eigenvalue of the autoregressive part by the same factor:
     /// an unstable second-order map (roots 1.2 and 0.5) becomes roots 0.99 and 0.4125, the input
