@@ -1,12 +1,12 @@
 //! The one-step baselines: GP-NARX trained by the marginal likelihood (eq. 5) on one-step pairs,
 //! and PILCO's variant with penalties on the signal-to-noise ratio and extreme length-scales
-//! (appendix A.1.1; [`super::hyper`]).
+//! (appendix A.1.1; `fit::hyper`).
 //!
 //! Two objectives ([`OneStepObjective`]). `Exact` (MSGP's start, PILCO's variant): the full GP's
 //! marginal likelihood, then the fitted GP is made sparse for moment-matching rollouts: `m`
 //! pseudo-inputs from seeded k-means over the training windows. `Vfe` (the GP-NARX baseline): the
 //! hyperparameters and the pseudo-inputs (from the same k-means start) by the variational
-//! sparse GP's bound ([`super::vfe`]). Either way the pseudo-targets are chosen so that the sparse mean
+//! sparse GP's bound (`fit::vfe`). Either way the pseudo-targets are chosen so that the sparse mean
 //! `k(x)ᵀ K̃_m⁻¹ ȳ` equals the DTC/projected-process mean
 //! `k(x)ᵀ (σ_n² K_mm + K_mn K_nm)⁻¹ K_mn y`, i.e. `ȳ = K̃_m (σ_n² K_mm + K_mn K_nm)⁻¹ K_mn y`.
 //! The exact objective's sparse GP-NARX is MSGP's initialisation, as in the paper.

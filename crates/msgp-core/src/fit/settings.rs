@@ -213,7 +213,7 @@ pub enum OneStepObjective {
     /// onto seeded k-means pseudo-inputs ([`super::one_step`]): MSGP's start.
     Exact,
     /// The variational sparse GP's collapsed bound (Titsias 2009), hyperparameters and
-    /// pseudo-inputs jointly from the k-means start ([`super::vfe`]): the sparse GP the
+    /// pseudo-inputs jointly from the k-means start (`fit::vfe`): the sparse GP the
     /// baselines of the paper's Table 1 most likely are (`docs/design.md`).
     Vfe,
 }
