@@ -97,7 +97,7 @@ def test_bad_constructor_arguments(kwargs, message):
 def test_fit_defaults_are_the_methods_own():
     """`defaults("fit", method=...)`: the shared settings and the method's own only."""
     shared = {"ly", "lu", "seed", "integrators", "method"}
-    assert set(msgp.defaults("fit", method="gp-narx")) == shared | {"inducing", "mean", "iterations", "solver"}
+    assert set(msgp.defaults("fit", method="gp-narx")) == shared | {"inducing", "mean", "iterations", "solver", "objective"}
     assert set(msgp.defaults("fit", method="linear-kf")) == shared | {"iterations"}
     full = msgp.defaults("fit")
     assert full == msgp.defaults("fit", method="msgp")

@@ -659,7 +659,10 @@ impl FitOptions {
         let one_step = OneStepFitSettings {
             inducing,
             mean,
-            ..OneStepFitSettings::default()
+            ..match self.method {
+                Method::PilcoNarx => OneStepFitSettings::pilco(),
+                _ => OneStepFitSettings::default(),
+            }
         };
         // a mean the user chose is not second-guessed: its recipe trains alone; the linear-kf
         // start is a linear mean (a zero one is refused by `validate`)
@@ -683,10 +686,7 @@ impl FitOptions {
                 ..defaults
             }),
             Method::GpNarx => MethodSettings::GpNarx(one_step),
-            Method::PilcoNarx => MethodSettings::PilcoNarx(OneStepFitSettings {
-                objective: OneStepObjective::Exact,
-                ..one_step
-            }),
+            Method::PilcoNarx => MethodSettings::PilcoNarx(one_step),
             Method::LinearKf => MethodSettings::LinearKf(LinearKfSettings::default()),
         };
         let settings = FitSettings {
