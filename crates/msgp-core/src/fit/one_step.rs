@@ -391,6 +391,29 @@ fn arx_solve(
     Ok(ch.solve(&(x.transpose() * y)))
 }
 
+/// Minimises `objective` from `x0` and returns the final iterate, or the lowest one seen when
+/// the last is not finite or not the lowest (Adam does not descend monotonically).
+fn minimize_to_best(
+    objective: &mut dyn Objective,
+    solver: &Solver,
+    x0: Vec<f64>,
+    active: &[bool],
+    iterations: usize,
+) -> Result<Vec<f64>> {
+    let mut best = (f64::INFINITY, x0.clone());
+    let (x, v) = minimize(objective, solver, x0, active, iterations, |_, v, x| {
+        if v < best.0 {
+            best = (v, x.to_vec());
+        }
+        Ok(Flow::Continue)
+    })?;
+    Ok(if v.is_finite() && v < best.0 {
+        x
+    } else {
+        best.1
+    })
+}
+
 /// Fits one-step GP-NARX hyperparameters per output and projects onto `m` pseudo-inputs.
 /// Returns the sparse model (process noise = one-step noise, observation noise at the floor).
 /// The outputs' fits run on up to [`OneStepSettings::threads`] threads; the result does not
@@ -502,25 +525,7 @@ pub fn fit_one_step(
             for k in 0..d {
                 active.extend(std::iter::repeat_n(!structure.ignored.contains(&k), mm));
             }
-            let mut best = (f64::INFINITY, x0.clone());
-            let (x, v) = minimize(
-                &mut objective,
-                &solver,
-                x0,
-                &active,
-                settings.iterations,
-                |_, v, x| {
-                    if v < best.0 {
-                        best = (v, x.to_vec());
-                    }
-                    Ok(Flow::Continue)
-                },
-            )?;
-            let x = if v.is_finite() && v < best.0 {
-                x
-            } else {
-                best.1
-            };
+            let x = minimize_to_best(&mut objective, &solver, x0, &active, settings.iterations)?;
             log.merge(&objective.log);
             let hypers: Vec<Hyper> = (0..e).map(|a| objective.hyper(&x, a)).collect();
             Some((hypers, objective.pseudo_inputs(&x)))
@@ -561,26 +566,15 @@ pub fn fit_one_step(
             for &k in &structure.ignored {
                 active[k] = false;
             }
-            let mut best = (f64::INFINITY, init.to_vec());
-            let (x, v) = minimize(
+            let x = minimize_to_best(
                 &mut objective,
                 &solver,
                 init.to_vec(),
                 &active,
                 settings.iterations,
-                |_, v, x| {
-                    if v < best.0 {
-                        best = (v, x.to_vec());
-                    }
-                    Ok(Flow::Continue)
-                },
             )?;
             log.merge(&objective.log);
-            if v.is_finite() && v < best.0 {
-                Hyper::from_vec(&x)
-            } else {
-                Hyper::from_vec(&best.1)
-            }
+            Hyper::from_vec(&x)
         };
         if structure.without_gp.contains(&a) {
             return Ok((h, DVector::zeros(mm), log));
