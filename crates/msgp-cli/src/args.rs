@@ -496,7 +496,9 @@ pub struct BudgetArgs {
     /// by K standard deviations of their predicted cost; 0: always), prequential=true|false
     /// (MSGP, on by default with the filter likelihood: each iteration also fits the linear
     /// model of the data and the search runs on the GP model only while the GP predicts the
-    /// episodes it had not seen better).
+    /// episodes it had not seen better), one-step-solver=adam|lbfgs and
+    /// one-step-objective=exact|vfe (GP-NARX's fit and the free-run MSGP's start: the one-step
+    /// solver, and the exact GP's marginal likelihood or the variational bound).
     #[arg(long = "experimental", value_name = "KEY=VALUE", value_parser = Experiment::parse)]
     pub experimental: Vec<Experiment>,
 }

@@ -210,7 +210,7 @@ impl Msgp {
                     .unwrap_or_default(),
                 threads: Threads::default(),
             },
-            overrides: None,
+            overrides: recorded_overrides(model.method, &file.training.settings),
             fitted: Some(Arc::new(Fitted {
                 file,
                 model,
@@ -891,4 +891,27 @@ impl Msgp {
             }
         }
     }
+}
+
+/// The settings a model file records that the constructor's arguments do not carry (the
+/// one-step solver and objective, the learning rate, the integrators, …), as the `settings`
+/// overrides of a refit: `Msgp.load(f).fit(...)` trains as the file's own fit did. `None` when
+/// the record is not this method's settings (files before format 1.2 held every method's).
+fn recorded_overrides(method: Method, recorded: &serde_json::Value) -> Option<serde_json::Value> {
+    let defaults = serde_json::to_value(FitSettings::new(method)).ok()?;
+    let own = defaults.as_object()?;
+    let kept: serde_json::Map<String, serde_json::Value> = recorded
+        .as_object()?
+        .iter()
+        .filter(|(k, _)| {
+            own.contains_key(k.as_str())
+                && k.as_str() != "threads"
+                && !OWN_SETTINGS.iter().any(|(o, _)| o == k)
+        })
+        .map(|(k, v)| (k.clone(), v.clone()))
+        .collect();
+    let kept = serde_json::Value::Object(kept);
+    crate::convert::merged::<FitSettings>(&defaults, &kept, "settings")
+        .is_ok()
+        .then_some(kept)
 }

@@ -120,6 +120,27 @@ def test_dryer_gp_narx_by_the_exact_gp_matches_cli(dryer, cli, tmp_path):
     )
 
 
+def test_a_loaded_model_refits_with_its_own_settings(dryer, cli, tmp_path):
+    """`msgp fit --one-step exact`'s file, loaded in Python and fitted again on the same data,
+    is the same fit: the method's own settings the constructor has no argument for (here the
+    one-step objective) come from the file's record, not from the defaults."""
+    path, u, y = dryer
+    out = tmp_path / "dryer.model.json"
+    cli_fit(
+        cli, path, out, 500, (2, 2), method="gp-narx", iters=30, inducing=20,
+        extra=("--one-step", "exact"),
+    )()
+    saved = json.loads(out.read_text())
+    refit = msgp.Msgp.load(out).fit(u[:500], y[:500])
+    mine = json.loads(refit.to_json())
+    assert mine["training"]["settings"]["objective"] == "exact"
+    assert mine["training"]["settings"] == saved["training"]["settings"]
+    for key in ("pseudo_inputs", "pseudo_targets", "log_lengthscales"):
+        np.testing.assert_array_equal(
+            np.asarray(refit.params[key]), np.asarray(msgp.Msgp.load(out).params[key])
+        )
+
+
 def test_dryer_gp_narx_default_inducing_matches_cli(dryer, cli, tmp_path):
     """No --inducing: both take min(100, training windows / 2) = 100 pseudo-inputs."""
     path, u, y = dryer

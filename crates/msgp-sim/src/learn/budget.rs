@@ -5,7 +5,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use msgp_core::fit::{FitOptimizer, FitSettings, MethodSettings, OneStepSolver};
+use msgp_core::fit::{FitOptimizer, FitSettings, MethodSettings, OneStepObjective, OneStepSolver};
 use msgp_core::gp::MeanFunction;
 use msgp_core::loss::Likelihood;
 use msgp_core::model::Method;
@@ -50,10 +50,14 @@ pub enum Experiment {
     /// minimised — GP-NARX's whole fit, the free-run MSGP's start ([`OneStepSolver`]); the
     /// filtered MSGP starts from the linear-kf model and has no one-step fit to change.
     OneStepSolver(OneStepSolver),
+    /// `one-step-objective=exact|vfe` (GP models): the one-step fit's likelihood — the exact
+    /// GP's marginal likelihood on at most 1000 pairs, or Titsias' bound with the pseudo-inputs
+    /// ([`OneStepObjective`]).
+    OneStepObjective(OneStepObjective),
 }
 
 /// The keys of [`Experiment`], as written on the command line.
-pub const EXPERIMENT_KEYS: [&str; 10] = [
+pub const EXPERIMENT_KEYS: [&str; 11] = [
     "start-smoothing",
     "fb-segment",
     "free-position",
@@ -64,6 +68,7 @@ pub const EXPERIMENT_KEYS: [&str; 10] = [
     "hold-margin",
     "prequential",
     "one-step-solver",
+    "one-step-objective",
 ];
 
 impl Experiment {
@@ -80,6 +85,7 @@ impl Experiment {
             Experiment::HoldMargin(_) => 7,
             Experiment::Prequential(_) => 8,
             Experiment::OneStepSolver(_) => 9,
+            Experiment::OneStepObjective(_) => 10,
         }]
     }
 
@@ -128,6 +134,13 @@ impl Experiment {
                 true => OneStepSolver::Adam,
                 false => OneStepSolver::Lbfgs,
             }),
+            "one-step-objective" => {
+                Experiment::OneStepObjective(match value.to_ascii_lowercase().as_str() {
+                    "exact" => OneStepObjective::Exact,
+                    "vfe" => OneStepObjective::Vfe,
+                    _ => return Err(format!("{key} is exact or vfe, got `{value}`")),
+                })
+            }
             other => {
                 return Err(format!(
                     "unknown experiment `{other}` (known: {})",
@@ -273,6 +286,7 @@ impl Budget {
         let mut hold_margin = d.hold_margin;
         let mut prequential_choice = d.prequential_choice;
         let mut one_step_solver = None;
+        let mut one_step_objective = None;
         for e in &self.experimental {
             if matches!(
                 e,
@@ -280,10 +294,13 @@ impl Budget {
                     | Experiment::FitOptimizer(_)
                     | Experiment::Prequential(true)
             ) && method != Method::Msgp
-                || matches!(e, Experiment::OneStepSolver(_)) && method == Method::LinearKf
+                || matches!(
+                    e,
+                    Experiment::OneStepSolver(_) | Experiment::OneStepObjective(_)
+                ) && method == Method::LinearKf
             {
                 let fit = match e {
-                    Experiment::OneStepSolver(_) => "a GP fit",
+                    Experiment::OneStepSolver(_) | Experiment::OneStepObjective(_) => "a GP fit",
                     _ => "the MSGP fit",
                 };
                 return Err(invalid(
@@ -305,6 +322,7 @@ impl Budget {
                 Experiment::HoldMargin(k) => hold_margin = k,
                 Experiment::Prequential(b) => prequential_choice = b,
                 Experiment::OneStepSolver(o) => one_step_solver = Some(o),
+                Experiment::OneStepObjective(o) => one_step_objective = Some(o),
             }
         }
         if !(trust_region.is_finite() && trust_region >= 0.0) {
@@ -365,11 +383,17 @@ impl Budget {
                 if let Some(o) = one_step_solver {
                     s.one_step_solver = o;
                 }
+                if let Some(o) = one_step_objective {
+                    s.one_step_objective = o;
+                }
             }
             MethodSettings::GpNarx(s) | MethodSettings::PilcoNarx(s) => {
                 s.mean = self.mean;
                 if let Some(o) = one_step_solver {
                     s.solver = o;
+                }
+                if let Some(o) = one_step_objective {
+                    s.objective = o;
                 }
             }
             MethodSettings::LinearKf(_) => {}
@@ -498,7 +522,7 @@ mod tests {
     }
 
     #[test]
-    fn the_one_step_solver_switch_reaches_gp_narx_and_the_msgp_start() {
+    fn the_one_step_switches_reach_gp_narx_and_the_msgp_start() {
         // GP-NARX's default is L-BFGS, MSGP's start Adam: each switched to the other
         let budget = Budget {
             experimental: vec![Experiment::OneStepSolver(OneStepSolver::Adam)],
@@ -534,6 +558,32 @@ mod tests {
             s.fit.msgp().map(|m| m.one_step_solver),
             Some(OneStepSolver::Lbfgs)
         );
+        // the one-step objective: the free-run MSGP's start and GP-NARX's whole fit
+        let vfe = |likelihood| Budget {
+            likelihood,
+            experimental: vec![Experiment::OneStepObjective(OneStepObjective::Vfe)],
+            ..Budget::default()
+        };
+        assert_eq!(
+            d.fit.msgp().map(|m| m.one_step_objective),
+            Some(OneStepObjective::Exact)
+        );
+        let s = vfe(Some(Likelihood::FreeRun))
+            .settings(Method::Msgp, 0, 1)
+            .expect("valid");
+        assert_eq!(
+            s.fit.msgp().map(|m| m.one_step_objective),
+            Some(OneStepObjective::Vfe)
+        );
+        let s = vfe(None).settings(Method::GpNarx, 0, 1).expect("valid");
+        match &s.fit.method {
+            MethodSettings::GpNarx(o) => assert_eq!(o.objective, OneStepObjective::Vfe),
+            other => panic!("{other:?}"),
+        }
+        let err = vfe(None)
+            .settings(Method::LinearKf, 0, 1)
+            .expect_err("linear-kf has no one-step fit");
+        assert!(err.to_string().contains("one-step-objective"), "{err}");
     }
 
     #[test]
@@ -546,7 +596,7 @@ mod tests {
         );
         for (k, key) in EXPERIMENT_KEYS.iter().enumerate() {
             let value = [
-                "4", "4", "true", "5", "1", "0.5", "adam", "1", "false", "lbfgs",
+                "4", "4", "true", "5", "1", "0.5", "adam", "1", "false", "lbfgs", "vfe",
             ][k];
             let e = Experiment::parse(&format!("{key}={value}")).expect("parses");
             assert_eq!(e.key(), *key);
@@ -564,6 +614,7 @@ mod tests {
             "free-position=1",
             "trust-region",
             "one-step-solver=newton",
+            "one-step-objective=sparse",
         ] {
             assert!(Experiment::parse(bad).is_err(), "{bad}");
         }
