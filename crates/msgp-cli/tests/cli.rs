@@ -446,6 +446,40 @@ fn linear_prior_mean_is_fitted_saved_and_used() {
     for key in ["rmse", "nll"] {
         assert_eq!(e[key], v[key], "`{key}` differs between fit and eval");
     }
+    assert_eq!(e["diverged"], false, "{e}");
+    assert_eq!(e["divergence"], Value::Null);
+    // the same model with its output lags' coefficients replaced by a pole at 1.1 runs away on
+    // the evaluated data: eval and simulate say so (stderr, text, JSON) and still report what
+    // they computed
+    let mut unstable = model.clone();
+    unstable["gp"]["linear_mean"][0][0] = serde_json::json!(1.1);
+    unstable["gp"]["linear_mean"][0][1] = serde_json::json!(0.0);
+    dir.write("u.json", &unstable.to_string());
+    let eval = [
+        "eval", "--model", "u.json", "--data", "s.csv", "--from", "80",
+    ];
+    let o = run(&dir, &args(&eval, &["--json"]));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let e: Value = serde_json::from_str(&stdout(&o)).expect("stdout is JSON");
+    assert_eq!(e["diverged"], true, "{e}");
+    let why = e["divergence"].as_str().expect("why");
+    assert!(
+        why.contains("s.csv") && why.contains("leaves the measured outputs' range"),
+        "{why}"
+    );
+    assert!(
+        stderr(&o).contains("warning: the model diverges on this data"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(ok(&dir, &eval).contains("WARNING: the model diverges on this data"));
+    let text = ok(
+        &dir,
+        &[
+            "simulate", "--model", "u.json", "--data", "s.csv", "--out", "p.csv",
+        ],
+    );
+    assert!(text.contains("WARNING: the model diverges"), "{text}");
     fails(
         &dir,
         &["fit", "--data", "s.csv", "--mean", "quadratic"],

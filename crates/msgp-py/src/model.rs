@@ -7,7 +7,9 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use msgp_core::data::Trajectory;
-use msgp_core::fit::{FitOptimizer, FitOptions, FitReport, FitSettings, MsgpStart, fit_observed};
+use msgp_core::fit::{
+    FitOptimizer, FitOptions, FitReport, FitSettings, MsgpStart, OutputRange, fit_observed,
+};
 use msgp_core::loss::Likelihood;
 use msgp_core::model::{Method, Metrics, Model, Rollout, pool, score};
 use msgp_core::model_file::{FitRecord, ModelFile};
@@ -603,9 +605,11 @@ impl Msgp {
 
     /// Free simulation of each trajectory of `u`, `y` from its first `max(l_y, l_u)` samples,
     /// scored against `y`: dict of `rmse`, `nll` (mean per step), `coverage_2sigma`, `steps`,
-    /// pooled over all trajectories like `msgp eval`. `rollout` as in `simulate`; with
-    /// `filtered=True` the dict also holds `filtered`, the same metrics of the one-step-ahead
-    /// filtered predictions (`msgp eval --filtered`).
+    /// pooled over all trajectories like `msgp eval`, and `diverged`/`divergence`: whether (and
+    /// why) the simulation runs away from the measured outputs, as `msgp eval` tests it (also
+    /// warned as a RuntimeWarning). `rollout` as in `simulate`; with `filtered=True` the dict
+    /// also holds `filtered`, the same metrics of the one-step-ahead filtered predictions
+    /// (`msgp eval --filtered`).
     #[pyo3(signature = (u, y, *, rollout = "mm", filtered = false))]
     fn score<'py>(
         slf: &Bound<'py, Self>,
@@ -627,26 +631,55 @@ impl Msgp {
             };
             Msgp::check_measured(&fitted.model, t, &prefix)?;
         }
-        let (metrics, filtered) = detached(py, move || {
+        let (metrics, filtered, diverged) = detached(py, move || {
             let model = &fitted.model;
-            let pooled = |predict: &dyn Fn(&Trajectory) -> msgp_core::Result<_>| {
-                let each = trajs
-                    .iter()
-                    .map(|t| Ok(score(&predict(t)?, t)?))
-                    .collect::<Result<Vec<Metrics>>>()?;
-                pool(&each, model.spec.dy).ok_or_else(|| input("nothing to score"))
-            };
-            let metrics = pooled(&|t| model.simulate_as(t, rollout))?;
+            let dy = model.spec.dy;
+            let pooled =
+                |each: Vec<Metrics>| pool(&each, dy).ok_or_else(|| input("nothing to score"));
+            // the free simulation, scored and held against each trajectory's measured outputs
+            // (`msgp eval`'s divergence test)
+            let mut diverged = None;
+            let mut each = Vec::with_capacity(trajs.len());
+            for (k, t) in trajs.iter().enumerate() {
+                let sim = model.simulate_as(t, rollout)?;
+                if diverged.is_none() {
+                    let what = if several {
+                        format!("trajectory {k}")
+                    } else {
+                        "the data".to_string()
+                    };
+                    diverged = OutputRange::of(&[t], dy).divergence(&sim, &what);
+                }
+                each.push(score(&sim, t)?);
+            }
+            let metrics = pooled(each)?;
             let filtered = match filtered {
-                true => Some(pooled(&|t| model.filtered(t))?),
+                true => Some(pooled(
+                    trajs
+                        .iter()
+                        .map(|t| Ok(score(&model.filtered(t)?, t)?))
+                        .collect::<Result<Vec<Metrics>>>()?,
+                )?),
                 false => None,
             };
-            Ok((metrics, filtered))
+            Ok((metrics, filtered, diverged))
         })?;
         let d = metrics_dict(py, &metrics)?;
         if let Some(f) = &filtered {
             d.set_item("filtered", metrics_dict(py, f)?)?;
         }
+        d.set_item("diverged", diverged.is_some())?;
+        if let Some(why) = &diverged {
+            let warning = py.get_type::<pyo3::exceptions::PyRuntimeWarning>();
+            PyErr::warn(
+                py,
+                &warning,
+                &std::ffi::CString::new(format!("the model diverges on this data: {why}"))
+                    .unwrap_or_default(),
+                1,
+            )?;
+        }
+        d.set_item("divergence", diverged)?;
         Ok(d)
     }
 

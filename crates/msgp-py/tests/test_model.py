@@ -89,6 +89,16 @@ def test_linear_prior_mean_is_in_params_file_and_prediction(tmp_path):
     a = model.simulate(data["u_test"], data["y_test"])
     b = loaded.simulate(data["u_test"], data["y_test"])
     assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    # `score` holds the simulation against the measured outputs as `msgp eval` does: silent on
+    # this model, a warning and the reason when its output lag's coefficient is a pole at 1.1
+    s = model.score(data["u_test"], data["y_test"])
+    assert s["diverged"] is False and s["divergence"] is None
+    doc["gp"]["linear_mean"][0][0] = 1.1
+    unstable = msgp.Msgp.from_json(json.dumps(doc))
+    with pytest.warns(RuntimeWarning, match="diverges on this data"):
+        s = unstable.score(data["u_test"][:60], data["y_test"][:60])
+    assert s["diverged"] is True
+    assert "the data leaves the measured outputs' range" in s["divergence"], s["divergence"]
     # without the mean the file has no such field
     plain = msgp.Msgp(history=data["history"], method="gp-narx", inducing=30, iterations=5, seed=1)
     plain.fit(data["u_train"], data["y_train"]).save(tmp_path / "plain.json")

@@ -12,7 +12,8 @@ use crate::render::plot::plot;
 use crate::render::prediction;
 use crate::render::report::{metrics_json, metrics_line, trajectories};
 use msgp_core::data::dataset::{Dataset, Part, Selection, check_lengths};
-use msgp_core::model::pool;
+use msgp_core::fit::OutputRange;
+use msgp_core::model::{Simulated, pool};
 
 /// The model, its file and the data sliced from `from`.
 struct Loaded {
@@ -81,11 +82,25 @@ fn load(model_path: &std::path::Path, args: &DataArgs, from: usize) -> anyhow::R
     })
 }
 
+/// Why a free simulation of `sims` runs away from its part's measured outputs (the fit's
+/// divergence test, held against the evaluated data: `msgp_core::fit::OutputRange`), warned on
+/// stderr; `None` when every part stays in range.
+fn divergence(sims: &[Simulated]) -> Option<String> {
+    let why = sims.iter().find_map(|s| {
+        OutputRange::of(&[&s.part.traj], s.sim.mean.ncols()).divergence(&s.sim, &s.part.label())
+    });
+    if let Some(why) = &why {
+        eprintln!("warning: the model diverges on this data: {why}");
+    }
+    why
+}
+
 /// Runs `msgp eval`.
 pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
     let l = load(&args.model, &args.data, args.from)?;
     let rollout = Rollout::from(args.rollout);
     let sims = l.model.simulate_parts_as(&l.parts, rollout)?;
+    let diverged = divergence(&sims);
     let metrics = pool(
         &sims.iter().map(|s| s.metrics).collect::<Vec<_>>(),
         l.model.spec.dy,
@@ -122,6 +137,8 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
             "from": args.from,
             "rollout": rollout.name(),
             "plot": args.plot.as_ref().map(|p| p.display().to_string()),
+            "diverged": diverged.is_some(),
+            "divergence": diverged,
         });
         metrics_json(&mut v, metrics.as_ref());
         if args.filtered {
@@ -146,6 +163,11 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
         text.push('\n');
         text.push_str(&metrics_line("one-step-ahead filtered", filtered.as_ref()));
     }
+    if let Some(why) = &diverged {
+        text.push_str(&format!(
+            "\nWARNING: the model diverges on this data: {why}"
+        ));
+    }
     if let Some(p) = &args.plot {
         text.push_str(&format!("\nplot written to {}", p.display()));
     }
@@ -166,6 +188,7 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let l = load(&args.model, &args.data, args.from)?;
     let rollout = Rollout::from(args.rollout);
     let sims = l.model.simulate_parts_as(&l.parts, rollout)?;
+    let diverged = divergence(&sims);
     let filtered = match args.filtered {
         true => Some(l.model.filtered_parts(&l.parts)?),
         false => None,
@@ -187,6 +210,8 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
             "rows": rows,
             "rollout": rollout.name(),
             "trajectories": sims.len(),
+            "diverged": diverged.is_some(),
+            "divergence": diverged,
         });
         metrics_json(&mut v, metrics.as_ref());
         if let Some(f) = &filtered {
@@ -201,12 +226,15 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         return out_json(&v);
     }
     out(&format!(
-        "wrote {rows} simulated steps of {} to {}\n{}",
+        "wrote {rows} simulated steps of {} to {}\n{}{}",
         trajectories(sims.len()),
         args.out.display(),
         metrics_line(
             &format!("free simulation{}", rollout_note(rollout)),
             metrics.as_ref()
-        )
+        ),
+        diverged
+            .map(|why| format!("\nWARNING: the model diverges on this data: {why}"))
+            .unwrap_or_default()
     ))
 }

@@ -17,7 +17,7 @@ pub mod one_step;
 mod settings;
 mod vfe;
 
-pub use divergence::{DIVERGENCE_RANGES, check_divergence};
+pub use divergence::{DIVERGENCE_RANGES, OutputRange, check_divergence};
 pub use settings::{
     DEFAULT_MAX_INDUCING, DEFAULT_ONE_STEP_ITERATIONS, FIT_LBFGS, FitOptimizer, FitOptions,
     FitSettings, LINEAR_RECIPE, LinearKfSettings, MethodSettings, MsgpSettings, MsgpStart,

@@ -701,7 +701,26 @@ fn the_divergence_check_fires_on_an_unstable_model_only() {
     let mut unstable = model.clone();
     unstable.params.linear_mean[(0, 0)] = 1.3;
     let why = check_divergence(&unstable, &[&traj]).expect("a pole at 1.3 diverges");
-    assert!(why.contains("leaves the training outputs' range"), "{why}");
+    assert!(
+        why.contains("training trajectory 0") && why.contains("leaves the measured outputs' range"),
+        "{why}"
+    );
+    // the same test against other data's outputs (what `msgp eval` runs): the stable model
+    // stays inside them, the unstable one leaves them
+    let range = OutputRange::of(&[&traj], 1);
+    let sim = model.simulate(&traj).expect("simulates");
+    assert_eq!(range.divergence(&sim, "the test part"), None);
+    let sim = unstable.simulate(&traj).expect("simulates");
+    let why = range
+        .divergence(&sim, "the test part")
+        .expect("the unstable model leaves the test outputs");
+    assert!(
+        why.starts_with("the free simulation of the test part leaves"),
+        "{why}"
+    );
+    // an output that was not measured (no finite range) is not judged
+    let unmeasured = OutputRange::of(&[], 1);
+    assert_eq!(unmeasured.divergence(&sim, "x"), None);
     let mut noisy = model.clone();
     // a process noise far above the outputs' range: the mean stays, the variance does not
     noisy.params.log_process_noise[0] = (1e4f64).ln();

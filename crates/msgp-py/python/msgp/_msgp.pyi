@@ -92,9 +92,11 @@ class Msgp:
     def score(
         self, u: Data, y: Data, *, rollout: str = "mm", filtered: bool = False
     ) -> Dict[str, Any]:
-        """Free-simulation metrics: rmse, nll (mean per step), coverage_2sigma, steps; with
-        filtered=True also "filtered", the same metrics of the one-step-ahead filtered
-        predictions (`msgp eval --filtered`)."""
+        """Free-simulation metrics: rmse, nll (mean per step), coverage_2sigma, steps, and
+        diverged/divergence (whether and why the simulation runs away from the measured outputs,
+        as `msgp eval` tests it; also warned as a RuntimeWarning); with filtered=True also
+        "filtered", the same metrics of the one-step-ahead filtered predictions
+        (`msgp eval --filtered`)."""
     def save(self, path: PathLike) -> None:
         """Writes the model file of `msgp fit` (JSON, atomically)."""
     @staticmethod
