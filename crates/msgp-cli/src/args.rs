@@ -1,5 +1,10 @@
 //! Every command-line type of `msgp`: the commands, their options and the value parsers (one
 //! file, as ripgrep and uv keep theirs). The commands themselves live in [`crate::commands`].
+//!
+//! The doc comments here are clap's help text, read in a terminal: units stay in plain brackets
+//! (`[s]`, `[rad]`) and placeholders in angle brackets (`<model>`), which rustdoc would otherwise
+//! take for links and HTML.
+#![allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
 
 use std::path::PathBuf;
 

@@ -94,7 +94,7 @@ pub fn run(args: &Table1Args) -> anyhow::Result<()> {
     out(&format!(
         "{}\n{}\nwritten to {} in {:.0} s",
         rmse_table(&rows, columns),
-        targets(&rows, columns).join("\n"),
+        targets(&rows, columns, &plan.seeds).join("\n"),
         args.common.out.display(),
         seconds
     ))

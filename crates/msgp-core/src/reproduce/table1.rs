@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 use crate::data::real::RealSeries;
 use crate::data::{Benchmark, NoiseScale, SyntheticSystem};
 use crate::error::{MsgpError, Result};
-use crate::fit::{FitOptimizer, FitProgress, FitSettings, MsgpSettings, fit};
+use crate::fit::{FitOptimizer, FitProgress, FitSettings, MsgpSettings, OutputRange, fit};
 use crate::loss::Likelihood;
 use crate::model::{Method, Metrics, Rollout};
 use crate::numeric::parallel::Threads;
@@ -214,6 +214,11 @@ pub struct Cell {
     pub iterations_run: usize,
     /// The iteration whose parameters were kept.
     pub best_iteration: usize,
+    /// Why the model diverges: the fit's check on its training inputs, else the moment-matching
+    /// simulation of the test part held against the test outputs (`msgp eval`'s test);
+    /// `None` when neither fires.
+    #[serde(default)]
+    pub diverged: Option<String>,
 }
 
 /// One benchmark's results: per column, one cell per seed.
@@ -460,11 +465,16 @@ pub fn fit_unit(
     let (model, report) = fit(std::slice::from_ref(&bench.train), &settings, progress)?;
     let mm = model.evaluate_as(&bench.test, Rollout::ALL[MM])?;
     let mean = model.evaluate_as(&bench.test, Rollout::ALL[MEAN])?;
+    let diverged = report.diverged.clone().or_else(|| {
+        let sim = model.simulate(&bench.test).ok()?;
+        OutputRange::of(&[&bench.test], model.spec.dy).divergence(&sim, "the test part")
+    });
     Ok(Cell {
         metrics: [mm, mean],
         train_seconds: report.train_seconds,
         iterations_run: report.iterations_run,
         best_iteration: report.best_iteration,
+        diverged,
     })
 }
 
@@ -532,6 +542,7 @@ pub fn rows_json(plan: &Plan, rows: &[Row]) -> Vec<serde_json::Value> {
                         "nll": m.nll,
                         "coverage_2sigma": m.coverage_2sigma,
                         "train_seconds": cell.train_seconds,
+                        "diverged": cell.diverged,
                         "history": [row.bench.ly, row.bench.lu],
                         "n_train": row.bench.train.len(),
                         "n_test": row.bench.test.len(),
@@ -580,7 +591,7 @@ pub fn rmse_table(rows: &[Row], columns: &[Column]) -> String {
 }
 
 /// The issue's targets, counted over the rows (seed means).
-pub fn targets(rows: &[Row], columns: &[Column]) -> Vec<String> {
+pub fn targets(rows: &[Row], columns: &[Column], seeds: &[u64]) -> Vec<String> {
     let mut lines = Vec::new();
     let rmse =
         |row: &Row, c: Column, k: usize| mean_of(&row.cells[c.index()], |x| x.metrics[k].rmse);
@@ -626,7 +637,41 @@ pub fn targets(rows: &[Row], columns: &[Column]) -> Vec<String> {
             c.label()
         ));
     }
+    lines.push(divergences(rows, columns, seeds));
     lines
+}
+
+/// The line naming every diverging model ([`Cell::diverged`]) by column, row and seed (`seeds`:
+/// the cells' seeds, in order).
+fn divergences(rows: &[Row], columns: &[Column], seeds: &[u64]) -> String {
+    let mut found = Vec::new();
+    for &c in columns {
+        for row in rows {
+            let diverging: Vec<String> = row.cells[c.index()]
+                .iter()
+                .zip(seeds)
+                .filter(|(x, _)| x.diverged.is_some())
+                .map(|(_, seed)| seed.to_string())
+                .collect();
+            if diverging.is_empty() {
+                continue;
+            }
+            found.push(format!(
+                "{} on {} (seed {})",
+                c.label(),
+                row.task.label,
+                diverging.join(", ")
+            ));
+        }
+    }
+    let list = match found.is_empty() {
+        true => "none".to_string(),
+        false => found.join("; "),
+    };
+    format!(
+        "- Diverging models (the fit's check on its training inputs, or the test part's \
+         simulation leaving the test outputs by 5 ranges, `msgp eval`'s check): {list}"
+    )
 }
 
 /// The markdown section for `rows` (see [`Plan::section`]).
@@ -676,7 +721,7 @@ pub fn render(plan: &Plan, rows: &[Row], provenance: &Provenance) -> String {
     s.push_str("## RMSE\n\n");
     s.push_str(&rmse_table(rows, columns));
     s.push('\n');
-    for line in targets(rows, columns) {
+    for line in targets(rows, columns, &plan.seeds) {
         let _ = writeln!(s, "{line}");
     }
     let _ = write!(
@@ -760,6 +805,7 @@ mod tests {
             train_seconds: 0.0,
             iterations_run: 1,
             best_iteration: 1,
+            diverged: None,
         }
     }
 
@@ -791,6 +837,22 @@ mod tests {
         for (a, b) in in_order.iter().zip(&reversed) {
             assert_eq!(a.cells, b.cells);
         }
+        // the targets' last line names the diverging models by column, row and seed
+        let none = targets(&in_order, &plan.columns, &plan.seeds);
+        assert!(
+            none.last().is_some_and(|l| l.ends_with(": none")),
+            "{none:?}"
+        );
+        let mut flagged = numbered.clone();
+        flagged[7].1.diverged = Some("runs away".into());
+        let rows = assemble(&plan, flagged).expect("rows");
+        let lines = targets(&rows, &plan.columns, &plan.seeds);
+        assert!(
+            lines
+                .last()
+                .is_some_and(|l| l.ends_with(": MSGP (filter) on Synthetic system 5 (seed 1)")),
+            "{lines:?}"
+        );
         // synthetic5, msgp-filter: units 5 (seed 3) and 7 (seed 1), in seed order
         let col = &in_order[1].cells[Column::MsgpFilter.index()];
         assert_eq!(

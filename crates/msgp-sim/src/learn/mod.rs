@@ -9,7 +9,7 @@
 //! judges the gains; it is neither interaction time nor training data. Optionally, from the
 //! second iteration on, an MSGP fit continues the previous model ([`LearnSettings::warm_start`]).
 //! In the filtered MSGP loop the search runs on the GP model only while it predicts the episodes
-//! it had not seen better than the linear model of the same data ([`choice`]).
+//! it had not seen better than the linear model of the same data (`choice`).
 //!
 //! Outputs are `[θ, x]` (measured), the input is the commanded acceleration; the modelled policy
 //! is [`msgp_core::policy::PidPolicy`] with the sine saturation that the simulator's policy

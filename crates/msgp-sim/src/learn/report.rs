@@ -30,7 +30,7 @@ pub struct IterationReport {
     /// gains ran again (and `predicted_cost` is theirs).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub held: bool,
-    /// Under the prequential choice ([`super::choice`]), the model this iteration's search
+    /// Under the prequential choice (`learn::choice`), the model this iteration's search
     /// ran on.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub search_model: Option<SearchModel>,

@@ -28,7 +28,8 @@ pub struct LearnSettings {
     /// with gains of the kind the search will ask about. They enter the model loss under their
     /// gains (the paper's `L_fb`), like the loop's own episodes. 0 (the default): the paper's
     /// smooth random signals only. Whether a drawn gain set would pass the stability test is
-    /// recorded ([`LearnOutcome::random_policies`]), so that luck is not read as learning.
+    /// recorded ([`LearnOutcome::random_policies`](super::LearnOutcome::random_policies)), so
+    /// that luck is not read as learning.
     #[serde(default)]
     pub random_policies: usize,
     /// The smooth random signal of those episodes. Its band reaches 10 Hz: a NARX model at
@@ -74,7 +75,7 @@ pub struct LearnSettings {
     /// search's gains run.
     #[serde(default)]
     pub hold_margin: f64,
-    /// The prequential choice of the MSGP loop ([`super::choice`]): every iteration also fits
+    /// The prequential choice of the MSGP loop (`learn::choice`): every iteration also fits
     /// the linear model of the data (linear-kf), scores both on the episode that follows, and
     /// runs the search on the GP model only while its predictions of episodes it had not seen
     /// beat the linear model's in total. `false`: always the GP model.
