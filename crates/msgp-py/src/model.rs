@@ -546,14 +546,7 @@ impl Msgp {
             .fitted = Some(Arc::new(fitted));
         if let Some(why) = diverged {
             // the model is kept (and says so in `diverged`); the user is told at once
-            let warning = py.get_type::<pyo3::exceptions::PyRuntimeWarning>();
-            PyErr::warn(
-                py,
-                &warning,
-                &std::ffi::CString::new(format!("the fitted model diverges: {why}"))
-                    .unwrap_or_default(),
-                1,
-            )?;
+            runtime_warning(py, &format!("the fitted model diverges: {why}"))?;
         }
         Ok(slf)
     }
@@ -670,14 +663,7 @@ impl Msgp {
         }
         d.set_item("diverged", diverged.is_some())?;
         if let Some(why) = &diverged {
-            let warning = py.get_type::<pyo3::exceptions::PyRuntimeWarning>();
-            PyErr::warn(
-                py,
-                &warning,
-                &std::ffi::CString::new(format!("the model diverges on this data: {why}"))
-                    .unwrap_or_default(),
-                1,
-            )?;
+            runtime_warning(py, &format!("the model diverges on this data: {why}"))?;
         }
         d.set_item("divergence", diverged)?;
         Ok(d)
@@ -947,4 +933,15 @@ fn recorded_overrides(method: Method, recorded: &serde_json::Value) -> Option<se
     crate::convert::merged::<FitSettings>(&defaults, &kept, "settings")
         .is_ok()
         .then_some(kept)
+}
+
+/// Warns `message` as a Python `RuntimeWarning` at the caller's line.
+fn runtime_warning(py: Python<'_>, message: &str) -> PyResult<()> {
+    let warning = py.get_type::<pyo3::exceptions::PyRuntimeWarning>();
+    PyErr::warn(
+        py,
+        &warning,
+        &std::ffi::CString::new(message).unwrap_or_default(),
+        1,
+    )
 }

@@ -21,7 +21,7 @@ use crate::data::{Benchmark, NoiseScale, SyntheticSystem};
 use crate::error::{MsgpError, Result};
 use crate::fit::{FitOptimizer, FitProgress, FitSettings, MsgpSettings, OutputRange, fit};
 use crate::loss::Likelihood;
-use crate::model::{Method, Metrics, Rollout};
+use crate::model::{Method, Metrics, Rollout, score};
 use crate::numeric::parallel::Threads;
 pub use crate::reproduce::results::Provenance;
 
@@ -463,10 +463,11 @@ pub fn fit_unit(
         settings = settings.with_solver_iterations(n);
     }
     let (model, report) = fit(std::slice::from_ref(&bench.train), &settings, progress)?;
-    let mm = model.evaluate_as(&bench.test, Rollout::ALL[MM])?;
+    // the moment-matching simulation is scored and held against the test outputs
+    let sim = model.simulate_as(&bench.test, Rollout::ALL[MM])?;
+    let mm = score(&sim, &bench.test)?;
     let mean = model.evaluate_as(&bench.test, Rollout::ALL[MEAN])?;
     let diverged = report.diverged.clone().or_else(|| {
-        let sim = model.simulate(&bench.test).ok()?;
         OutputRange::of(&[&bench.test], model.spec.dy).divergence(&sim, "the test part")
     });
     Ok(Cell {
