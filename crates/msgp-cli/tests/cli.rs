@@ -464,7 +464,7 @@ fn linear_prior_mean_is_fitted_saved_and_used() {
     assert_eq!(e["diverged"], true, "{e}");
     let why = e["divergence"].as_str().expect("why");
     assert!(
-        why.contains("s.csv") && why.contains("leaves the measured outputs' range"),
+        why.contains("s.csv from sample 80") && why.contains("leaves the measured outputs' range"),
         "{why}"
     );
     assert!(

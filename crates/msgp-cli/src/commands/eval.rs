@@ -82,12 +82,17 @@ fn load(model_path: &std::path::Path, args: &DataArgs, from: usize) -> anyhow::R
     })
 }
 
-/// Why a free simulation of `sims` runs away from its part's measured outputs (the fit's
-/// divergence test, held against the evaluated data: `msgp_core::fit::OutputRange`), warned on
-/// stderr; `None` when every part stays in range.
-fn divergence(sims: &[Simulated]) -> Option<String> {
+/// Why a free simulation of `sims` (each part simulated from its sample `from`) runs away from
+/// its part's measured outputs (the fit's divergence test, held against the evaluated data:
+/// `msgp_core::fit::OutputRange`), warned on stderr; `None` when every part stays in range.
+fn divergence(sims: &[Simulated], from: usize) -> Option<String> {
     let why = sims.iter().find_map(|s| {
-        OutputRange::of(&[&s.part.traj], s.sim.mean.ncols()).divergence(&s.sim, &s.part.label())
+        // the test's steps count from the simulated slice's first sample: say which one
+        let what = match from {
+            0 => s.part.label(),
+            n => format!("{} from sample {n}", s.part.label()),
+        };
+        OutputRange::of(&[&s.part.traj], s.sim.mean.ncols()).divergence(&s.sim, &what)
     });
     if let Some(why) = &why {
         eprintln!("warning: the model diverges on this data: {why}");
@@ -100,7 +105,7 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
     let l = load(&args.model, &args.data, args.from)?;
     let rollout = Rollout::from(args.rollout);
     let sims = l.model.simulate_parts_as(&l.parts, rollout)?;
-    let diverged = divergence(&sims);
+    let diverged = divergence(&sims, args.from);
     let metrics = pool(
         &sims.iter().map(|s| s.metrics).collect::<Vec<_>>(),
         l.model.spec.dy,
@@ -188,7 +193,7 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let l = load(&args.model, &args.data, args.from)?;
     let rollout = Rollout::from(args.rollout);
     let sims = l.model.simulate_parts_as(&l.parts, rollout)?;
-    let diverged = divergence(&sims);
+    let diverged = divergence(&sims, args.from);
     let filtered = match args.filtered {
         true => Some(l.model.filtered_parts(&l.parts)?),
         false => None,
