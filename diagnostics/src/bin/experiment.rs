@@ -5,6 +5,7 @@
 //! [complexity] [noise] [lr=F] [lbfgs=true] [every=N] [patience=N] [valfrac=F] [floor=F]
 //! [inducing=N] [freeze_x=true] [free_x=true] [nstart=full] [onestep=N] [filter=true] [dump=true]
 //! [threads=N] [ly=N] [lu=N] [mean=linear] [init=adam|lbfgs] [alt=false] [sparse=exact|vfe]
+//! [from=N] [to=N] (train on samples `from..to` of the training part only)
 //!`
 //!
 //! Positional: `system` `sys1`…`sys5` or a real series (`actuator`, `ballbeam`, `drives`,
@@ -40,7 +41,7 @@ const USAGE: &str = "experiment [sys1..sys5|actuator|ballbeam|drives|furnace|dry
     [every=N] [patience=N] [valfrac=F] [floor=F] [inducing=N] [freeze_x=true] [free_x=true] \
     [nstart=split|full] [onestep=N] \
     [filter=true] [dump=true] [threads=N] [sparse=exact|vfe] \
-    [init_sparse=exact|vfe]";
+    [init_sparse=exact|vfe] [from=N] [to=N]";
 
 const SWITCHES: &[&str] = &[
     "lr",
@@ -64,6 +65,9 @@ const SWITCHES: &[&str] = &[
     "alt",
     "sparse",
     "init_sparse",
+    "from",
+    "to",
+    "evaltail",
 ];
 
 enum Bench {
@@ -80,6 +84,11 @@ struct Options {
     dump: bool,
     ly: Option<usize>,
     lu: Option<usize>,
+    /// Train on samples `from..to` of the training part only.
+    from: Option<usize>,
+    to: Option<usize>,
+    /// Evaluate on the training part after `to` (from the window before it) instead of the test part.
+    evaltail: bool,
 }
 
 /// The arguments: `FitSettings` defaults, the positional arguments, then the switches.
@@ -210,16 +219,29 @@ fn options() -> Result<Options, String> {
         dump: sw.get("dump")? == Some(true),
         ly: sw.get("ly")?,
         lu: sw.get("lu")?,
+        from: sw.get("from")?,
+        to: sw.get("to")?,
+        evaltail: sw.get("evaltail")? == Some(true),
     })
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let o = options().unwrap_or_else(|e| usage_error(USAGE, &e));
     let seed = o.settings.seed;
-    let bench = match &o.bench {
+    let mut bench = match &o.bench {
         Bench::Synthetic(s) => s.generate(seed, o.scale)?,
         Bench::Real(s) => s.load(&data_dir(Path::new(".")))?,
     };
+    if let (true, Some(to)) = (o.evaltail, o.to) {
+        let l = o.ly.unwrap_or(bench.ly).max(o.lu.unwrap_or(bench.lu));
+        bench.test = bench.train.slice(to - l, bench.train.len());
+    }
+    if o.from.is_some() || o.to.is_some() {
+        let n = bench.train.len();
+        bench.train = bench
+            .train
+            .slice(o.from.unwrap_or(0), o.to.unwrap_or(n).min(n));
+    }
     let settings = FitSettings {
         ly: o.ly.unwrap_or(bench.ly),
         lu: o.lu.unwrap_or(bench.lu),
@@ -229,13 +251,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         eprintln!("{}", serde_json::to_string(&settings)?);
     }
     let dump = o.dump;
+    let mut rise: (f64, f64, usize) = (f64::NAN, 0.0, 0);
     let (model, report) = fit(std::slice::from_ref(&bench.train), &settings, &mut |p| {
+        // (lowest loss so far, largest rise above it, its iteration)
+        if p.iteration == 0 {
+            rise = (p.loss, 0.0, 0);
+        } else {
+            if p.loss - rise.0 > rise.1 {
+                rise = (rise.0, p.loss - rise.0, p.iteration);
+            }
+            rise.0 = rise.0.min(p.loss);
+        }
         if let (Some(v), true) = (p.validation, p.iteration % 50 == 0) {
             eprintln!(
                 "it {:4} loss {:.4} val {:.4} ({:.1}s)",
                 p.iteration, p.loss, v, p.elapsed
             );
-        } else if p.validation.is_none() && p.iteration % 20 == 0 {
+        } else if p.validation.is_none() && (p.iteration % 20 == 0 || p.iteration < 24) {
             eprintln!(
                 "it {:4} loss {:.4} ({:.1}s)",
                 p.iteration, p.loss, p.elapsed
@@ -256,6 +288,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             eprintln!("hist {i} {l:.4} {v:.4}");
         }
     }
+    eprintln!(
+        "last stage: lowest loss {:.4}, largest rise above the lowest before it {:.4} at iteration {}",
+        rise.0, rise.1, rise.2
+    );
     let m = model.evaluate(&bench.test)?;
     let mf = model.evaluate_as(&bench.test, msgp_core::model::Rollout::MeanFeedback)?;
     if !report.recipes.is_empty() {

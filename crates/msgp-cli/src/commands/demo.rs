@@ -74,20 +74,11 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
             started.elapsed().as_secs_f64()
         ))?;
         if method == Method::Msgp {
-            let chosen =
-                report
-                    .recipes
-                    .get(report.chosen_recipe)
-                    .map_or("the settings' own", |r| match r.recipe.mean {
-                        msgp_core::gp::MeanFunction::Zero => "zero-mean",
-                        msgp_core::gp::MeanFunction::Linear => "linear-mean",
-                    });
             eprintln!(
-                "  kept iteration {} of the {chosen} recipe ({} iterations over {} recipes; \
-                 chosen by the validation NLL of the last 20% of the training data)",
-                report.best_iteration,
+                "  {} iterations over {} recipes; {}",
                 report.iterations_run,
-                report.recipes.len()
+                report.recipes.len(),
+                crate::commands::fit::kept(&report)
             );
             if let Some(why) = &report.diverged {
                 eprintln!("  warning: the fitted model diverges: {why}");

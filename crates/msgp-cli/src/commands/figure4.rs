@@ -3,11 +3,9 @@
 //! folder are reused, so runs can be split over processes (`msgp learn-policy --out`) or
 //! machines (`python -m msgp.sweep figure4`) and collected here.
 
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use anyhow::{Context, anyhow};
+use anyhow::Context;
 use msgp_core::numeric::parallel::Threads;
 use msgp_core::reproduce::results::{Provenance, machine, today, update_section};
 use msgp_sim::figure4::{self, Plan, Run, Unit};
@@ -15,6 +13,7 @@ use msgp_sim::learn::{summary, write_run_dir};
 
 use crate::args::Figure4Args;
 use crate::commands::learn::{flagged, learn};
+use crate::commands::side_by_side;
 
 /// Runs `msgp reproduce figure4`.
 pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
@@ -50,12 +49,8 @@ pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
             }
         }
     }
-    let threads = Threads::from_env()?.get();
-    let jobs = args
-        .jobs
-        .map_or(threads, usize::from)
-        .clamp(1, todo.len().max(1));
-    for (k, run) in run_side_by_side(&plan, todo, jobs, threads, args.quiet)? {
+    let (jobs, per_run) = side_by_side::share(args.jobs, Threads::from_env()?.get(), todo.len())?;
+    for (k, run) in run_side_by_side(&plan, todo, jobs, per_run, args.quiet)? {
         done[k] = Some(run);
     }
     let runs: Vec<Run> = done.into_iter().flatten().collect();
@@ -95,76 +90,40 @@ fn run_unit(plan: &Plan, unit: Unit, threads: Option<Threads>, quiet: bool) -> a
     Ok(Run { unit, run })
 }
 
-/// The units of `todo` (with their places in the plan) on `jobs` workers that share `threads`
-/// threads, each taking the next unit when its last is done; one line per started and finished
-/// run, and with one job the run's own progress too (with more it would interleave). The first
-/// failure stops the workers from starting further runs and is returned once the running ones
-/// end.
+/// The units of `todo` (with their places in the plan) on `jobs` workers, each run on
+/// `per_run` threads (the settings' own with one job); one line per started and finished run,
+/// and with one job the run's own progress too (with more it would interleave).
 fn run_side_by_side(
     plan: &Plan,
     todo: Vec<(usize, Unit)>,
     jobs: usize,
-    threads: usize,
+    per_run: Option<Threads>,
     quiet: bool,
 ) -> anyhow::Result<Vec<(usize, Run)>> {
-    // one job keeps the settings' threads and shows the run's progress
-    let per_run = (jobs > 1)
-        .then(|| Threads::new((threads / jobs).max(1)))
-        .transpose()?;
     let run_quiet = quiet || jobs > 1;
-    let queue = Mutex::new(todo.into_iter());
-    let failed = AtomicBool::new(false);
     let clock = Instant::now();
-    let worker = || -> anyhow::Result<Vec<(usize, Run)>> {
-        let mut ran = Vec::new();
-        loop {
-            if failed.load(Ordering::Relaxed) {
-                return Ok(ran);
-            }
-            let next = queue.lock().map_err(|_| anyhow!("a run panicked"))?.next();
-            let Some((k, unit)) = next else {
-                return Ok(ran);
-            };
-            let name = unit.name();
-            if !quiet {
-                eprintln!(
-                    "== {name}: started ({:.0} s)",
-                    clock.elapsed().as_secs_f64()
-                );
-            }
-            match run_unit(plan, unit, per_run, run_quiet) {
-                Ok(run) => {
-                    if !quiet {
-                        let first = run
-                            .first_stable()
-                            .map_or("none".to_string(), |r| r.iteration.to_string());
-                        eprintln!(
-                            "== {name}: done in {:.0} s, first stable iteration {first} ({:.0} s)",
-                            run.run.seconds,
-                            clock.elapsed().as_secs_f64()
-                        );
-                    }
-                    ran.push((k, run));
-                }
-                Err(e) => {
-                    failed.store(true, Ordering::Relaxed);
-                    return Err(e.context(format!("run {name}")));
-                }
-            }
+    side_by_side::run(todo, jobs, |(k, unit)| {
+        let name = unit.name();
+        if !quiet {
+            eprintln!(
+                "== {name}: started ({:.0} s)",
+                clock.elapsed().as_secs_f64()
+            );
         }
-    };
-    let results: Vec<anyhow::Result<Vec<(usize, Run)>>> = std::thread::scope(|scope| {
-        let handles: Vec<_> = (0..jobs).map(|_| scope.spawn(worker)).collect();
-        handles
-            .into_iter()
-            .map(|h| h.join().unwrap_or_else(|_| Err(anyhow!("a run panicked"))))
-            .collect()
-    });
-    let mut ran = Vec::new();
-    for r in results {
-        ran.extend(r?);
-    }
-    Ok(ran)
+        let run =
+            run_unit(plan, unit, per_run, run_quiet).with_context(|| format!("run {name}"))?;
+        if !quiet {
+            let first = run
+                .first_stable()
+                .map_or("none".to_string(), |r| r.iteration.to_string());
+            eprintln!(
+                "== {name}: done in {:.0} s, first stable iteration {first} ({:.0} s)",
+                run.run.seconds,
+                clock.elapsed().as_secs_f64()
+            );
+        }
+        Ok((k, run))
+    })
 }
 
 /// This process's arguments after the binary, quoted for a POSIX shell where needed: the

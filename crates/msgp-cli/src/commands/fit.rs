@@ -5,7 +5,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use msgp_core::data::Trajectory;
-use msgp_core::fit::{FitOptimizer, FitOptions, FitProgress, MethodSettings, MsgpStart, fit};
+use msgp_core::fit::{
+    FitOptimizer, FitOptions, FitProgress, FitReport, MethodSettings, MsgpStart, fit,
+};
 use msgp_core::loss::Likelihood;
 use msgp_core::model::Method;
 use msgp_core::model_file::{FitRecord, ModelFile};
@@ -184,6 +186,8 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             "train_seconds": report.train_seconds,
             "iterations_run": report.iterations_run,
             "best_iteration": report.best_iteration,
+            "full_data_iteration": report.full_data_iteration,
+            "full_data_failed": report.full_data_failed,
             "diverged": report.diverged.is_some(),
             "divergence": report.diverged,
             "model": model_path.display().to_string(),
@@ -212,8 +216,9 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     if method == Method::Msgp {
         let solver = FitOptimizer::from(args.optimizer).name();
         text.push_str(&format!(
-            " ({} {solver} iterations, kept iteration {})",
-            report.iterations_run, report.best_iteration
+            " ({} {solver} iterations, {})",
+            report.iterations_run,
+            kept(&report)
         ));
     }
     text.push('\n');
@@ -226,6 +231,30 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         text.push_str(&format!("\nplot written to {}", p.display()));
     }
     out(&text)
+}
+
+/// Which iterate an MSGP fit returned, in words: the head's (chosen on the validation tail) or
+/// that of the final training on all the data ([`msgp_core::fit::MsgpSettings::full_data_iterations`]).
+pub fn kept(report: &FitReport) -> String {
+    let recipe = report
+        .recipes
+        .get(report.chosen_recipe)
+        .filter(|_| report.recipes.len() > 1)
+        .map_or(String::new(), |r| match r.recipe.mean {
+            msgp_core::gp::MeanFunction::Zero => " the zero-mean recipe,".to_string(),
+            msgp_core::gp::MeanFunction::Linear => " the linear-mean recipe,".to_string(),
+        });
+    match (report.full_data_iteration, &report.full_data_failed) {
+        (Some(j), _) => format!(
+            "kept iteration {j} of the final training on all the data; the validation tail chose{recipe} best at its iteration {}",
+            report.best_iteration
+        ),
+        (None, Some(why)) => format!(
+            "kept iteration {} of the training on the head ({why}: the head's model stands)",
+            report.best_iteration
+        ),
+        (None, None) => format!("kept iteration {}", report.best_iteration),
+    }
 }
 
 #[cfg(test)]

@@ -1,7 +1,8 @@
 //! `msgp reproduce table1`: the paper's Table 1 (`msgp_core::reproduce::table1`), its units fitted
-//! one after another on this machine with a progress bar each, written as a section of the
-//! results file.
+//! `--jobs` at a time on this machine (one job: a progress bar each; more: a line per finished
+//! fit), written as a section of the results file.
 
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use anyhow::Context;
@@ -15,6 +16,7 @@ use msgp_core::reproduce::table1::{
 use serde_json::json;
 
 use crate::args::Table1Args;
+use crate::commands::side_by_side;
 use crate::render::output::{out, out_json};
 use crate::render::progress::FitBar;
 
@@ -42,13 +44,19 @@ pub fn run(args: &Table1Args) -> anyhow::Result<()> {
         args.optimizer.into(),
         &args.common.data_dir(),
     )?;
-    let threads = Threads::from_env()?;
     let units = plan.units();
     let total = units.len();
-    let mut results = Vec::with_capacity(total);
-    for (done, unit) in units.into_iter().enumerate() {
+    let (jobs, per_fit) = side_by_side::share(args.jobs, Threads::from_env()?.get(), total)?;
+    let threads = per_fit.unwrap_or(Threads::from_env()?);
+    // one job shows each fit's progress bar; with more they would interleave, and a line per
+    // finished fit says how far the table is
+    let quiet = args.common.quiet || jobs > 1;
+    let finished = AtomicUsize::new(0);
+    let todo: Vec<_> = units.into_iter().enumerate().collect();
+    let results = side_by_side::run(todo, jobs, |(k, unit)| {
         let what = unit.describe();
-        let mut bar = FitBar::new(&format!("[{}/{total}] {what}", done + 1), args.common.quiet);
+        let label = format!("[{}/{total}] {what}", k + 1);
+        let mut bar = FitBar::new(&label, quiet);
         let cell = match fit_unit(&plan, &unit, threads, &mut |p: &FitProgress| bar.update(p)) {
             Ok(c) => c,
             Err(e) => {
@@ -61,12 +69,20 @@ pub fn run(args: &Table1Args) -> anyhow::Result<()> {
             _ => String::new(),
         };
         let [mm, mean] = &cell.metrics;
-        bar.finish(&format!(
+        let summary = format!(
             "RMSE {:.4}{paper}, mean feedback {:.4}, NLL {:.3}, coverage {:.2}, {:.1} s",
             mm.rmse, mean.rmse, mm.nll, mm.coverage_2sigma, cell.train_seconds
-        ));
-        results.push((unit, cell));
-    }
+        );
+        bar.finish(&summary);
+        let done = finished.fetch_add(1, Ordering::Relaxed) + 1;
+        if jobs > 1 && !args.common.quiet {
+            eprintln!(
+                "{label}: {summary} ({done}/{total} done, {:.0} s)",
+                started.elapsed().as_secs_f64()
+            );
+        }
+        Ok((unit, cell))
+    })?;
     let rows = assemble(&plan, results)?;
     let seconds = started.elapsed().as_secs_f64();
     let provenance = Provenance {

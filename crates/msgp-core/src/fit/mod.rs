@@ -19,9 +19,10 @@ mod vfe;
 
 pub use divergence::{DIVERGENCE_RANGES, OutputRange, check_divergence};
 pub use settings::{
-    DEFAULT_MAX_INDUCING, DEFAULT_ONE_STEP_ITERATIONS, FIT_LBFGS, FitOptimizer, FitOptions,
-    FitSettings, LINEAR_RECIPE, LinearKfSettings, MethodSettings, MsgpSettings, MsgpStart,
-    NoiseStart, OneStepFitSettings, OneStepObjective, OneStepSolver, Recipe,
+    DEFAULT_FULL_DATA_ITERATIONS, DEFAULT_MAX_INDUCING, DEFAULT_ONE_STEP_ITERATIONS, FIT_LBFGS,
+    FitOptimizer, FitOptions, FitSettings, LINEAR_RECIPE, LinearKfSettings, MethodSettings,
+    MsgpSettings, MsgpStart, NoiseStart, OneStepFitSettings, OneStepObjective, OneStepSolver,
+    Recipe,
 };
 
 use std::ops::ControlFlow;
@@ -41,8 +42,9 @@ use one_step::{OneStepSettings, fit_one_step, one_step_pairs};
 /// One line of fit progress.
 #[derive(Clone, Copy, Debug)]
 pub struct FitProgress {
-    /// 1: training with early stopping on the held-out tail; 2: refit on all training data;
-    /// 3: training the alternative recipe ([`MsgpSettings::alternative`]).
+    /// 1: training with early stopping on the held-out tail; 2: refit on all training data
+    /// ([`MsgpSettings::refit`], [`MsgpSettings::full_data_iterations`]); 3: training the
+    /// alternative recipe ([`MsgpSettings::alternative`]).
     pub stage: u8,
     /// Adam iteration.
     pub iteration: usize,
@@ -85,6 +87,14 @@ pub struct FitReport {
     /// MSGP: the index in `recipes` of the returned model's recipe.
     #[serde(default)]
     pub chosen_recipe: usize,
+    /// MSGP with [`MsgpSettings::full_data_iterations`]: the iterate of the final training on
+    /// all the data that the fit returns (its lowest training loss).
+    #[serde(default)]
+    pub full_data_iteration: Option<usize>,
+    /// MSGP: why the final training on all the data failed, if it did (the model trained on
+    /// the head is returned then).
+    #[serde(default)]
+    pub full_data_failed: Option<String>,
 }
 
 /// How one MSGP recipe did on the validation tail.

@@ -2,7 +2,10 @@
 //! L-BFGS on the trajectory likelihood ([`crate::loss`]) with its exact adjoint gradient, early
 //! stopping on a held-out tail of the training data, and an optional refit on all of it. With
 //! an alternative recipe ([`MsgpSettings::alternative`]) both recipes train this way and the one
-//! with the lower validation NLL is returned.
+//! with the lower validation NLL is chosen; with [`MsgpSettings::full_data_iterations`] (the
+//! default) the chosen recipe then trains once more from its start on all the training data,
+//! for a fixed number of iterations, and that model is returned: the tail judges *which* recipe
+//! well, but on short series it is a poor judge of *how long* to train (`docs/design.md`).
 //!
 //! ## Guarding against noise collapse
 //! The trajectory likelihood can be lowered by shrinking the noise variances while the free
@@ -204,9 +207,42 @@ pub(super) fn fit_msgp(
             report.best_iteration = best_iteration;
         }
     }
-    let Some((_, chosen, config)) = best else {
+    let Some((_, mut chosen, config)) = best else {
         return Err(first_error.unwrap_or_else(|| MsgpError::NonFinite("no recipe trained".into())));
     };
+    // the chosen recipe once more, from its start on all the training data
+    if let (Some(iterations), false, None) = (msgp.full_data_iterations, tails.is_empty(), previous)
+    {
+        let recipe = &recipes[report.chosen_recipe];
+        let mut stage = Stage {
+            spec,
+            config,
+            settings,
+            msgp: recipe,
+            start,
+            progress: &mut *progress,
+            report: &mut report,
+        };
+        let trained = match recipe.start {
+            MsgpStart::OneStep => stage.initial(&all_eps, one_step),
+            MsgpStart::LinearKf => stage.initial_from_kalman(&all_eps),
+        }
+        .and_then(|init| {
+            let n = iterations.min(recipe.iterations);
+            stage.train(init, &all_eps, &[], n, 2, Some(FULL_DATA_BLOW_UP))
+        });
+        match trained {
+            // a blow-up: the head's model stands (`train` wrote why into the report)
+            Ok(_) if report.full_data_failed.is_some() => {}
+            Ok((params, iteration, _)) => {
+                chosen = params;
+                report.full_data_iteration = Some(iteration);
+            }
+            Err(e @ MsgpError::Stopped { .. }) => return Err(e),
+            // a numerical failure at the start: the head's model stands, and the report says so
+            Err(e) => report.full_data_failed = Some(e.to_string()),
+        }
+    }
     report.train_seconds = start.elapsed().as_secs_f64();
     let model = Model {
         method: Method::Msgp,
@@ -217,6 +253,15 @@ pub(super) fn fit_msgp(
     };
     Ok((model, report))
 }
+
+/// The rise of the training loss (nats per predicted step) above its lowest iterate, never
+/// undone, that marks the final training on all the data ([`MsgpSettings::full_data_iterations`])
+/// as blown up, the head's model standing instead. Adam's setbacks that the loss recovers from
+/// do not count, however large (the linear recipe's first steps jump by 1–17 nats); ballbeam's
+/// zero-mean recipe jumps by 56 at its 11th step and never again comes down to the iterate
+/// before, whose free simulation of the test part is far worse than the head's
+/// (`docs/design.md`).
+const FULL_DATA_BLOW_UP: f64 = 5.0;
 
 /// Most L-BFGS iterations of the Kalman-filter fit behind [`MsgpStart::LinearKf`] (it stops by
 /// itself when converged, after 10–60 on the pendulum loop's data).
@@ -244,8 +289,14 @@ fn train_recipe(
         (None, MsgpStart::OneStep) => stage.initial(head_eps, one_step)?,
         (None, MsgpStart::LinearKf) => stage.initial_from_kalman(head_eps)?,
     };
-    let (mut chosen, best_iteration, validation) =
-        stage.train(init, head_eps, tails, stage.msgp.iterations, stage_number)?;
+    let (mut chosen, best_iteration, validation) = stage.train(
+        init,
+        head_eps,
+        tails,
+        stage.msgp.iterations,
+        stage_number,
+        None,
+    )?;
     if stage.msgp.refit && !tails.is_empty() {
         // the same number of iterations on the whole training data
         let init = match (previous, stage.msgp.start) {
@@ -256,7 +307,7 @@ fn train_recipe(
         chosen = if best_iteration == 0 {
             init
         } else {
-            stage.train(init, all_eps, &[], best_iteration, 2)?.0
+            stage.train(init, all_eps, &[], best_iteration, 2, None)?.0
         };
     }
     Ok((chosen, best_iteration, validation))
@@ -459,7 +510,10 @@ impl Stage<'_, '_> {
     /// The solver from `init` for up to `iterations` steps. With validation episodes, checks them
     /// every `eval_every` steps, stops after `patience` checks without improvement and returns the
     /// parameters of the best validation NLL and their iteration; otherwise returns the iterate of
-    /// the lowest training loss (the last one, unless a late Adam step threw the loss up).
+    /// the lowest training loss (the last one, unless a late Adam step threw the loss up). With
+    /// `blow_up` (and no validation episodes), a lowest training loss that the loss later rose
+    /// above by more than that (per predicted step) and never came back below is reported in
+    /// [`FitReport::full_data_failed`]: that iterate sits at the edge of a blow-up.
     fn train(
         &mut self,
         init: GpParams<f64>,
@@ -467,6 +521,7 @@ impl Stage<'_, '_> {
         tails: &[Episode],
         iterations: usize,
         stage: u8,
+        blow_up: Option<f64>,
     ) -> Result<Trained> {
         let shape = init.shape()?;
         // which parameters move: the frozen groups (and `A` without a linear mean) stay
@@ -514,6 +569,9 @@ impl Stage<'_, '_> {
             FitOptimizer::Lbfgs => 1,
         };
         let mut best: (f64, Vec<f64>, usize) = (f64::INFINITY, init.to_flat(), 0);
+        // without tails: the largest rise of the loss above the lowest so far since it was
+        // reached, and where
+        let mut rise = (0.0f64, 0usize);
         let mut since_best = 0usize;
         let mut good: Option<(Vec<f64>, usize)> = None;
         let report = &mut *self.report;
@@ -538,6 +596,9 @@ impl Stage<'_, '_> {
                 // 2.7 nats per step on the loop's data), for tens of iterations, also at the last
                 if tails.is_empty() && loss < best.0 {
                     best = (loss, x.to_vec(), it);
+                    rise = (0.0, it);
+                } else if tails.is_empty() && loss - best.0 > rise.0 {
+                    rise = (loss - best.0, it);
                 }
                 let mut validation = None;
                 if !tails.is_empty() && (it % every == 0 || it == iterations) {
@@ -574,6 +635,16 @@ impl Stage<'_, '_> {
         report.jitter.merge(&objective.log);
         if let Some(iteration) = stopped {
             return Err(MsgpError::Stopped { iteration });
+        }
+        if let Some(limit) = blow_up
+            && tails.is_empty()
+            && rise.0 > limit
+        {
+            report.full_data_failed = Some(format!(
+                "the training loss on all the data blew up: its lowest, {:.3} nats per step at \
+                 iteration {}, rose by {:.1} at iteration {} and never came back below it",
+                best.0, best.2, rise.0, rise.1
+            ));
         }
         let validation = if tails.is_empty() {
             f64::INFINITY

@@ -569,6 +569,7 @@ fn settings_serialise_with_the_methods_own_keys() {
     msgp_1_2.push("alternative");
     msgp_1_2.push("start");
     msgp_1_2.push("one_step_objective");
+    msgp_1_2.push("full_data_iterations");
     assert_eq!(keys(&FitSettings::new(Method::Msgp)), with(&msgp_1_2));
     for m in [Method::GpNarx, Method::PilcoNarx] {
         assert_eq!(
@@ -743,6 +744,7 @@ fn mean_feedback_and_moment_matching_agree_without_noise() {
         method: MsgpSettings {
             inducing: 15,
             iterations: 0,
+            full_data_iterations: None,
             ..MsgpSettings::default()
         }
         .into(),
@@ -885,6 +887,99 @@ fn the_protocol_keeps_the_recipe_with_the_better_validation_nll() {
     .settings(std::slice::from_ref(&traj))
     .expect_err("a zero mean");
     assert!(zero.to_string().contains("linear-kf start"), "{zero}");
+}
+
+/// After the validation tail has chosen the recipe, the chosen recipe trains again from its
+/// start on all the training data: the model returned is bit for bit the one a fit of that
+/// recipe alone, without a tail, for the final stage's iterations gives, and not the head's.
+#[test]
+fn the_chosen_recipe_trains_again_on_all_the_data() {
+    const FINAL: usize = 80;
+    let n = 160;
+    let u: Vec<f64> = (0..n)
+        .map(|i| ((i as f64) * 0.37).sin() + 0.5 * ((i as f64) * 0.05).cos())
+        .collect();
+    let mut y = vec![0.0; n];
+    for t in 2..n {
+        y[t] = 1.5 * y[t - 1] - 0.6 * y[t - 2] + 0.3 * u[t - 1] + 0.1 * (y[t - 1]).tanh();
+    }
+    let traj = Trajectory::siso(&u, &y).expect("finite");
+    let msgp = |validation_fraction: f64, full: Option<usize>| MsgpSettings {
+        inducing: 12,
+        iterations: FINAL,
+        validation_fraction,
+        full_data_iterations: full,
+        ..MsgpSettings::default()
+    };
+    let settings = |m: MsgpSettings| FitSettings {
+        ly: 2,
+        lu: 1,
+        method: m.into(),
+        ..FitSettings::default()
+    };
+    let mut stages = Vec::new();
+    let (model, report) = fit(
+        std::slice::from_ref(&traj),
+        &settings(msgp(0.2, Some(FINAL))),
+        &mut |p| stages.push(p.stage),
+    )
+    .expect("fit");
+    assert!(report.full_data_failed.is_none(), "{report:?}");
+    let last = report.full_data_iteration.expect("the final stage ran");
+    assert!(last <= FINAL, "{last}");
+    assert_eq!(
+        stages.iter().filter(|&&s| s == 2).count(),
+        FINAL + 1,
+        "the final stage runs its iterations on the observed thread"
+    );
+    // the same recipe alone, on all the data, without a tail
+    let chosen = report.recipes[report.chosen_recipe].recipe;
+    let alone = MsgpSettings {
+        iterations: FINAL,
+        alternative: None,
+        ..msgp(0.0, None).with_recipe(chosen)
+    };
+    let (reference, r) =
+        fit(std::slice::from_ref(&traj), &settings(alone), &mut |_| {}).expect("fit alone");
+    assert_eq!(model.params, reference.params);
+    assert_eq!(model.config, reference.config);
+    assert_eq!(r.best_iteration, last);
+    // without the stage: the head's model, another one
+    let (head, r) = fit(
+        std::slice::from_ref(&traj),
+        &settings(msgp(0.2, None)),
+        &mut |_| {},
+    )
+    .expect("fit without the final stage");
+    assert!(r.full_data_iteration.is_none());
+    assert_eq!(r.chosen_recipe, report.chosen_recipe);
+    assert_ne!(head.params, model.params);
+    // the final stage takes at most the settings' iterations; stopped after 10, the linear
+    // recipe's first Adam step (a jump of ≈ 20 nats per step) has not been undone, and the
+    // fit says so and keeps the head's model
+    let mut stages = Vec::new();
+    let few = settings(MsgpSettings {
+        iterations: 10,
+        ..msgp(0.2, Some(FINAL))
+    });
+    let (blown, r) = fit(std::slice::from_ref(&traj), &few, &mut |p| {
+        stages.push(p.stage)
+    })
+    .expect("fit with few iterations");
+    assert_eq!(stages.iter().filter(|&&s| s == 2).count(), 11);
+    let why = r.full_data_failed.expect("a blow-up");
+    assert!(why.contains("never came back below it"), "{why}");
+    assert!(r.full_data_iteration.is_none());
+    let (head, _) = fit(
+        std::slice::from_ref(&traj),
+        &settings(MsgpSettings {
+            iterations: 10,
+            ..msgp(0.2, None)
+        }),
+        &mut |_| {},
+    )
+    .expect("the head alone");
+    assert_eq!(blown.params, head.params);
 }
 
 /// `Model::filter_nll` in original units: for one output the joint density factors into the

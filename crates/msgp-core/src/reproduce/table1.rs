@@ -212,8 +212,12 @@ pub struct Cell {
     pub train_seconds: f64,
     /// Solver iterations run.
     pub iterations_run: usize,
-    /// The iteration whose parameters were kept.
+    /// The iteration whose parameters were kept: the head's, chosen on the validation tail.
     pub best_iteration: usize,
+    /// MSGP: the kept iterate of the final training on all the data, when it ran
+    /// ([`crate::fit::MsgpSettings::full_data_iterations`]).
+    #[serde(default)]
+    pub full_data_iteration: Option<usize>,
     /// Why the model diverges: the fit's check on its training inputs, else the moment-matching
     /// simulation of the test part held against the test outputs (`msgp eval`'s test);
     /// `None` when neither fires.
@@ -475,6 +479,7 @@ pub fn fit_unit(
         train_seconds: report.train_seconds,
         iterations_run: report.iterations_run,
         best_iteration: report.best_iteration,
+        full_data_iteration: report.full_data_iteration,
         diverged,
     })
 }
@@ -698,13 +703,20 @@ pub fn render(plan: &Plan, rows: &[Row], provenance: &Provenance) -> String {
          pseudo-inputs; GP-NARX: a sparse GP by the variational bound (hyperparameters and \
          pseudo-inputs jointly); PILCO GP-NARX: the full GP's penalised marginal likelihood, \
          then projected onto k-means pseudo-inputs; MSGP: the default protocol of \
-         `msgp_core::fit::MsgpSettings` with at most {iters} {solver} iterations. MM: \
+         `msgp_core::fit::MsgpSettings` (two recipes trained on the first 80 % of the training \
+         data, with at most {iters} {solver} iterations each and early stopping on the last \
+         20 %, which also chooses the recipe; the chosen recipe then trains again from its start \
+         on all the training data for {full} iterations). MM: \
          moment-matching simulation (the paper's method for every column and our default); \
          mean: the predicted means fed back, no uncertainty propagated (`msgp eval --rollout \
          mean`).\n",
         seeds = seeds.join(", "),
         m = plan.inducing,
         iters = plan.iters.unwrap_or(MsgpSettings::default().iterations),
+        full = plan
+            .iters
+            .unwrap_or(MsgpSettings::default().iterations)
+            .min(crate::fit::DEFAULT_FULL_DATA_ITERATIONS),
     );
     let _ = writeln!(s, "- Command: {}", provenance.command);
     let _ = writeln!(
@@ -729,7 +741,10 @@ pub fn render(plan: &Plan, rows: &[Row], provenance: &Provenance) -> String {
         s,
         "\n## Our calibration\n\nMean negative log predictive density per step (NLL, original \
          units) and the fraction of test outputs inside mean ± 2σ, per rollout, with the \
-         training time (means ± standard deviations over the seeds).\n\n\
+         training time (means ± standard deviations over the seeds). MSGP's iterations: all \
+         solver iterations of the fit, then in brackets the iteration the validation tail kept \
+         and, where the chosen recipe trained again on all the training data, the iterate of \
+         that training the model is.\n\n\
          | Task | method | rollout | RMSE | NLL/step | 2σ coverage | train s | {} iterations (kept) |\n\
          |---|---|---|---:|---:|---:|---:|---:|\n",
         plan.optimizer.name()
@@ -744,7 +759,10 @@ pub fn render(plan: &Plan, rows: &[Row], provenance: &Provenance) -> String {
                 let iters = if c.method() == Method::Msgp {
                     cells
                         .iter()
-                        .map(|x| format!("{} ({})", x.iterations_run, x.best_iteration))
+                        .map(|x| match x.full_data_iteration {
+                            Some(j) => format!("{} ({}; {j})", x.iterations_run, x.best_iteration),
+                            None => format!("{} ({})", x.iterations_run, x.best_iteration),
+                        })
                         .collect::<Vec<_>>()
                         .join(", ")
                 } else {
@@ -806,6 +824,7 @@ mod tests {
             train_seconds: 0.0,
             iterations_run: 1,
             best_iteration: 1,
+            full_data_iteration: None,
             diverged: None,
         }
     }
