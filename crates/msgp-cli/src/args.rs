@@ -607,6 +607,11 @@ pub struct BenchmarkArgs {
         default_value = "0"
     )]
     pub seeds: Vec<u64>,
+    /// Fits at a time (table1: units; generalisation: benchmark and seed pairs), the threads
+    /// (`MSGP_THREADS`, else the machine's cores) shared between them; every figure but the
+    /// times is the same for any N [default: the threads].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
+    pub jobs: Option<u16>,
     /// Print the rows as one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -636,10 +641,6 @@ pub struct Table1Args {
     /// Likelihoods of the MSGP columns, comma-separated [default: both].
     #[arg(long, value_enum, value_name = "L,...", value_delimiter = ',')]
     pub likelihoods: Vec<LikelihoodArg>,
-    /// Fits at a time, the threads (`MSGP_THREADS`, else the machine's cores) shared between
-    /// them; results do not depend on it [default: the threads].
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
-    pub jobs: Option<u16>,
 }
 
 /// Options of `msgp reproduce figure4`.

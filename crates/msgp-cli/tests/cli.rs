@@ -1272,6 +1272,48 @@ fn reproductions_run_over_seeds_and_unseen_excitations() {
     for r in rows {
         assert!(r["rmse"].as_f64().expect("rmse").is_finite(), "{r}");
     }
+    // fits side by side (`--jobs`) give the same figures as one at a time
+    let run = |jobs: &str| {
+        let v = ok_json(
+            &dir,
+            &[
+                "reproduce",
+                "table1",
+                "--only",
+                "synthetic5",
+                "--seeds",
+                "0,1",
+                "--methods",
+                "msgp",
+                "--likelihoods",
+                "free-run",
+                "--iters",
+                "30",
+                "--jobs",
+                jobs,
+                "--out",
+                "j.md",
+                "--json",
+                "--quiet",
+            ],
+        );
+        v["rows"]
+            .as_array()
+            .expect("rows")
+            .iter()
+            .map(|r| {
+                (
+                    r["seed"].clone(),
+                    r["rollout"].clone(),
+                    r["rmse"].clone(),
+                    r["nll"].clone(),
+                )
+            })
+            .collect::<Vec<_>>()
+    };
+    let (one, two) = (run("1"), run("2"));
+    assert_eq!(one.len(), 4);
+    assert_eq!(one, two);
     let md = std::fs::read_to_string(dir.path("t.md")).expect("markdown");
     assert!(md.contains(" ± "), "{md}");
     assert!(md.contains("GP-NARX (ours, mean)"), "{md}");

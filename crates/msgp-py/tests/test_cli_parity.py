@@ -60,6 +60,9 @@ def test_synthetic_msgp_matches_cli(sys4, sys4_fit):
     assert_same_fit(report, model, metrics, out)
     assert report["iterations_run"] == model.training["iterations_run"]
     assert report["best_iteration"] == model.training["best_iteration"]
+    # the chosen recipe's final training on all the data, reported alike by both
+    assert report["full_data_iteration"] == model.report["full_data_iteration"]
+    assert (report["full_data_iteration"] is None) != (report["full_data_failed"] is None)
 
 
 def test_dryer_msgp_matches_cli(dryer, cli, tmp_path):

@@ -12,12 +12,14 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use msgp_core::data::real::RealSeries;
 use msgp_core::data::{Benchmark, NoiseScale, SyntheticSystem, Trajectory};
+use msgp_core::error::MsgpError;
 use msgp_core::fit::{FitProgress, FitSettings, fit};
 use msgp_core::model::{Method, Metrics, Model};
 use msgp_core::numeric::parallel::Threads;
 use serde_json::json;
 
 use crate::args::GeneralisationArgs;
+use crate::commands::side_by_side;
 use crate::render::output::{out, out_json};
 use crate::render::progress::FitBar;
 use msgp_core::reproduce::results::{machine, today};
@@ -119,58 +121,81 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
     args.common.check_seeds()?;
     sources.retain(|s| args.common.only.is_empty() || args.common.only.contains(&s.key()));
     let dir = args.common.data_dir();
-    let threads = Threads::from_env()?;
-    let mut cases = Vec::new();
-    for source in &sources {
-        for &seed in &args.common.seeds {
-            let key = source.key();
-            let (bench, tests): (Benchmark, Vec<(String, Trajectory, bool)>) = match source {
-                Source::Synthetic(s) => {
-                    let bench = s.generate(seed, NoiseScale::StdDev)?;
-                    let mut tests =
-                        vec![("Table 2 test input".to_string(), bench.test.clone(), false)];
-                    for (e, t) in s.alternate_tests(seed)? {
-                        tests.push((e.name().to_string(), t, true));
-                    }
-                    (bench, tests)
+    let units: Vec<(&Source, u64)> = sources
+        .iter()
+        .flat_map(|s| args.common.seeds.iter().map(move |&seed| (s, seed)))
+        .collect();
+    let (jobs, per_unit) =
+        side_by_side::share(args.common.jobs, Threads::from_env()?.get(), units.len())?;
+    let threads = per_unit.unwrap_or(Threads::from_env()?);
+    // one job shows each fit's progress bar; with more, a line per finished benchmark and seed
+    let quiet = args.common.quiet || jobs > 1;
+    let per_unit_cases = side_by_side::run(units, jobs, |(source, seed)| {
+        let key = source.key();
+        let (bench, tests): (Benchmark, Vec<(String, Trajectory, bool)>) = match source {
+            Source::Synthetic(s) => {
+                let bench = s.generate(seed, NoiseScale::StdDev)?;
+                let mut tests = vec![("Table 2 test input".to_string(), bench.test.clone(), false)];
+                for (e, t) in s.alternate_tests(seed)? {
+                    tests.push((e.name().to_string(), t, true));
                 }
-                Source::Real(r) => {
-                    let bench = r.load_swapped(&dir).with_context(|| {
-                        format!(
-                            "loading the real series {} (set --data-dir or MSGP_DATA_DIR)",
-                            r.name()
-                        )
-                    })?;
-                    let test = bench.test.clone();
-                    (bench, vec![("swapped split".to_string(), test, true)])
-                }
-            };
-            let models = fit_all(
-                &bench,
-                seed,
-                &format!("{key} (seed {seed})"),
-                args.common.quiet,
-                threads,
-            )?;
-            let level = bench.train.y.column(0).mean();
-            for (name, traj, alternate) in tests {
-                let mut metrics = Vec::new();
-                for (m, method) in models.iter().zip(METHODS) {
-                    metrics.push(m.evaluate(&traj).with_context(|| {
-                        format!("simulating {} on {key}, {name}", method.name())
-                    })?);
-                }
-                cases.push(Case {
-                    key: key.clone(),
-                    test: name,
-                    seed,
-                    mean_rmse: constant_rmse(&traj, bench.ly.max(bench.lu), level),
-                    metrics,
-                    alternate,
-                });
+                (bench, tests)
             }
+            Source::Real(r) => {
+                let bench = r.load_swapped(&dir).with_context(|| {
+                    format!(
+                        "loading the real series {} (set --data-dir or MSGP_DATA_DIR)",
+                        r.name()
+                    )
+                })?;
+                let test = bench.test.clone();
+                (bench, vec![("swapped split".to_string(), test, true)])
+            }
+        };
+        let label = format!("{key} (seed {seed})");
+        let models = fit_all(&bench, seed, &label, quiet, threads)?;
+        let level = bench.train.y.column(0).mean();
+        let mut cases = Vec::new();
+        for (name, traj, alternate) in tests {
+            let mut metrics = Vec::new();
+            for (m, method) in models.iter().zip(METHODS) {
+                // a simulation that fails numerically scores +∞ (a runaway model), and the
+                // table goes on
+                let scored = match m.evaluate(&traj) {
+                    Err(MsgpError::NonFinite(_) | MsgpError::NotPositiveDefinite { .. }) => {
+                        Ok(Metrics {
+                            rmse: f64::INFINITY,
+                            nll: f64::INFINITY,
+                            coverage_2sigma: 0.0,
+                            steps: traj.len().saturating_sub(m.spec.warmup()),
+                        })
+                    }
+                    other => other,
+                };
+                metrics.push(
+                    scored.with_context(|| {
+                        format!("simulating {} on {key}, {name}", method.name())
+                    })?,
+                );
+            }
+            cases.push(Case {
+                key: key.clone(),
+                test: name,
+                seed,
+                mean_rmse: constant_rmse(&traj, bench.ly.max(bench.lu), level),
+                metrics,
+                alternate,
+            });
         }
-    }
+        if jobs > 1 && !args.common.quiet {
+            eprintln!(
+                "{label}: fitted and simulated ({:.0} s)",
+                started.elapsed().as_secs_f64()
+            );
+        }
+        Ok(cases)
+    })?;
+    let cases: Vec<Case> = per_unit_cases.into_iter().flatten().collect();
     let seconds = started.elapsed().as_secs_f64();
     let markdown = render(args, &cases, seconds);
     msgp_core::reproduce::results::update_section(&args.common.out, "generalisation", &markdown)?;

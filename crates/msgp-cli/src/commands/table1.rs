@@ -46,7 +46,7 @@ pub fn run(args: &Table1Args) -> anyhow::Result<()> {
     )?;
     let units = plan.units();
     let total = units.len();
-    let (jobs, per_fit) = side_by_side::share(args.jobs, Threads::from_env()?.get(), total)?;
+    let (jobs, per_fit) = side_by_side::share(args.common.jobs, Threads::from_env()?.get(), total)?;
     let threads = per_fit.unwrap_or(Threads::from_env()?);
     // one job shows each fit's progress bar; with more they would interleave, and a line per
     // finished fit says how far the table is

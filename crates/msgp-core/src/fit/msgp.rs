@@ -103,15 +103,7 @@ pub(super) fn fit_msgp(
             start: recipe.start_window,
             ..GpConfig::default()
         };
-        let mut stage = Stage {
-            spec,
-            config,
-            settings,
-            msgp: recipe,
-            start,
-            progress,
-            report,
-        };
+        let mut stage = Stage::new(spec, config, settings, recipe, start, progress, report);
         let stage_number = if k == 0 { 1 } else { 3 };
         let trained = train_recipe(
             &mut stage,
@@ -210,19 +202,24 @@ pub(super) fn fit_msgp(
     let Some((_, mut chosen, config)) = best else {
         return Err(first_error.unwrap_or_else(|| MsgpError::NonFinite("no recipe trained".into())));
     };
-    // the chosen recipe once more, from its start on all the training data
-    if let (Some(iterations), false, None) = (msgp.full_data_iterations, tails.is_empty(), previous)
-    {
+    // the chosen recipe once more, from its start on all the training data (Adam's small steps:
+    // L-BFGS would run to the training optimum, which early stopping exists to avoid)
+    if let (Some(iterations), false, None, FitOptimizer::Adam) = (
+        msgp.full_data_iterations,
+        tails.is_empty(),
+        previous,
+        msgp.optimizer,
+    ) {
         let recipe = &recipes[report.chosen_recipe];
-        let mut stage = Stage {
+        let mut stage = Stage::new(
             spec,
             config,
             settings,
-            msgp: recipe,
+            recipe,
             start,
-            progress: &mut *progress,
-            report: &mut report,
-        };
+            &mut *progress,
+            &mut report,
+        );
         let trained = match recipe.start {
             MsgpStart::OneStep => stage.initial(&all_eps, one_step),
             MsgpStart::LinearKf => stage.initial_from_kalman(&all_eps),
@@ -254,14 +251,54 @@ pub(super) fn fit_msgp(
     Ok((model, report))
 }
 
-/// The rise of the training loss (nats per predicted step) above its lowest iterate, never
-/// undone, that marks the final training on all the data ([`MsgpSettings::full_data_iterations`])
-/// as blown up, the head's model standing instead. Adam's setbacks that the loss recovers from
-/// do not count, however large (the linear recipe's first steps jump by 1–17 nats); ballbeam's
-/// zero-mean recipe jumps by 56 at its 11th step and never again comes down to the iterate
-/// before, whose free simulation of the test part is far worse than the head's
+/// The rise of the training loss (nats per predicted step, above its lowest since iteration
+/// [`BLOW_UP_AFTER`]) that ends the final training on all the data
+/// ([`MsgpSettings::full_data_iterations`]) as a blow-up, the head's model standing instead.
+/// Later setbacks on the ten rows of Table 1 stay below 1.6 (2.7 on the pendulum loop's data),
+/// while ballbeam's zero-mean recipe jumps by 56 at its 11th step and by 81 at its 15th (seed 1),
+/// and the iterates it then reaches simulate the test part far worse than the head's model
 /// (`docs/design.md`).
 const FULL_DATA_BLOW_UP: f64 = 5.0;
+
+/// Adam's first steps are not judged by [`FULL_DATA_BLOW_UP`]: before its moment estimates
+/// settle they move every coordinate by about the full step size at once, and the loss jumps and
+/// recovers (by up to 100 nats per step on a small linear plant, 9 on actuator's linear start).
+const BLOW_UP_AFTER: usize = 10;
+
+/// Watches a training loss for a blow-up: a rise by more than `limit` nats per step above its
+/// lowest since iteration [`BLOW_UP_AFTER`].
+struct BlowUp {
+    limit: f64,
+    /// The lowest loss since [`BLOW_UP_AFTER`] and its iteration.
+    lowest: (f64, usize),
+}
+
+impl BlowUp {
+    fn new(limit: f64) -> Self {
+        Self {
+            limit,
+            lowest: (f64::INFINITY, 0),
+        }
+    }
+
+    /// The loss of iteration `it`; why it is a blow-up, if it is one.
+    fn observe(&mut self, it: usize, loss: f64) -> Option<String> {
+        if it < BLOW_UP_AFTER {
+            return None;
+        }
+        if loss > self.lowest.0 + self.limit {
+            return Some(format!(
+                "the training loss on all the data blew up at iteration {it}: {loss:.3} nats per \
+                 step after {:.3} at iteration {}",
+                self.lowest.0, self.lowest.1
+            ));
+        }
+        if loss < self.lowest.0 {
+            self.lowest = (loss, it);
+        }
+        None
+    }
+}
 
 /// Most L-BFGS iterations of the Kalman-filter fit behind [`MsgpStart::LinearKf`] (it stops by
 /// itself when converged, after 10–60 on the pendulum loop's data).
@@ -397,7 +434,28 @@ struct Stage<'a, 'p> {
     report: &'a mut FitReport,
 }
 
-impl Stage<'_, '_> {
+impl<'a, 'p> Stage<'a, 'p> {
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        spec: NarxSpec,
+        config: GpConfig,
+        settings: &'a FitSettings,
+        msgp: &'a MsgpSettings,
+        start: Instant,
+        progress: &'p mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
+        report: &'a mut FitReport,
+    ) -> Self {
+        Self {
+            spec,
+            config,
+            settings,
+            msgp,
+            start,
+            progress,
+            report,
+        }
+    }
+
     /// The sparse one-step GP-NARX fit on `episodes`, its noise variance starting both the
     /// process and the observation noise as [`MsgpSettings::noise_start`] says.
     fn initial(
@@ -511,9 +569,9 @@ impl Stage<'_, '_> {
     /// every `eval_every` steps, stops after `patience` checks without improvement and returns the
     /// parameters of the best validation NLL and their iteration; otherwise returns the iterate of
     /// the lowest training loss (the last one, unless a late Adam step threw the loss up). With
-    /// `blow_up` (and no validation episodes), a lowest training loss that the loss later rose
-    /// above by more than that (per predicted step) and never came back below is reported in
-    /// [`FitReport::full_data_failed`]: that iterate sits at the edge of a blow-up.
+    /// `blow_up` (and no validation episodes), a training loss that rises by more than that (per
+    /// predicted step) above its lowest since iteration [`BLOW_UP_AFTER`] stops the run and is
+    /// reported in [`FitReport::full_data_failed`].
     fn train(
         &mut self,
         init: GpParams<f64>,
@@ -569,9 +627,7 @@ impl Stage<'_, '_> {
             FitOptimizer::Lbfgs => 1,
         };
         let mut best: (f64, Vec<f64>, usize) = (f64::INFINITY, init.to_flat(), 0);
-        // without tails: the largest rise of the loss above the lowest so far since it was
-        // reached, and where
-        let mut rise = (0.0f64, 0usize);
+        let mut blow_up = blow_up.map(BlowUp::new);
         let mut since_best = 0usize;
         let mut good: Option<(Vec<f64>, usize)> = None;
         let report = &mut *self.report;
@@ -596,9 +652,13 @@ impl Stage<'_, '_> {
                 // 2.7 nats per step on the loop's data), for tens of iterations, also at the last
                 if tails.is_empty() && loss < best.0 {
                     best = (loss, x.to_vec(), it);
-                    rise = (0.0, it);
-                } else if tails.is_empty() && loss - best.0 > rise.0 {
-                    rise = (loss - best.0, it);
+                }
+                if let (true, Some(watch)) = (tails.is_empty(), blow_up.as_mut())
+                    && let Some(why) = watch.observe(it, loss)
+                {
+                    report.full_data_failed = Some(why);
+                    report.iterations_run += 1;
+                    return Ok(Flow::Stop);
                 }
                 let mut validation = None;
                 if !tails.is_empty() && (it % every == 0 || it == iterations) {
@@ -636,16 +696,6 @@ impl Stage<'_, '_> {
         if let Some(iteration) = stopped {
             return Err(MsgpError::Stopped { iteration });
         }
-        if let Some(limit) = blow_up
-            && tails.is_empty()
-            && rise.0 > limit
-        {
-            report.full_data_failed = Some(format!(
-                "the training loss on all the data blew up: its lowest, {:.3} nats per step at \
-                 iteration {}, rose by {:.1} at iteration {} and never came back below it",
-                best.0, best.2, rise.0, rise.1
-            ));
-        }
         let validation = if tails.is_empty() {
             f64::INFINITY
         } else {
@@ -668,5 +718,44 @@ impl Stage<'_, '_> {
             (None, _) => (best.1, best.2),
         };
         Ok((GpParams::from_flat(shape, &x)?, it, validation))
+    }
+}
+
+#[cfg(test)]
+mod blow_up_tests {
+    use super::*;
+
+    fn first_blow_up(losses: &[f64]) -> Option<(usize, String)> {
+        let mut watch = BlowUp::new(FULL_DATA_BLOW_UP);
+        losses
+            .iter()
+            .enumerate()
+            .find_map(|(it, &l)| watch.observe(it, l).map(|w| (it, w)))
+    }
+
+    /// Ballbeam's final training (seed 0: 1.32 → 0.38 in ten steps, 56 at the 11th) is a
+    /// blow-up; Adam's first-step jumps that the loss recovers from, and setbacks of a nat or
+    /// two later on, are not.
+    #[test]
+    fn a_blow_up_is_a_large_rise_after_adams_first_steps() {
+        let ballbeam = [
+            1.32, 1.16, 1.14, 1.09, 1.03, 0.97, 0.89, 0.78, 0.72, 0.66, 0.38, 56.0, 39.0, 25.6,
+        ];
+        let (it, why) = first_blow_up(&ballbeam).expect("a blow-up");
+        assert_eq!(it, 11);
+        assert!(
+            why.contains("at iteration 11") && why.contains("0.380"),
+            "{why}"
+        );
+        let first_steps = [
+            -1.47, 99.2, 4.5, 3.6, 4.0, 5.8, 5.5, 5.3, 5.4, 5.5, 5.6, 5.6, 5.1,
+        ];
+        assert_eq!(first_blow_up(&first_steps), None);
+        let mut setbacks: Vec<f64> = (0..60).map(|k| 2.0 - 0.05 * k as f64).collect();
+        setbacks[40] += 1.6;
+        setbacks[50] += 4.9;
+        assert_eq!(first_blow_up(&setbacks), None);
+        setbacks[55] += 5.1 + 0.3;
+        assert_eq!(first_blow_up(&setbacks).map(|b| b.0), Some(55));
     }
 }

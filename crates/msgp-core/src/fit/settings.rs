@@ -102,8 +102,9 @@ pub struct MsgpSettings {
     /// its start on *all* the training data (the tail included) for this many solver
     /// iterations (at most [`MsgpSettings::iterations`]) and return its iterate of lowest
     /// training loss ([`DEFAULT_FULL_DATA_ITERATIONS`]; `None`: return the
-    /// model trained on the head, as records before 2026-12-04 did). Only fits with a
-    /// validation tail and no previous model have this stage.
+    /// model trained on the head, as records before 2026-12-04 did). Only Adam fits with a
+    /// validation tail and no previous model have this stage: L-BFGS runs to the training
+    /// optimum within a few dozen iterations, which early stopping is there to avoid.
     #[serde(default)]
     pub full_data_iterations: Option<usize>,
     /// How the free-run loss starts each training trajectory's rollout ([`StartWindow`]; the

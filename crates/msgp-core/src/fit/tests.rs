@@ -781,6 +781,20 @@ fn mean_feedback_and_moment_matching_agree_without_noise() {
     );
 }
 
+/// 160 samples of a second-order plant with a long memory driven by two sines, linear but for
+/// `nonlinear · tanh(y_{t−1})`.
+fn long_memory_plant(nonlinear: f64) -> Trajectory {
+    let n = 160;
+    let u: Vec<f64> = (0..n)
+        .map(|i| ((i as f64) * 0.37).sin() + 0.5 * ((i as f64) * 0.05).cos())
+        .collect();
+    let mut y = vec![0.0; n];
+    for t in 2..n {
+        y[t] = 1.5 * y[t - 1] - 0.6 * y[t - 2] + 0.3 * u[t - 1] + nonlinear * y[t - 1].tanh();
+    }
+    Trajectory::siso(&u, &y).expect("finite")
+}
+
 /// The default protocol trains both recipes where a validation tail can judge them and keeps
 /// the one of lower validation NLL; the two recipes run side by side on two threads with the
 /// same result, bit for bit, as one after the other; without a validation tail, or with a mean
@@ -788,15 +802,7 @@ fn mean_feedback_and_moment_matching_agree_without_noise() {
 #[test]
 fn the_protocol_keeps_the_recipe_with_the_better_validation_nll() {
     // a linear plant with a long memory: the linear-mean recipe explains it
-    let n = 160;
-    let u: Vec<f64> = (0..n)
-        .map(|i| ((i as f64) * 0.37).sin() + 0.5 * ((i as f64) * 0.05).cos())
-        .collect();
-    let mut y = vec![0.0; n];
-    for t in 2..n {
-        y[t] = 1.5 * y[t - 1] - 0.6 * y[t - 2] + 0.3 * u[t - 1];
-    }
-    let traj = Trajectory::siso(&u, &y).expect("finite");
+    let traj = long_memory_plant(0.0);
     let settings = |threads: usize, validation_fraction: f64| FitSettings {
         ly: 2,
         lu: 1,
@@ -895,15 +901,7 @@ fn the_protocol_keeps_the_recipe_with_the_better_validation_nll() {
 #[test]
 fn the_chosen_recipe_trains_again_on_all_the_data() {
     const FINAL: usize = 80;
-    let n = 160;
-    let u: Vec<f64> = (0..n)
-        .map(|i| ((i as f64) * 0.37).sin() + 0.5 * ((i as f64) * 0.05).cos())
-        .collect();
-    let mut y = vec![0.0; n];
-    for t in 2..n {
-        y[t] = 1.5 * y[t - 1] - 0.6 * y[t - 2] + 0.3 * u[t - 1] + 0.1 * (y[t - 1]).tanh();
-    }
-    let traj = Trajectory::siso(&u, &y).expect("finite");
+    let traj = long_memory_plant(0.1);
     let msgp = |validation_fraction: f64, full: Option<usize>| MsgpSettings {
         inducing: 12,
         iterations: FINAL,
@@ -954,32 +952,32 @@ fn the_chosen_recipe_trains_again_on_all_the_data() {
     assert!(r.full_data_iteration.is_none());
     assert_eq!(r.chosen_recipe, report.chosen_recipe);
     assert_ne!(head.params, model.params);
-    // the final stage takes at most the settings' iterations; stopped after 10, the linear
-    // recipe's first Adam step (a jump of ≈ 20 nats per step) has not been undone, and the
-    // fit says so and keeps the head's model
+    // the final stage takes at most the settings' iterations (the linear recipe's first Adam
+    // step throws its loss up by ≈ 20 nats per step, which is not a blow-up)
     let mut stages = Vec::new();
     let few = settings(MsgpSettings {
         iterations: 10,
         ..msgp(0.2, Some(FINAL))
     });
-    let (blown, r) = fit(std::slice::from_ref(&traj), &few, &mut |p| {
+    let (_, r) = fit(std::slice::from_ref(&traj), &few, &mut |p| {
         stages.push(p.stage)
     })
     .expect("fit with few iterations");
     assert_eq!(stages.iter().filter(|&&s| s == 2).count(), 11);
-    let why = r.full_data_failed.expect("a blow-up");
-    assert!(why.contains("never came back below it"), "{why}");
-    assert!(r.full_data_iteration.is_none());
-    let (head, _) = fit(
+    assert!(r.full_data_failed.is_none(), "{:?}", r.full_data_failed);
+    assert!(r.full_data_iteration.expect("ran") <= 10);
+    // L-BFGS fits have no final stage: the early-stopped head's model is theirs
+    let (_, r) = fit(
         std::slice::from_ref(&traj),
         &settings(MsgpSettings {
             iterations: 10,
-            ..msgp(0.2, None)
+            optimizer: FitOptimizer::Lbfgs,
+            ..msgp(0.2, Some(FINAL))
         }),
         &mut |_| {},
     )
-    .expect("the head alone");
-    assert_eq!(blown.params, head.params);
+    .expect("L-BFGS fit");
+    assert_eq!((r.full_data_iteration, r.full_data_failed), (None, None));
 }
 
 /// `Model::filter_nll` in original units: for one output the joint density factors into the

@@ -467,13 +467,33 @@ pub fn fit_unit(
         settings = settings.with_solver_iterations(n);
     }
     let (model, report) = fit(std::slice::from_ref(&bench.train), &settings, progress)?;
-    // the moment-matching simulation is scored and held against the test outputs
-    let sim = model.simulate_as(&bench.test, Rollout::ALL[MM])?;
-    let mm = score(&sim, &bench.test)?;
-    let mean = model.evaluate_as(&bench.test, Rollout::ALL[MEAN])?;
-    let diverged = report.diverged.clone().or_else(|| {
-        OutputRange::of(&[&bench.test], model.spec.dy).divergence(&sim, "the test part")
-    });
+    // the moment-matching simulation is scored and held against the test outputs; a simulation
+    // that fails numerically is a diverged cell (scored +∞), not the end of the table
+    let failed = |e: MsgpError| match e {
+        MsgpError::NonFinite(_) | MsgpError::NotPositiveDefinite { .. } => Ok(Metrics {
+            rmse: f64::INFINITY,
+            nll: f64::INFINITY,
+            coverage_2sigma: 0.0,
+            steps: bench.test.len().saturating_sub(model.spec.warmup()),
+        }),
+        e => Err(e),
+    };
+    let (mm, mut diverged) = match model.simulate_as(&bench.test, Rollout::ALL[MM]) {
+        Ok(sim) => (
+            score(&sim, &bench.test)?,
+            OutputRange::of(&[&bench.test], model.spec.dy).divergence(&sim, "the test part"),
+        ),
+        Err(e) => {
+            let why = format!("the test part's simulation fails: {e}");
+            (failed(e)?, Some(why))
+        }
+    };
+    let mean = model
+        .evaluate_as(&bench.test, Rollout::ALL[MEAN])
+        .or_else(failed)?;
+    if report.diverged.is_some() {
+        diverged = report.diverged.clone();
+    }
     Ok(Cell {
         metrics: [mm, mean],
         train_seconds: report.train_seconds,
