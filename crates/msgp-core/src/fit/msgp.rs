@@ -103,7 +103,15 @@ pub(super) fn fit_msgp(
             start: recipe.start_window,
             ..GpConfig::default()
         };
-        let mut stage = Stage::new(spec, config, settings, recipe, start, progress, report);
+        let mut stage = Stage {
+            spec,
+            config,
+            settings,
+            msgp: recipe,
+            start,
+            progress,
+            report,
+        };
         let stage_number = if k == 0 { 1 } else { 3 };
         let trained = train_recipe(
             &mut stage,
@@ -211,15 +219,15 @@ pub(super) fn fit_msgp(
         msgp.optimizer,
     ) {
         let recipe = &recipes[report.chosen_recipe];
-        let mut stage = Stage::new(
+        let mut stage = Stage {
             spec,
             config,
             settings,
-            recipe,
+            msgp: recipe,
             start,
-            &mut *progress,
-            &mut report,
-        );
+            progress: &mut *progress,
+            report: &mut report,
+        };
         let trained = match recipe.start {
             MsgpStart::OneStep => stage.initial(&all_eps, one_step),
             MsgpStart::LinearKf => stage.initial_from_kalman(&all_eps),
@@ -434,28 +442,7 @@ struct Stage<'a, 'p> {
     report: &'a mut FitReport,
 }
 
-impl<'a, 'p> Stage<'a, 'p> {
-    #[allow(clippy::too_many_arguments)]
-    fn new(
-        spec: NarxSpec,
-        config: GpConfig,
-        settings: &'a FitSettings,
-        msgp: &'a MsgpSettings,
-        start: Instant,
-        progress: &'p mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
-        report: &'a mut FitReport,
-    ) -> Self {
-        Self {
-            spec,
-            config,
-            settings,
-            msgp,
-            start,
-            progress,
-            report,
-        }
-    }
-
+impl Stage<'_, '_> {
     /// The sparse one-step GP-NARX fit on `episodes`, its noise variance starting both the
     /// process and the observation noise as [`MsgpSettings::noise_start`] says.
     fn initial(
