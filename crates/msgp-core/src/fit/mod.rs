@@ -44,7 +44,10 @@ use one_step::{OneStepSettings, fit_one_step, one_step_pairs};
 pub struct FitProgress {
     /// 1: training with early stopping on the held-out tail; 2: refit on all training data
     /// ([`MsgpSettings::refit`], [`MsgpSettings::full_data_iterations`]); 3: training the
-    /// alternative recipe ([`MsgpSettings::alternative`]).
+    /// alternative recipe ([`MsgpSettings::alternative`]). On two or more threads the final
+    /// training on all the data may start while the alternative recipe still trains, for the
+    /// recipe leading at that moment; if the other one overtakes it, stage 2 starts again at
+    /// iteration 0 for that one (the model returned does not depend on it).
     pub stage: u8,
     /// Adam iteration.
     pub iteration: usize,

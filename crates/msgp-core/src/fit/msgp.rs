@@ -18,6 +18,7 @@
 //!    parameters with the best validation NLL are returned. The test data are never seen.
 
 use std::ops::ControlFlow;
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
@@ -90,22 +91,33 @@ pub(super) fn fit_msgp(
     if let (Some(r), false, None) = (msgp.alternative, tails.is_empty(), previous) {
         recipes.push(msgp.with_recipe(r));
     }
+    // the final training on all the training data applies to Adam fits with a tail and no
+    // previous model (L-BFGS would run to the training optimum, which early stopping avoids)
+    let final_iterations = match (
+        msgp.full_data_iterations,
+        tails.is_empty(),
+        previous,
+        msgp.optimizer,
+    ) {
+        (Some(n), false, None, FitOptimizer::Adam) => Some(n),
+        _ => None,
+    };
+    let config_of = |recipe: &MsgpSettings| GpConfig {
+        noise_floor: recipe.noise_floor,
+        mean: recipe.mean,
+        start: recipe.start_window,
+        ..GpConfig::default()
+    };
     // one recipe's training under its own report and observer
     let run = |k: usize,
                recipe: &MsgpSettings,
                settings: &FitSettings,
                progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
                report: &mut FitReport|
-     -> (Result<Trained>, GpConfig) {
-        let config = GpConfig {
-            noise_floor: recipe.noise_floor,
-            mean: recipe.mean,
-            start: recipe.start_window,
-            ..GpConfig::default()
-        };
+     -> Result<Trained> {
         let mut stage = Stage {
             spec,
-            config,
+            config: config_of(recipe),
             settings,
             msgp: recipe,
             start,
@@ -113,7 +125,7 @@ pub(super) fn fit_msgp(
             report,
         };
         let stage_number = if k == 0 { 1 } else { 3 };
-        let trained = train_recipe(
+        train_recipe(
             &mut stage,
             previous,
             one_step,
@@ -121,64 +133,166 @@ pub(super) fn fit_msgp(
             &all_eps,
             &tails,
             stage_number,
-        );
-        (trained, config)
+        )
     };
-    let results: Vec<(Result<Trained>, GpConfig)> =
-        if recipes.len() == 2 && settings.threads.get() >= 2 {
-            // the two recipes side by side, each on half the threads; the observer sees the
-            // first, and stopping it stops both
-            let half = FitSettings {
-                threads: Threads::new((settings.threads.get() / 2).max(1))?,
-                ..settings.clone()
-            };
-            let stop = AtomicBool::new(false);
-            let mut side = FitReport::default();
-            let (first, second) = std::thread::scope(|scope| {
-                let handle = scope.spawn(|| {
-                    let mut quiet = |_: &FitProgress| {
-                        if stop.load(Ordering::Relaxed) {
-                            ControlFlow::Break(())
-                        } else {
-                            ControlFlow::Continue(())
-                        }
-                    };
-                    run(1, &recipes[1], &half, &mut quiet, &mut side)
-                });
-                let mut observed = |p: &FitProgress| {
-                    let flow = progress(p);
-                    if flow.is_break() {
-                        stop.store(true, Ordering::Relaxed);
+    // recipe `k` once more, from its start on all the training data, under its own report
+    let final_stage = |k: usize,
+                       iterations: usize,
+                       settings: &FitSettings,
+                       progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>|
+     -> FinalTraining {
+        let recipe = &recipes[k];
+        let mut own = FitReport::default();
+        let mut stage = Stage {
+            spec,
+            config: config_of(recipe),
+            settings,
+            msgp: recipe,
+            start,
+            progress,
+            report: &mut own,
+        };
+        let trained = match recipe.start {
+            MsgpStart::OneStep => stage.initial(&all_eps, one_step),
+            MsgpStart::LinearKf => stage.initial_from_kalman(&all_eps),
+        }
+        .and_then(|init| {
+            let n = iterations.min(recipe.iterations);
+            stage.train(init, &all_eps, &[], n, 2, Some(FULL_DATA_BLOW_UP))
+        });
+        let outcome = match trained {
+            // a blow-up: the head's model stands (`train` wrote why into the report)
+            Ok(_) if own.full_data_failed.is_some() => Ok(None),
+            Ok((params, iteration, _)) => Ok(Some((params, iteration))),
+            Err(e @ MsgpError::Stopped { .. }) => Err(e),
+            // a numerical failure at the start: the head's model stands, and the report says so
+            Err(e) => {
+                own.full_data_failed = Some(e.to_string());
+                Ok(None)
+            }
+        };
+        FinalTraining {
+            recipe: k,
+            outcome,
+            report: own,
+        }
+    };
+    // the final training if it ran while the second recipe's head was still training
+    let mut early_final: Option<FinalTraining> = None;
+    let results: Vec<Result<Trained>> = if recipes.len() == 2 && settings.threads.get() >= 2 {
+        // the two recipes side by side, each on half the threads; the observer sees the
+        // first, and stopping it stops both. Once the first head is done, its thread trains
+        // the recipe that leads on all the data while the second head goes on (`Race`)
+        let half = FitSettings {
+            threads: Threads::new((settings.threads.get() / 2).max(1))?,
+            ..settings.clone()
+        };
+        let stop = AtomicBool::new(false);
+        let race = Mutex::new(Race::default());
+        let mut side = FitReport::default();
+        let (first, second) = std::thread::scope(|scope| {
+            let handle = scope.spawn(|| {
+                let mut quiet = |p: &FitProgress| {
+                    if let Some(v) = p.validation {
+                        race.lock().unwrap_or_else(|e| e.into_inner()).saw(v);
                     }
-                    flow
+                    if stop.load(Ordering::Relaxed) {
+                        ControlFlow::Break(())
+                    } else {
+                        ControlFlow::Continue(())
+                    }
                 };
-                let first = run(0, &recipes[0], &half, &mut observed, &mut report);
-                if matches!(first.0, Err(MsgpError::Stopped { .. })) {
+                let second = run(1, &recipes[1], &half, &mut quiet, &mut side);
+                race.lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .finished(&second);
+                second
+            });
+            let mut observed = |p: &FitProgress| {
+                let flow = progress(p);
+                if flow.is_break() {
                     stop.store(true, Ordering::Relaxed);
                 }
-                let second = handle.join().map_err(|_| {
-                    MsgpError::NonFinite("the alternative recipe's training panicked".into())
-                });
-                (first, second)
-            });
-            let second = second?;
-            report.iterations_run += side.iterations_run;
-            report.jitter.merge(&side.jitter);
-            report.history.extend(side.history);
-            if report.numerical_stop.is_none() {
-                report.numerical_stop = side.numerical_stop;
+                flow
+            };
+            let first = run(0, &recipes[0], &half, &mut observed, &mut report);
+            // the first head's outcome as the choice sees it: its validation NLL, or `None`
+            // when it failed numerically (another failure decides nothing: it is returned)
+            let first_outcome = match &first {
+                Ok(t) => Some(Some(t.2)),
+                Err(MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_)) => Some(None),
+                Err(_) => None,
+            };
+            if let (Some(iterations), Some(first_outcome)) = (final_iterations, first_outcome) {
+                let state = || race.lock().unwrap_or_else(|e| e.into_inner());
+                loop {
+                    // (the guard is dropped at the end of this statement, not held in training)
+                    let leader = state().leader(first_outcome);
+                    let Some(k) = leader else { break };
+                    let mut aborted = false;
+                    let mut watched = |p: &FitProgress| {
+                        if !state().keeps(k, first_outcome) {
+                            aborted = true;
+                            return ControlFlow::Break(());
+                        }
+                        let flow = progress(p);
+                        if flow.is_break() {
+                            stop.store(true, Ordering::Relaxed);
+                        }
+                        flow
+                    };
+                    let trained = final_stage(k, iterations, &half, &mut watched);
+                    match (&trained.outcome, aborted) {
+                        // the leader changed: the other recipe's final training
+                        (Err(MsgpError::Stopped { .. }), true) => continue,
+                        _ => {
+                            early_final = Some(trained);
+                            break;
+                        }
+                    }
+                }
             }
-            vec![first, second]
-        } else {
-            recipes
-                .iter()
-                .enumerate()
-                .map(|(k, r)| run(k, r, settings, &mut *progress, &mut report))
-                .collect()
-        };
-    let mut best: Option<(f64, GpParams<f64>, GpConfig)> = None;
+            if matches!(first, Err(MsgpError::Stopped { .. }))
+                || matches!(
+                    early_final,
+                    Some(FinalTraining {
+                        outcome: Err(MsgpError::Stopped { .. }),
+                        ..
+                    })
+                )
+            {
+                stop.store(true, Ordering::Relaxed);
+            }
+            let second = handle.join().map_err(|_| {
+                MsgpError::NonFinite("the alternative recipe's training panicked".into())
+            });
+            (first, second)
+        });
+        let second = second?;
+        report.iterations_run += side.iterations_run;
+        report.jitter.merge(&side.jitter);
+        report.history.extend(side.history);
+        if report.numerical_stop.is_none() {
+            report.numerical_stop = side.numerical_stop;
+        }
+        vec![first, second]
+    } else {
+        recipes
+            .iter()
+            .enumerate()
+            .map(|(k, r)| run(k, r, settings, &mut *progress, &mut report))
+            .collect()
+    };
+    if let Some(FinalTraining {
+        outcome: Err(e @ MsgpError::Stopped { .. }),
+        ..
+    }) = early_final
+    {
+        return Err(e);
+    }
+    let mut best: Option<(f64, GpParams<f64>)> = None;
     let mut first_error = None;
-    for (k, ((trained, config), recipe)) in results.into_iter().zip(&recipes).enumerate() {
+    for (k, (trained, recipe)) in results.into_iter().zip(&recipes).enumerate() {
         let (params, best_iteration, validation) = match trained {
             Ok(t) => t,
             // a recipe whose start already fails numerically (e.g. an unstable linear map)
@@ -202,52 +316,32 @@ pub(super) fn fit_msgp(
             failed: None,
         });
         if best.as_ref().is_none_or(|b| validation < b.0) {
-            best = Some((validation, params, config));
+            best = Some((validation, params));
             report.chosen_recipe = k;
             report.best_iteration = best_iteration;
         }
     }
-    let Some((_, mut chosen, config)) = best else {
+    let Some((_, mut chosen)) = best else {
         return Err(first_error.unwrap_or_else(|| MsgpError::NonFinite("no recipe trained".into())));
     };
-    // the chosen recipe once more, from its start on all the training data (Adam's small steps:
-    // L-BFGS would run to the training optimum, which early stopping exists to avoid)
-    if let (Some(iterations), false, None, FitOptimizer::Adam) = (
-        msgp.full_data_iterations,
-        tails.is_empty(),
-        previous,
-        msgp.optimizer,
-    ) {
-        let recipe = &recipes[report.chosen_recipe];
-        let mut stage = Stage {
-            spec,
-            config,
-            settings,
-            msgp: recipe,
-            start,
-            progress: &mut *progress,
-            report: &mut report,
+    let k = report.chosen_recipe;
+    if let Some(iterations) = final_iterations {
+        let trained = match early_final {
+            Some(t) if t.recipe == k => t,
+            _ => final_stage(k, iterations, settings, &mut *progress),
         };
-        let trained = match recipe.start {
-            MsgpStart::OneStep => stage.initial(&all_eps, one_step),
-            MsgpStart::LinearKf => stage.initial_from_kalman(&all_eps),
+        report.iterations_run += trained.report.iterations_run;
+        report.jitter.merge(&trained.report.jitter);
+        if trained.report.numerical_stop.is_some() {
+            report.numerical_stop = trained.report.numerical_stop;
         }
-        .and_then(|init| {
-            let n = iterations.min(recipe.iterations);
-            stage.train(init, &all_eps, &[], n, 2, Some(FULL_DATA_BLOW_UP))
-        });
-        match trained {
-            // a blow-up: the head's model stands (`train` wrote why into the report)
-            Ok(_) if report.full_data_failed.is_some() => {}
-            Ok((params, iteration, _)) => {
-                chosen = params;
-                report.full_data_iteration = Some(iteration);
-            }
-            Err(e @ MsgpError::Stopped { .. }) => return Err(e),
-            // a numerical failure at the start: the head's model stands, and the report says so
-            Err(e) => report.full_data_failed = Some(e.to_string()),
+        report.full_data_failed = trained.report.full_data_failed;
+        if let Some((params, iteration)) = trained.outcome? {
+            chosen = params;
+            report.full_data_iteration = Some(iteration);
         }
     }
+    let config = config_of(&recipes[k]);
     report.train_seconds = start.elapsed().as_secs_f64();
     let model = Model {
         method: Method::Msgp,
@@ -257,6 +351,73 @@ pub(super) fn fit_msgp(
         normalizer,
     };
     Ok((model, report))
+}
+
+/// The final training on all the data of one recipe: its outcome (the parameters and iteration
+/// kept; `None` where it blew up or failed numerically, the head's model standing) and the
+/// report of that training alone.
+struct FinalTraining {
+    recipe: usize,
+    outcome: Result<Option<(GpParams<f64>, usize)>>,
+    report: FitReport,
+}
+
+/// What the first recipe's thread knows of the second recipe's head while both train side by
+/// side. The choice between the recipes ([`fit_msgp`]) takes the second only if its best
+/// validation NLL is strictly below the first's (or the first failed), and a running best only
+/// falls, so once it is below the first's final value the second has won unless its head still
+/// fails: the first thread can start the winner's final training before the second head ends,
+/// and abandons it if that changes. The returned model is the same, bit for bit, as when
+/// everything runs in turn.
+#[derive(Default)]
+struct Race {
+    /// The second head's lowest validation NLL so far.
+    running: Option<f64>,
+    /// The second head's outcome once it ended: its validation NLL, or `None` if it failed.
+    ended: Option<Option<f64>>,
+}
+
+impl Race {
+    /// A validation NLL of the second head.
+    fn saw(&mut self, v: f64) {
+        self.running = Some(self.running.map_or(v, |r| r.min(v)));
+    }
+
+    /// The second head ended with `outcome`.
+    fn finished(&mut self, outcome: &Result<Trained>) {
+        self.ended = Some(outcome.as_ref().ok().map(|t| t.2));
+    }
+
+    /// The recipe whose final training the first thread should run now, given the first head's
+    /// validation NLL (`None`: it failed); `None` once the second head has ended (the choice is
+    /// then made as when the recipes run in turn).
+    fn leader(&self, first: Option<f64>) -> Option<usize> {
+        if self.ended.is_some() {
+            return None;
+        }
+        let second_ahead = match (first, self.running) {
+            (None, _) => true,
+            (Some(a), Some(b)) => b < a,
+            (Some(_), None) => false,
+        };
+        Some(usize::from(second_ahead))
+    }
+
+    /// Whether the final training of recipe `k`, under way, is still worth finishing: `k` leads,
+    /// or, once the second head has ended, `k` is the recipe the choice takes.
+    fn keeps(&self, k: usize, first: Option<f64>) -> bool {
+        match self.ended {
+            None => self.leader(first) == Some(k),
+            Some(second) => {
+                let second_chosen = match (first, second) {
+                    (_, None) => false,
+                    (None, Some(_)) => true,
+                    (Some(a), Some(b)) => b < a,
+                };
+                usize::from(second_chosen) == k
+            }
+        }
+    }
 }
 
 /// The rise of the training loss (nats per predicted step, above its lowest since iteration
@@ -744,5 +905,49 @@ mod blow_up_tests {
         assert_eq!(first_blow_up(&setbacks), None);
         setbacks[55] += 5.1 + 0.3;
         assert_eq!(first_blow_up(&setbacks).map(|b| b.0), Some(55));
+    }
+}
+
+#[cfg(test)]
+mod race_tests {
+    use super::*;
+
+    /// The first thread trains on all the data the recipe that leads, and keeps at it only while
+    /// the choice can still fall on it; once the second head ended, the choice is exactly the
+    /// one of the recipes run in turn (strictly lower validation NLL wins, ties to the first).
+    #[test]
+    fn the_final_training_follows_the_leading_recipe() {
+        let mut race = Race::default();
+        // the second head has not validated yet: the first leads
+        assert_eq!(race.leader(Some(0.5)), Some(0));
+        // … nor when the second only ties it
+        race.saw(0.5);
+        assert_eq!(race.leader(Some(0.5)), Some(0));
+        assert!(race.keeps(0, Some(0.5)) && !race.keeps(1, Some(0.5)));
+        // a running best below the first's final value: the second has won (its best only falls)
+        race.saw(0.7);
+        race.saw(0.4);
+        assert_eq!(race.running, Some(0.4));
+        assert_eq!(race.leader(Some(0.5)), Some(1));
+        assert!(!race.keeps(0, Some(0.5)) && race.keeps(1, Some(0.5)));
+        // a first head that failed numerically leaves the lead to the second
+        assert_eq!(Race::default().leader(None), Some(1));
+        // once the second head ended: no new speculation, the exact choice
+        let ended = |second: Result<Trained>| {
+            let mut race = Race::default();
+            race.finished(&second);
+            race
+        };
+        let params = GpParams::filled(GpShape { m: 1, d: 1, e: 1 }, 0.0);
+        let trained = |v: f64| Ok((params.clone(), 3, v));
+        let race = ended(trained(0.4));
+        assert_eq!(race.leader(Some(0.5)), None);
+        assert!(race.keeps(1, Some(0.5)) && !race.keeps(0, Some(0.5)));
+        let race = ended(trained(0.5));
+        assert!(race.keeps(0, Some(0.5)), "ties go to the first recipe");
+        assert!(race.keeps(1, None), "the first failed");
+        // the second failed late (after leading): the first is chosen
+        let race = ended(Err(MsgpError::NonFinite("late".into())));
+        assert!(race.keeps(0, Some(0.5)) && !race.keeps(1, Some(0.5)));
     }
 }

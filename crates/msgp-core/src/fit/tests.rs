@@ -212,6 +212,28 @@ fn an_observer_can_stop_a_fit() {
     .expect("fit");
     let (plain, _) = fit_episodes(&episodes, &settings, &mut |_| {}).expect("fit");
     assert_eq!(observed.params, plain.params);
+    // two recipes side by side on two threads: stopping the final training on all the data
+    // (which may start before the second recipe's head ends) stops the whole fit
+    let both = FitSettings {
+        threads: Threads::new(2).expect("threads"),
+        method: MsgpSettings {
+            inducing: 10,
+            iterations: 40,
+            validation_fraction: 0.2,
+            ..MsgpSettings::default()
+        }
+        .into(),
+        ..settings
+    };
+    let err = fit_episodes_observed(&episodes, &both, None, &mut |p| {
+        if (p.stage, p.iteration) == (2, 3) {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    })
+    .expect_err("stopped in the final training");
+    assert!(matches!(err, MsgpError::Stopped { iteration: 3 }), "{err}");
 }
 
 #[test]
@@ -828,10 +850,20 @@ fn the_protocol_keeps_the_recipe_with_the_better_validation_nll() {
     assert_eq!(r1.chosen_recipe, chosen);
     assert_eq!(chosen, 1, "the linear recipe wins on a linear plant: {v:?}");
     assert_eq!(one.config.mean, MeanFunction::Linear);
+    // on two threads the final training may start before the second head ends (for the
+    // recipe leading then): the same model and the same report either way
     let (two, r2) = fit(std::slice::from_ref(&traj), &settings(2, 0.2), &mut |_| {}).expect("fit");
     assert_eq!(one.params, two.params, "two threads give the same model");
     assert_eq!(r1.chosen_recipe, r2.chosen_recipe);
     assert_eq!(r1.iterations_run, r2.iterations_run);
+    assert_eq!(r1.best_iteration, r2.best_iteration);
+    assert_eq!(r1.history, r2.history);
+    assert_eq!(r1.recipes, r2.recipes);
+    assert_eq!(r1.full_data_iteration, r2.full_data_iteration);
+    assert!(r1.full_data_iteration.is_some(), "the final training ran");
+    assert_eq!(r1.full_data_failed, r2.full_data_failed);
+    assert_eq!(r1.numerical_stop, r2.numerical_stop);
+    assert_eq!(r1.jitter.events, r2.jitter.events);
     // no tail: one recipe, the settings' own
     let (alone, r) = fit(std::slice::from_ref(&traj), &settings(2, 0.0), &mut |_| {}).expect("fit");
     assert!(
@@ -919,14 +951,20 @@ fn the_chosen_recipe_trains_again_on_all_the_data() {
     let (model, report) = fit(
         std::slice::from_ref(&traj),
         &settings(msgp(0.2, Some(FINAL))),
-        &mut |p| stages.push(p.stage),
+        &mut |p| stages.push((p.stage, p.iteration)),
     )
     .expect("fit");
     assert!(report.full_data_failed.is_none(), "{report:?}");
     let last = report.full_data_iteration.expect("the final stage ran");
     assert!(last <= FINAL, "{last}");
+    // (on two threads a final training started for the recipe leading at the time restarts at
+    // iteration 0 if the other overtakes it: the last run is the one kept)
+    let last_run = stages.iter().rposition(|&(s, it)| (s, it) == (2, 0));
     assert_eq!(
-        stages.iter().filter(|&&s| s == 2).count(),
+        stages[last_run.expect("a final training")..]
+            .iter()
+            .filter(|&&(s, _)| s == 2)
+            .count(),
         FINAL + 1,
         "the final stage runs its iterations on the observed thread"
     );
@@ -960,10 +998,17 @@ fn the_chosen_recipe_trains_again_on_all_the_data() {
         ..msgp(0.2, Some(FINAL))
     });
     let (_, r) = fit(std::slice::from_ref(&traj), &few, &mut |p| {
-        stages.push(p.stage)
+        stages.push((p.stage, p.iteration))
     })
     .expect("fit with few iterations");
-    assert_eq!(stages.iter().filter(|&&s| s == 2).count(), 11);
+    let last_run = stages.iter().rposition(|&(s, it)| (s, it) == (2, 0));
+    assert_eq!(
+        stages[last_run.expect("a final training")..]
+            .iter()
+            .filter(|&&(s, _)| s == 2)
+            .count(),
+        11
+    );
     assert!(r.full_data_failed.is_none(), "{:?}", r.full_data_failed);
     assert!(r.full_data_iteration.expect("ran") <= 10);
     // L-BFGS fits have no final stage: the early-stopped head's model is theirs
