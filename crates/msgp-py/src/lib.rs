@@ -21,6 +21,12 @@ pub mod sim;
 
 use pyo3::prelude::*;
 
+/// The Rust side's allocator (Python's own is untouched): the one-step fit frees and allocates
+/// `n × n` matrices of 2–8 MB hundreds of times per fit, which glibc's malloc returns to the
+/// system and faults back in each time (`BENCHMARKS.md`, sixth session).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 /// The compiled module `msgp._msgp` (re-exported by the `msgp` package).
 #[pymodule]
 fn _msgp(m: &Bound<'_, PyModule>) -> PyResult<()> {
