@@ -927,6 +927,17 @@ fn the_protocol_keeps_the_recipe_with_the_better_validation_nll() {
     assert!(zero.to_string().contains("linear-kf start"), "{zero}");
 }
 
+/// The progress events of the last final training among `(stage, iteration)` events: on two
+/// threads a final training started for the recipe leading at the time restarts at iteration 0
+/// if the other recipe overtakes it.
+fn last_final_run(stages: &[(u8, usize)]) -> usize {
+    let start = stages
+        .iter()
+        .rposition(|&event| event == (2, 0))
+        .expect("a final training");
+    stages[start..].iter().filter(|&&(s, _)| s == 2).count()
+}
+
 /// After the validation tail has chosen the recipe, the chosen recipe trains again from its
 /// start on all the training data: the model returned is bit for bit the one a fit of that
 /// recipe alone, without a tail, for the final stage's iterations gives, and not the head's.
@@ -957,14 +968,8 @@ fn the_chosen_recipe_trains_again_on_all_the_data() {
     assert!(report.full_data_failed.is_none(), "{report:?}");
     let last = report.full_data_iteration.expect("the final stage ran");
     assert!(last <= FINAL, "{last}");
-    // (on two threads a final training started for the recipe leading at the time restarts at
-    // iteration 0 if the other overtakes it: the last run is the one kept)
-    let last_run = stages.iter().rposition(|&(s, it)| (s, it) == (2, 0));
     assert_eq!(
-        stages[last_run.expect("a final training")..]
-            .iter()
-            .filter(|&&(s, _)| s == 2)
-            .count(),
+        last_final_run(&stages),
         FINAL + 1,
         "the final stage runs its iterations on the observed thread"
     );
@@ -1001,14 +1006,7 @@ fn the_chosen_recipe_trains_again_on_all_the_data() {
         stages.push((p.stage, p.iteration))
     })
     .expect("fit with few iterations");
-    let last_run = stages.iter().rposition(|&(s, it)| (s, it) == (2, 0));
-    assert_eq!(
-        stages[last_run.expect("a final training")..]
-            .iter()
-            .filter(|&&(s, _)| s == 2)
-            .count(),
-        11
-    );
+    assert_eq!(last_final_run(&stages), 11);
     assert!(r.full_data_failed.is_none(), "{:?}", r.full_data_failed);
     assert!(r.full_data_iteration.expect("ran") <= 10);
     // L-BFGS fits have no final stage: the early-stopped head's model is theirs
