@@ -8,13 +8,13 @@ mod render;
 
 use clap::Parser;
 
+use args::{Cli, Command, ReproduceCommand};
+
 /// mimalloc instead of the system allocator: the one-step fit frees and allocates `n × n`
 /// matrices of 2–8 MB hundreds of times per fit, which glibc's malloc returns to the system and
 /// faults back in each time (`BENCHMARKS.md`, sixth session).
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
-use args::{Cli, Command, ReproduceCommand};
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
