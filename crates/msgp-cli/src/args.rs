@@ -298,6 +298,11 @@ pub struct FitArgs {
     /// gp-narx, exact for pilco-narx and for msgp's start].
     #[arg(long = "one-step", value_enum, value_name = "OBJECTIVE")]
     pub one_step: Option<OneStepArg>,
+    /// msgp: report the free simulation's variance as the model predicts it, without the
+    /// output-variance calibration the default protocol judges on the validation tail
+    /// (`docs/design.md`, "Honest uncertainty on data the model never saw").
+    #[arg(long)]
+    pub no_calibration: bool,
     /// Prior mean of the GP [default: msgp trains a zero-mean and a linear-mean recipe and
     /// keeps the one with the lower validation NLL; the baselines: zero].
     #[arg(long, value_enum)]

@@ -269,7 +269,7 @@ fn baselines_text_output_and_default_model_path() {
         serde_json::from_str(&std::fs::read_to_string(dir.path("p.json")).expect("model file"))
             .expect("model JSON");
     assert_eq!(model["format"], "msgp-model");
-    assert_eq!(model["format_version"], "1.2");
+    assert_eq!(model["format_version"], "1.3");
     assert_eq!(model["method"], "pilco-narx");
 }
 

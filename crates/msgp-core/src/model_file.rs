@@ -32,7 +32,7 @@ pub const FORMAT: &str = "msgp-model";
 /// Major format version written and read by this build.
 pub const FORMAT_MAJOR: u32 = 1;
 /// Minor format version written by this build (readers accept any minor of their major).
-pub const FORMAT_MINOR: u32 = 2;
+pub const FORMAT_MINOR: u32 = 3;
 
 /// NARX history lengths.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -90,6 +90,10 @@ pub struct GpFile {
     /// absent for the zero mean.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub linear_mean: Option<Vec<Vec<f64>>>,
+    /// Per output, the variance (normalised units, ≥ 0) added to every free-simulated output
+    /// variance (format 1.3; `msgp_core::fit::calibration`); absent: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<Vec<f64>>,
 }
 
 /// Where the model came from (not needed for predictions).
@@ -328,6 +332,7 @@ impl ModelFile {
                 },
                 linear_mean: (model.config.mean == MeanFunction::Linear)
                     .then(|| rows_of(&p.linear_mean)),
+                calibration: (!model.calibration.is_empty()).then(|| model.calibration.clone()),
             },
             training: Training {
                 seed: record.settings.seed,
@@ -420,6 +425,20 @@ impl ModelFile {
         ] {
             check_finite(path, what, values)?;
         }
+        let calibration = match &g.calibration {
+            Some(c) => {
+                vector(path, "gp.calibration", c, dy)?;
+                check_finite(path, "gp.calibration", c)?;
+                if let Some(i) = c.iter().position(|v| *v < 0.0) {
+                    return Err(shape_err(
+                        path,
+                        format!("`gp.calibration` entry {i} is negative"),
+                    ));
+                }
+                c.clone()
+            }
+            None => Vec::new(),
+        };
         let j = g.jitter;
         let valid = g.noise_floor.is_finite()
             && g.noise_floor >= 0.0
@@ -459,6 +478,7 @@ impl ModelFile {
                 y_mean: n.y_mean.clone(),
                 y_std: n.y_std.clone(),
             },
+            calibration,
         })
     }
 

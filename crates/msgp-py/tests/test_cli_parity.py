@@ -63,6 +63,9 @@ def test_synthetic_msgp_matches_cli(sys4, sys4_fit):
     # the chosen recipe's final training on all the data, reported alike by both
     assert report["full_data_iteration"] == model.report["full_data_iteration"]
     assert (report["full_data_iteration"] is None) != (report["full_data_failed"] is None)
+    # … and the output-variance calibration its proxy judged on the tail
+    assert report["calibration"] is not None
+    assert report["calibration"] == model.report["calibration"]
 
 
 def test_dryer_msgp_matches_cli(dryer, cli, tmp_path):

@@ -80,6 +80,9 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
                 report.recipes.len(),
                 crate::commands::fit::kept(&report)
             );
+            if let Some(line) = crate::commands::fit::calibrated(&report, &["y".to_string()]) {
+                eprintln!("  {line}");
+            }
             if let Some(why) = &report.diverged {
                 eprintln!("  warning: the fitted model diverges: {why}");
             }

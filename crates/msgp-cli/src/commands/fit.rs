@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use msgp_core::data::Trajectory;
+use msgp_core::fit::calibration::Judge;
 use msgp_core::fit::{
     FitOptimizer, FitOptions, FitProgress, FitReport, MethodSettings, MsgpStart, fit,
 };
@@ -105,6 +106,15 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             ),
         }
     }
+    if args.no_calibration {
+        match &mut settings.method {
+            MethodSettings::Msgp(s) => s.calibrate = false,
+            _ => bail!(
+                "--no-calibration: only msgp fits are calibrated; --method {} is not",
+                method.name()
+            ),
+        }
+    }
     warnings.extend(options.inducing_warning(&trajs));
     for w in &warnings {
         eprintln!("warning: {w}");
@@ -188,6 +198,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             "best_iteration": report.best_iteration,
             "full_data_iteration": report.full_data_iteration,
             "full_data_failed": report.full_data_failed,
+            "calibration": report.calibration,
             "diverged": report.diverged.is_some(),
             "divergence": report.diverged,
             "model": model_path.display().to_string(),
@@ -222,6 +233,10 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         ));
     }
     text.push('\n');
+    if let Some(line) = calibrated(&report, &data.outputs) {
+        text.push_str(&line);
+        text.push('\n');
+    }
     if let Some(why) = &report.diverged {
         text.push_str(&format!("WARNING: the fitted model diverges: {why}\n"));
     }
@@ -255,6 +270,32 @@ pub fn kept(report: &FitReport) -> String {
         ),
         (None, None) => format!("kept iteration {}", report.best_iteration),
     }
+}
+
+/// The output-variance calibration of an MSGP fit, in words ([`msgp_core::fit::calibration`]);
+/// `None` without one.
+pub fn calibrated(report: &FitReport, outputs: &[String]) -> Option<String> {
+    let c = report.calibration.as_ref()?;
+    let added: Vec<String> = c
+        .added_std
+        .iter()
+        .enumerate()
+        .map(|(j, s)| match outputs.get(j) {
+            Some(name) => format!("{s:.4} ({name})"),
+            None => format!("{s:.4}"),
+        })
+        .collect();
+    let judge = match c.judge {
+        Judge::Proxy { iteration } => format!(
+            "the final training's proxy on the head (its iteration {iteration}) simulating the \
+             validation tail"
+        ),
+        Judge::Head => "the head's model simulating the validation tail".to_string(),
+    };
+    Some(format!(
+        "output variance calibrated by {judge}: added standard deviation {}",
+        added.join(", ")
+    ))
 }
 
 #[cfg(test)]

@@ -416,6 +416,7 @@ pub fn fit_linear_kf(
         params,
         config,
         normalizer,
+        calibration: Vec::new(),
     };
     Ok((
         model,

@@ -9,6 +9,7 @@
 //! run [`fit_episodes_observed`]; front ends build their [`FitSettings`] from the user's
 //! [`FitOptions`].
 
+pub mod calibration;
 mod divergence;
 mod hyper;
 pub mod linear_kf;
@@ -47,7 +48,9 @@ pub struct FitProgress {
     /// alternative recipe ([`MsgpSettings::alternative`]). On two or more threads the final
     /// training on all the data may start while the alternative recipe still trains, for the
     /// recipe leading at that moment; if the other one overtakes it, stage 2 starts again at
-    /// iteration 0 for that one (the model returned does not depend on it).
+    /// iteration 0 for that one (the model returned does not depend on it). 4: the
+    /// calibration's proxy of the final training, on the head alone ([`calibration`]; shown
+    /// only when it does not run beside the final training).
     pub stage: u8,
     /// Adam iteration.
     pub iteration: usize,
@@ -64,7 +67,7 @@ pub struct FitProgress {
 /// What happened during a fit.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct FitReport {
-    /// Adam iterations run (all stages).
+    /// Adam iterations run (all stages, the calibration's proxy included).
     pub iterations_run: usize,
     /// Iteration chosen by early stopping (the refit runs this many); without a validation
     /// tail, the iteration of the lowest training loss, whose parameters the fit returns.
@@ -98,6 +101,10 @@ pub struct FitReport {
     /// the head is returned then).
     #[serde(default)]
     pub full_data_failed: Option<String>,
+    /// MSGP with the final training and [`MsgpSettings::calibrate`]: the output-variance
+    /// calibration of the returned model ([`calibration`]).
+    #[serde(default)]
+    pub calibration: Option<calibration::CalibrationReport>,
 }
 
 /// How one MSGP recipe did on the validation tail.
@@ -367,6 +374,7 @@ fn fit_unchecked(
         params,
         config,
         normalizer,
+        calibration: Vec::new(),
     };
     Ok((model, report))
 }

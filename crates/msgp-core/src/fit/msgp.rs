@@ -6,6 +6,9 @@
 //! default) the chosen recipe then trains once more from its start on all the training data,
 //! for a fixed number of iterations, and that model is returned: the tail judges *which* recipe
 //! well, but on short series it is a poor judge of *how long* to train (`docs/design.md`).
+//! With [`MsgpSettings::calibrate`] (the default) a proxy of that final training, on the head
+//! alone, then judges on the tail how much output variance the model must add
+//! ([`super::calibration`]).
 //!
 //! ## Guarding against noise collapse
 //! The trajectory likelihood can be lowered by shrinking the noise variances while the free
@@ -22,6 +25,7 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
+use super::calibration::{CalibrationReport, Judge, tail_calibration};
 use super::linear_kf::{KF_NOISE_FLOOR, fit_linear_kf};
 use super::one_step::{OneStepSettings, column_std, fit_one_step, one_step_pairs};
 use super::{
@@ -33,7 +37,7 @@ use crate::error::{MsgpError, Result};
 use crate::gp::integrator::Structure;
 use crate::gp::integrator::{IGNORED_LENGTHSCALE, NO_GP_SIGNAL_VAR};
 use crate::gp::kmeans::kmeans;
-use crate::gp::{GpConfig, GpParams, GpShape, MeanFunction, ParamGroup};
+use crate::gp::{GpConfig, GpParams, GpShape, MeanFunction, ParamGroup, PreparedGp};
 use crate::loss::{
     Complexity, Likelihood, filter_loss, filter_loss_and_gradient, loss_and_gradient, msgp_loss,
 };
@@ -102,6 +106,12 @@ pub(super) fn fit_msgp(
         (Some(n), false, None, FitOptimizer::Adam) => Some(n),
         _ => None,
     };
+    // the proxy of the final training, for the calibration (only with the final training)
+    let proxy_iterations = final_iterations.filter(|_| msgp.calibrate);
+    // each recipe's start on the head (the proxy starts from it)
+    let starts: Mutex<Vec<Option<GpParams<f64>>>> = Mutex::new(vec![None; recipes.len()]);
+    // set when the user stops the fit: stops whatever trains on another thread
+    let stop = AtomicBool::new(false);
     let config_of = |recipe: &MsgpSettings| GpConfig {
         noise_floor: recipe.noise_floor,
         mean: recipe.mean,
@@ -125,7 +135,8 @@ pub(super) fn fit_msgp(
             report,
         };
         let stage_number = if k == 0 { 1 } else { 3 };
-        train_recipe(
+        let mut head_start = None;
+        let trained = train_recipe(
             &mut stage,
             previous,
             one_step,
@@ -133,7 +144,12 @@ pub(super) fn fit_msgp(
             &all_eps,
             &tails,
             stage_number,
-        )
+            &mut head_start,
+        );
+        if head_start.is_some() {
+            starts.lock().unwrap_or_else(|e| e.into_inner())[k] = head_start;
+        }
+        trained
     };
     // recipe `k` once more, from its start on all the training data, under its own report
     let final_stage = |k: usize,
@@ -177,8 +193,55 @@ pub(super) fn fit_msgp(
             report: own,
         }
     };
+    // the proxy of recipe `k`'s final training ([`calibration`]): the same training from the
+    // recipe's start on the head, on the head alone
+    let proxy_stage = |k: usize,
+                       iterations: usize,
+                       settings: &FitSettings,
+                       progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>|
+     -> ProxyTraining {
+        let recipe = &recipes[k];
+        let mut own = FitReport::default();
+        let init = starts.lock().unwrap_or_else(|e| e.into_inner())[k].clone();
+        let outcome = match init {
+            None => Ok(None),
+            Some(init) => {
+                let mut stage = Stage {
+                    spec,
+                    config: config_of(recipe),
+                    settings,
+                    msgp: recipe,
+                    start,
+                    progress,
+                    report: &mut own,
+                };
+                let n = iterations.min(recipe.iterations);
+                match stage.train(init, &head_eps, &[], n, 4, Some(FULL_DATA_BLOW_UP)) {
+                    Ok(_) if own.full_data_failed.is_some() => Ok(None),
+                    Ok((params, iteration, _)) => Ok(Some((params, iteration))),
+                    Err(e @ MsgpError::Stopped { .. }) => Err(e),
+                    Err(_) => Ok(None),
+                }
+            }
+        };
+        ProxyTraining {
+            recipe: k,
+            outcome,
+            report: own,
+        }
+    };
+    // a quiet observer for work beside the observed one: it stops when the user stopped
+    let quiet_stop = |_: &FitProgress| {
+        if stop.load(Ordering::Relaxed) {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    };
     // the final training if it ran while the second recipe's head was still training
     let mut early_final: Option<FinalTraining> = None;
+    // the proxy if the second recipe's thread trained it once both heads had ended
+    let mut early_proxy: Option<ProxyTraining> = None;
     let results: Vec<Result<Trained>> = if recipes.len() == 2 && settings.threads.get() >= 2 {
         // the two recipes side by side, each on half the threads; the observer sees the
         // first, and stopping it stops both. Once the first head is done, its thread trains
@@ -187,26 +250,29 @@ pub(super) fn fit_msgp(
             threads: Threads::new((settings.threads.get() / 2).max(1))?,
             ..settings.clone()
         };
-        let stop = AtomicBool::new(false);
         let race = Mutex::new(Race::default());
         let mut side = FitReport::default();
-        let (first, second) = std::thread::scope(|scope| {
+        let (first, second, proxy) = std::thread::scope(|scope| {
             let handle = scope.spawn(|| {
                 let mut quiet = |p: &FitProgress| {
                     if let Some(v) = p.validation {
                         race.lock().unwrap_or_else(|e| e.into_inner()).saw(v);
                     }
-                    if stop.load(Ordering::Relaxed) {
-                        ControlFlow::Break(())
-                    } else {
-                        ControlFlow::Continue(())
-                    }
+                    quiet_stop(p)
                 };
                 let second = run(1, &recipes[1], &half, &mut quiet, &mut side);
-                race.lock()
-                    .unwrap_or_else(|e| e.into_inner())
-                    .finished(&second);
-                second
+                let chosen = {
+                    let mut race = race.lock().unwrap_or_else(|e| e.into_inner());
+                    race.finished(&second);
+                    race.chosen()
+                };
+                // both heads have ended: this thread trains the chosen recipe's proxy while
+                // the other finishes its final training
+                let proxy = match (proxy_iterations, chosen) {
+                    (Some(n), Some(k)) => Some(proxy_stage(k, n, &half, &mut quiet_stop.clone())),
+                    _ => None,
+                };
+                (second, proxy)
             });
             let mut observed = |p: &FitProgress| {
                 let flow = progress(p);
@@ -223,6 +289,9 @@ pub(super) fn fit_msgp(
                 Err(MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_)) => Some(None),
                 Err(_) => None,
             };
+            if let Some(outcome) = first_outcome {
+                race.lock().unwrap_or_else(|e| e.into_inner()).first = Some(outcome);
+            }
             if let (Some(iterations), Some(first_outcome)) = (final_iterations, first_outcome) {
                 let state = || race.lock().unwrap_or_else(|e| e.into_inner());
                 loop {
@@ -263,12 +332,16 @@ pub(super) fn fit_msgp(
             {
                 stop.store(true, Ordering::Relaxed);
             }
-            let second = handle.join().map_err(|_| {
+            let joined = handle.join().map_err(|_| {
                 MsgpError::NonFinite("the alternative recipe's training panicked".into())
             });
-            (first, second)
+            match joined {
+                Ok((second, proxy)) => (first, Ok(second), proxy),
+                Err(e) => (first, Err(e), None),
+            }
         });
         let second = second?;
+        early_proxy = proxy;
         report.iterations_run += side.iterations_run;
         report.jitter.merge(&side.jitter);
         report.history.extend(side.history);
@@ -325,10 +398,51 @@ pub(super) fn fit_msgp(
         return Err(first_error.unwrap_or_else(|| MsgpError::NonFinite("no recipe trained".into())));
     };
     let k = report.chosen_recipe;
+    let head_model = chosen.clone();
+    let mut proxy = None;
     if let Some(iterations) = final_iterations {
-        let trained = match early_final {
-            Some(t) if t.recipe == k => t,
-            _ => final_stage(k, iterations, settings, &mut *progress),
+        let early = early_final.filter(|t| t.recipe == k);
+        proxy = early_proxy.filter(|p| p.recipe == k);
+        let proxy_needed = proxy_iterations.is_some() && proxy.is_none();
+        let trained = match early {
+            Some(t) => {
+                if proxy_needed {
+                    proxy = Some(proxy_stage(k, iterations, settings, &mut *progress));
+                }
+                t
+            }
+            None if proxy_needed && settings.threads.get() >= 2 => {
+                // the final training and its proxy side by side, each on half the threads
+                let half = FitSettings {
+                    threads: Threads::new((settings.threads.get() / 2).max(1))?,
+                    ..settings.clone()
+                };
+                let (trained, side) = std::thread::scope(|scope| {
+                    let handle =
+                        scope.spawn(|| proxy_stage(k, iterations, &half, &mut quiet_stop.clone()));
+                    let mut observed = |p: &FitProgress| {
+                        let flow = progress(p);
+                        if flow.is_break() {
+                            stop.store(true, Ordering::Relaxed);
+                        }
+                        flow
+                    };
+                    let trained = final_stage(k, iterations, &half, &mut observed);
+                    (trained, handle.join())
+                });
+                proxy = Some(side.map_err(|_| {
+                    MsgpError::NonFinite("the calibration's proxy training panicked".into())
+                })?);
+                trained
+            }
+            None => {
+                let trained = final_stage(k, iterations, settings, &mut *progress);
+                // (where the head's model stands, it is its own judge: no proxy)
+                if proxy_needed && matches!(trained.outcome, Ok(Some(_))) {
+                    proxy = Some(proxy_stage(k, iterations, settings, &mut *progress));
+                }
+                trained
+            }
         };
         report.iterations_run += trained.report.iterations_run;
         report.jitter.merge(&trained.report.jitter);
@@ -342,6 +456,40 @@ pub(super) fn fit_msgp(
         }
     }
     let config = config_of(&recipes[k]);
+    // the calibration: the proxy judges the final training's model, the head's model itself
+    let mut calibration = Vec::new();
+    if proxy_iterations.is_some() {
+        let proxy_outcome = match proxy {
+            Some(p) => {
+                report.iterations_run += p.report.iterations_run;
+                report.jitter.merge(&p.report.jitter);
+                p.outcome?
+            }
+            None => None,
+        };
+        let (params, judge) = match (report.full_data_iteration, proxy_outcome) {
+            (Some(_), Some((params, iteration))) => (params, Judge::Proxy { iteration }),
+            _ => (head_model, Judge::Head),
+        };
+        let judged = PreparedGp::new(&params, &config, &mut report.jitter)
+            .and_then(|gp| tail_calibration(&gp, &spec, &tails));
+        match judged {
+            Ok(delta) => {
+                report.calibration = Some(CalibrationReport {
+                    added_std: delta
+                        .iter()
+                        .enumerate()
+                        .map(|(j, d)| normalizer.y_var_to_original(j, *d).sqrt())
+                        .collect(),
+                    judge,
+                });
+                calibration = delta;
+            }
+            // a judge whose simulation fails numerically decides nothing
+            Err(MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_)) => {}
+            Err(e) => return Err(e),
+        }
+    }
     report.train_seconds = start.elapsed().as_secs_f64();
     let model = Model {
         method: Method::Msgp,
@@ -349,8 +497,17 @@ pub(super) fn fit_msgp(
         params: chosen,
         config,
         normalizer,
+        calibration,
     };
     Ok((model, report))
+}
+
+/// The proxy of one recipe's final training ([`calibration`]): its outcome (the parameters and
+/// iteration kept; `None` where it blew up, failed numerically or had no start) and its report.
+struct ProxyTraining {
+    recipe: usize,
+    outcome: Result<Option<(GpParams<f64>, usize)>>,
+    report: FitReport,
 }
 
 /// The final training on all the data of one recipe: its outcome (the parameters and iteration
@@ -375,6 +532,8 @@ struct Race {
     running: Option<f64>,
     /// The second head's outcome once it ended: its validation NLL, or `None` if it failed.
     ended: Option<Option<f64>>,
+    /// The first head's outcome once it ended (as [`Race::ended`]; a stopped head never ends).
+    first: Option<Option<f64>>,
 }
 
 impl Race {
@@ -401,6 +560,16 @@ impl Race {
             (Some(_), None) => false,
         };
         Some(usize::from(second_ahead))
+    }
+
+    /// The recipe the choice takes once both heads have ended; `None` before, or when the
+    /// recipe it would take failed.
+    fn chosen(&self) -> Option<usize> {
+        let (Some(first), Some(_)) = (self.first, self.ended) else {
+            return None;
+        };
+        let k = usize::from(self.keeps(1, first));
+        (k == 1 || first.is_some()).then_some(k)
     }
 
     /// Whether the final training of recipe `k`, under way, is still worth finishing: `k` leads,
@@ -479,7 +648,8 @@ type Trained = (GpParams<f64>, usize, f64);
 
 /// One recipe's training: its start (or `previous`), the solver with early stopping on
 /// `tails`, the optional refit. Returns the parameters, the chosen iteration and the best
-/// validation NLL per step (`+∞` without tails).
+/// validation NLL per step (`+∞` without tails); its start (without `previous`) goes to
+/// `head_start`.
 #[allow(clippy::too_many_arguments)]
 fn train_recipe(
     stage: &mut Stage<'_, '_>,
@@ -489,12 +659,16 @@ fn train_recipe(
     all_eps: &[Episode],
     tails: &[Episode],
     stage_number: u8,
+    head_start: &mut Option<GpParams<f64>>,
 ) -> Result<Trained> {
     let init = match (previous, stage.msgp.start) {
         (Some(p), _) => p.params.clone(),
         (None, MsgpStart::OneStep) => stage.initial(head_eps, one_step)?,
         (None, MsgpStart::LinearKf) => stage.initial_from_kalman(head_eps)?,
     };
+    if previous.is_none() {
+        *head_start = Some(init.clone());
+    }
     let (mut chosen, best_iteration, validation) = stage.train(
         init,
         head_eps,
@@ -949,5 +1123,33 @@ mod race_tests {
         // the second failed late (after leading): the first is chosen
         let race = ended(Err(MsgpError::NonFinite("late".into())));
         assert!(race.keeps(0, Some(0.5)) && !race.keeps(1, Some(0.5)));
+        // the choice the second recipe's thread trains the calibration's proxy for: known only
+        // once both heads have ended, and never a recipe that failed
+        let chosen = |first: Option<Option<f64>>, second: Option<Result<Trained>>| {
+            let mut race = Race {
+                first,
+                ..Race::default()
+            };
+            if let Some(s) = second {
+                race.finished(&s);
+            }
+            race.chosen()
+        };
+        assert_eq!(
+            chosen(None, Some(trained(0.4))),
+            None,
+            "the first still trains"
+        );
+        assert_eq!(
+            chosen(Some(Some(0.5)), None),
+            None,
+            "the second still trains"
+        );
+        assert_eq!(chosen(Some(Some(0.5)), Some(trained(0.4))), Some(1));
+        assert_eq!(chosen(Some(Some(0.5)), Some(trained(0.5))), Some(0));
+        assert_eq!(chosen(Some(None), Some(trained(0.9))), Some(1));
+        let failed = || Some(Err(MsgpError::NonFinite("late".into())));
+        assert_eq!(chosen(Some(Some(0.5)), failed()), Some(0));
+        assert_eq!(chosen(Some(None), failed()), None, "both failed");
     }
 }

@@ -123,6 +123,11 @@ pub struct MsgpSettings {
     /// on the held-out tail. Without a validation tail only these settings train.
     #[serde(default)]
     pub alternative: Option<Recipe>,
+    /// With the final training ([`MsgpSettings::full_data_iterations`]): calibrate the returned
+    /// model's output variance on the validation tail by a proxy of that training
+    /// ([`super::calibration`]; records before 2026-12-05 had none).
+    #[serde(default)]
+    pub calibrate: bool,
 }
 
 /// The default [`MsgpSettings::alternative`]: a linear prior mean, the complexity term
@@ -271,6 +276,7 @@ impl Default for MsgpSettings {
             noise_start: NoiseStart::Split,
             start: MsgpStart::OneStep,
             alternative: Some(LINEAR_RECIPE),
+            calibrate: true,
         }
     }
 }

@@ -592,6 +592,7 @@ fn settings_serialise_with_the_methods_own_keys() {
     msgp_1_2.push("start");
     msgp_1_2.push("one_step_objective");
     msgp_1_2.push("full_data_iterations");
+    msgp_1_2.push("calibrate");
     assert_eq!(keys(&FitSettings::new(Method::Msgp)), with(&msgp_1_2));
     for m in [Method::GpNarx, Method::PilcoNarx] {
         assert_eq!(
@@ -805,6 +806,141 @@ fn mean_feedback_and_moment_matching_agree_without_noise() {
 
 /// 160 samples of a second-order plant with a long memory driven by two sines, linear but for
 /// `nonlinear · tanh(y_{t−1})`.
+/// The protocol's calibration is what its definition says: the chosen recipe trained on the
+/// head alone for the final training's iterations (here: a fit of the head without a tail,
+/// which starts and trains the same way) simulates the tail, and the added variance is the one
+/// minimising that simulation's NLL. It widens every simulated variance by exactly that, moves
+/// no mean, and is saved and reloaded with the model; `calibrate: false` leaves it out and the
+/// model otherwise unchanged.
+#[test]
+fn the_calibration_is_the_tail_nll_of_the_final_trainings_proxy() {
+    use crate::fit::calibration::{Judge, added_variance};
+    use crate::model_file::{FitRecord, ModelFile};
+    // a saturating plant whose output drifts in its last fifth (the tail): a model trained on
+    // the head alone is overconfident there
+    let n = 160;
+    let u: Vec<f64> = (0..n).map(|i| ((i as f64) * 0.37).sin()).collect();
+    let mut y = vec![0.0; n];
+    for t in 1..n {
+        let drift = if t < 128 { 0.0 } else { 0.5 };
+        y[t] = 0.7 * y[t - 1] + (1.5 * u[t - 1]).tanh() + drift;
+    }
+    let traj = Trajectory::siso(&u, &y).expect("finite");
+    let msgp = MsgpSettings {
+        inducing: 12,
+        iterations: 80,
+        full_data_iterations: Some(40),
+        ..MsgpSettings::default()
+    };
+    let settings = |msgp: MsgpSettings| FitSettings {
+        ly: 2,
+        lu: 1,
+        threads: Threads::new(1).expect("threads"),
+        method: msgp.into(),
+        ..FitSettings::default()
+    };
+    let (model, report) = fit(
+        std::slice::from_ref(&traj),
+        &settings(msgp.clone()),
+        &mut |_| {},
+    )
+    .expect("fit");
+    let c = report.calibration.clone().expect("calibrated");
+    let Judge::Proxy { iteration } = c.judge else {
+        panic!("the final training ran, so its proxy judges: {c:?}")
+    };
+    // the proxy, independently: the chosen recipe on the head, no tail, 40 iterations
+    let chosen = match report.chosen_recipe {
+        0 => msgp.clone(),
+        _ => msgp.with_recipe(msgp.alternative.expect("alternative")),
+    };
+    let n = traj.len();
+    let n_val = (n as f64 * msgp.validation_fraction).round() as usize;
+    let head = traj.slice(0, n - n_val);
+    let proxy_settings = settings(MsgpSettings {
+        validation_fraction: 0.0,
+        iterations: 40,
+        ..chosen
+    });
+    let (proxy, proxy_report) =
+        fit(std::slice::from_ref(&head), &proxy_settings, &mut |_| {}).expect("proxy");
+    // (the reference normalises by the head's statistics, the fit by all the data's: the two
+    // proxies agree to an iteration or two and their calibrations to the grid's step)
+    assert!(
+        proxy_report.best_iteration.abs_diff(iteration) <= 3,
+        "{} vs {iteration}",
+        proxy_report.best_iteration
+    );
+    let tail = traj.slice(n - n_val - model.spec.warmup(), n);
+    let sim = proxy.simulate(&tail).expect("tail");
+    let (std, w) = (model.normalizer.y_std[0], model.spec.warmup());
+    let pairs: Vec<(f64, f64)> = (0..sim.mean.nrows())
+        .map(|i| {
+            let r = (tail.y[(w + i, 0)] - sim.mean[(i, 0)]) / std;
+            (r * r, sim.var[(i, 0)] / (std * std))
+        })
+        .collect();
+    let delta = added_variance(&pairs);
+    assert!(
+        delta > 0.1,
+        "the proxy is overconfident on the tail: {delta}"
+    );
+    assert_eq!(model.calibration.len(), 1);
+    let step = 10f64.ln() / crate::fit::calibration::GRID_PER_DECADE as f64;
+    assert!(
+        (model.calibration[0] / delta).ln().abs() <= 1.01 * step,
+        "{} vs {delta}",
+        model.calibration[0]
+    );
+    // … which the final model's own simulation of the tail (it trained on it) would not give
+    let gp = PreparedGp::new(&model.params, &model.config, &mut Default::default()).expect("gp");
+    let ep = crate::rollout::Episode::feed_forward(model.normalizer.apply(&tail));
+    let own = calibration::tail_calibration(&gp, &model.spec, &[ep]).expect("own");
+    assert!(
+        (own[0] / delta).ln().abs() > 2.0 * step,
+        "{own:?} vs {delta}"
+    );
+    assert!((c.added_std[0] - model.calibration[0].sqrt() * std).abs() < 1e-12 * std);
+    // every simulated variance widened by δ, no mean moved
+    let bare = Model {
+        calibration: Vec::new(),
+        ..model.clone()
+    };
+    let (a, b) = (
+        model.simulate(&traj).expect("sim"),
+        bare.simulate(&traj).expect("sim"),
+    );
+    assert_eq!(a.mean, b.mean);
+    for (va, vb) in a.var.iter().zip(b.var.iter()) {
+        assert!((va - vb - model.calibration[0] * std * std).abs() < 1e-12 * va);
+    }
+    // saved and reloaded with the model
+    let record = FitRecord {
+        train: std::slice::from_ref(&traj),
+        settings: &settings(msgp.clone()),
+        report: &report,
+        inputs: &["u".to_string()],
+        outputs: &["y".to_string()],
+    };
+    let reloaded = ModelFile::from_fit(&model, &record)
+        .expect("file")
+        .to_model()
+        .expect("model");
+    assert_eq!(reloaded.calibration, model.calibration);
+    // switched off: no calibration, the same parameters
+    let (off, off_report) = fit(
+        std::slice::from_ref(&traj),
+        &settings(MsgpSettings {
+            calibrate: false,
+            ..msgp
+        }),
+        &mut |_| {},
+    )
+    .expect("fit");
+    assert!(off.calibration.is_empty() && off_report.calibration.is_none());
+    assert_eq!(off.params, model.params);
+}
+
 fn long_memory_plant(nonlinear: f64) -> Trajectory {
     let n = 160;
     let u: Vec<f64> = (0..n)
@@ -864,6 +1000,9 @@ fn the_protocol_keeps_the_recipe_with_the_better_validation_nll() {
     assert_eq!(r1.full_data_failed, r2.full_data_failed);
     assert_eq!(r1.numerical_stop, r2.numerical_stop);
     assert_eq!(r1.jitter.events, r2.jitter.events);
+    assert!(r1.calibration.is_some(), "the model was calibrated");
+    assert_eq!(r1.calibration, r2.calibration);
+    assert_eq!(one.calibration, two.calibration);
     // no tail: one recipe, the settings' own
     let (alone, r) = fit(std::slice::from_ref(&traj), &settings(2, 0.0), &mut |_| {}).expect("fit");
     assert!(

@@ -96,6 +96,11 @@ pub struct Model {
     pub config: GpConfig,
     /// Training statistics.
     pub normalizer: Normalizer,
+    /// Per output, the variance (normalised units) added to every free-simulated output
+    /// variance, by either rollout: the MSGP protocol's cross-validated calibration
+    /// ([`crate::fit::calibration`]); empty where there is none. It moves no mean and no
+    /// filtered prediction.
+    pub calibration: Vec<f64>,
 }
 
 /// A free simulation in original units.
@@ -128,7 +133,9 @@ impl Model {
             for i in 0..mean.nrows() {
                 for j in 0..dy {
                     mean[(i, j)] = self.normalizer.y_to_original(j, mean[(i, j)]);
-                    var[(i, j)] = self.normalizer.y_var_to_original(j, var[(i, j)]);
+                    var[(i, j)] = self
+                        .normalizer
+                        .y_var_to_original(j, var[(i, j)] + self.added_variance(j));
                 }
             }
             return Ok(Simulation {
@@ -151,7 +158,9 @@ impl Model {
         for (i, s) in steps.iter().enumerate() {
             for j in 0..dy {
                 mean[(i, j)] = self.normalizer.y_to_original(j, s.mean[j]);
-                var[(i, j)] = self.normalizer.y_var_to_original(j, s.cov[(j, j)]);
+                var[(i, j)] = self
+                    .normalizer
+                    .y_var_to_original(j, s.cov[(j, j)] + self.added_variance(j));
             }
         }
         Ok(Simulation {
@@ -159,6 +168,11 @@ impl Model {
             mean,
             var,
         })
+    }
+
+    /// The calibration's added variance of output `j` (normalised units; 0 without one).
+    fn added_variance(&self, j: usize) -> f64 {
+        self.calibration.get(j).copied().unwrap_or(0.0)
     }
 
     /// Free simulation of `traj` scored against its measured outputs.

@@ -218,6 +218,10 @@ pub struct Cell {
     /// ([`crate::fit::MsgpSettings::full_data_iterations`]).
     #[serde(default)]
     pub full_data_iteration: Option<usize>,
+    /// MSGP: the standard deviation its output-variance calibration adds (original units;
+    /// [`crate::fit::calibration`]), when it has one.
+    #[serde(default)]
+    pub added_std: Option<f64>,
     /// Why the model diverges: the fit's check on its training inputs, else the moment-matching
     /// simulation of the test part held against the test outputs (`msgp eval`'s test);
     /// `None` when neither fires.
@@ -500,6 +504,10 @@ pub fn fit_unit(
         iterations_run: report.iterations_run,
         best_iteration: report.best_iteration,
         full_data_iteration: report.full_data_iteration,
+        added_std: report
+            .calibration
+            .as_ref()
+            .and_then(|c| c.added_std.first().copied()),
         diverged,
     })
 }
@@ -764,7 +772,9 @@ pub fn render(plan: &Plan, rows: &[Row], provenance: &Provenance) -> String {
          training time (means ± standard deviations over the seeds). MSGP's iterations: all \
          solver iterations of the fit, then in brackets the iteration the validation tail kept \
          and, where the chosen recipe trained again on all the training data, the iterate of \
-         that training the model is.\n\n\
+         that training the model is; after them, the standard deviation (original units) the \
+         output-variance calibration adds to every simulated output (`msgp_core::fit::calibration`: \
+         judged on the validation tail by the final training's proxy; it moves no mean).\n\n\
          | Task | method | rollout | RMSE | NLL/step | 2σ coverage | train s | {} iterations (kept) |\n\
          |---|---|---|---:|---:|---:|---:|---:|\n",
         plan.optimizer.name()
@@ -779,9 +789,17 @@ pub fn render(plan: &Plan, rows: &[Row], provenance: &Provenance) -> String {
                 let iters = if c.method() == Method::Msgp {
                     cells
                         .iter()
-                        .map(|x| match x.full_data_iteration {
-                            Some(j) => format!("{} ({}; {j})", x.iterations_run, x.best_iteration),
-                            None => format!("{} ({})", x.iterations_run, x.best_iteration),
+                        .map(|x| {
+                            let kept = match x.full_data_iteration {
+                                Some(j) => {
+                                    format!("{} ({}; {j})", x.iterations_run, x.best_iteration)
+                                }
+                                None => format!("{} ({})", x.iterations_run, x.best_iteration),
+                            };
+                            match x.added_std {
+                                Some(a) => format!("{kept} +{a:.3}"),
+                                None => kept,
+                            }
                         })
                         .collect::<Vec<_>>()
                         .join(", ")
@@ -845,6 +863,7 @@ mod tests {
             iterations_run: 1,
             best_iteration: 1,
             full_data_iteration: None,
+            added_std: None,
             diverged: None,
         }
     }
