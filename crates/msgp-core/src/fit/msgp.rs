@@ -151,11 +151,15 @@ pub(super) fn fit_msgp(
         }
         trained
     };
-    // recipe `k` once more, from its start on all the training data, under its own report
-    let final_stage = |k: usize,
-                       iterations: usize,
-                       settings: &FitSettings,
-                       progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>|
+    // recipe `k` for a fixed number of iterations on `episodes` without a tail, from `init` or
+    // (`None`) its own start on them, under its own report: the final training, or its proxy
+    let fixed_training = |k: usize,
+                          episodes: &[Episode],
+                          init: Option<GpParams<f64>>,
+                          stage_number: u8,
+                          iterations: usize,
+                          settings: &FitSettings,
+                          progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>|
      -> FinalTraining {
         let recipe = &recipes[k];
         let mut own = FitReport::default();
@@ -168,13 +172,21 @@ pub(super) fn fit_msgp(
             progress,
             report: &mut own,
         };
-        let trained = match recipe.start {
-            MsgpStart::OneStep => stage.initial(&all_eps, one_step),
-            MsgpStart::LinearKf => stage.initial_from_kalman(&all_eps),
-        }
-        .and_then(|init| {
+        let init = match (init, recipe.start) {
+            (Some(init), _) => Ok(init),
+            (None, MsgpStart::OneStep) => stage.initial(episodes, one_step),
+            (None, MsgpStart::LinearKf) => stage.initial_from_kalman(episodes),
+        };
+        let trained = init.and_then(|init| {
             let n = iterations.min(recipe.iterations);
-            stage.train(init, &all_eps, &[], n, 2, Some(FULL_DATA_BLOW_UP))
+            stage.train(
+                init,
+                episodes,
+                &[],
+                n,
+                stage_number,
+                Some(FULL_DATA_BLOW_UP),
+            )
         });
         let outcome = match trained {
             // a blow-up: the head's model stands (`train` wrote why into the report)
@@ -193,43 +205,34 @@ pub(super) fn fit_msgp(
             report: own,
         }
     };
+    // recipe `k` once more, from its start on all the training data
+    let final_stage =
+        |k: usize,
+         iterations: usize,
+         settings: &FitSettings,
+         progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>| {
+            fixed_training(k, &all_eps, None, 2, iterations, settings, progress)
+        };
     // the proxy of recipe `k`'s final training ([`calibration`]): the same training from the
-    // recipe's start on the head, on the head alone
-    let proxy_stage = |k: usize,
-                       iterations: usize,
-                       settings: &FitSettings,
-                       progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>|
-     -> ProxyTraining {
-        let recipe = &recipes[k];
-        let mut own = FitReport::default();
-        let init = starts.lock().unwrap_or_else(|e| e.into_inner())[k].clone();
-        let outcome = match init {
-            None => Ok(None),
-            Some(init) => {
-                let mut stage = Stage {
-                    spec,
-                    config: config_of(recipe),
-                    settings,
-                    msgp: recipe,
-                    start,
-                    progress,
-                    report: &mut own,
-                };
-                let n = iterations.min(recipe.iterations);
-                match stage.train(init, &head_eps, &[], n, 4, Some(FULL_DATA_BLOW_UP)) {
-                    Ok(_) if own.full_data_failed.is_some() => Ok(None),
-                    Ok((params, iteration, _)) => Ok(Some((params, iteration))),
-                    Err(e @ MsgpError::Stopped { .. }) => Err(e),
-                    Err(_) => Ok(None),
+    // recipe's start on the head, on the head alone (nothing without that start)
+    let proxy_stage =
+        |k: usize,
+         iterations: usize,
+         settings: &FitSettings,
+         progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>| {
+            // (the lock is released before the training)
+            let init = starts.lock().unwrap_or_else(|e| e.into_inner())[k].clone();
+            match init {
+                Some(init) => {
+                    fixed_training(k, &head_eps, Some(init), 4, iterations, settings, progress)
                 }
+                None => FinalTraining {
+                    recipe: k,
+                    outcome: Ok(None),
+                    report: FitReport::default(),
+                },
             }
         };
-        ProxyTraining {
-            recipe: k,
-            outcome,
-            report: own,
-        }
-    };
     // a quiet observer for work beside the observed one: it stops when the user stopped
     let quiet_stop = |_: &FitProgress| {
         if stop.load(Ordering::Relaxed) {
@@ -241,7 +244,7 @@ pub(super) fn fit_msgp(
     // the final training if it ran while the second recipe's head was still training
     let mut early_final: Option<FinalTraining> = None;
     // the proxy if the second recipe's thread trained it once both heads had ended
-    let mut early_proxy: Option<ProxyTraining> = None;
+    let mut early_proxy: Option<FinalTraining> = None;
     let results: Vec<Result<Trained>> = if recipes.len() == 2 && settings.threads.get() >= 2 {
         // the two recipes side by side, each on half the threads; the observer sees the
         // first, and stopping it stops both. Once the first head is done, its thread trains
@@ -502,16 +505,9 @@ pub(super) fn fit_msgp(
     Ok((model, report))
 }
 
-/// The proxy of one recipe's final training ([`calibration`]): its outcome (the parameters and
-/// iteration kept; `None` where it blew up, failed numerically or had no start) and its report.
-struct ProxyTraining {
-    recipe: usize,
-    outcome: Result<Option<(GpParams<f64>, usize)>>,
-    report: FitReport,
-}
-
-/// The final training on all the data of one recipe: its outcome (the parameters and iteration
-/// kept; `None` where it blew up or failed numerically, the head's model standing) and the
+/// The final training on all the data of one recipe, or its proxy on the head
+/// ([`calibration`]): its outcome (the parameters and iteration kept; `None` where it blew up
+/// or failed numerically — the head's model standing — or the proxy had no start) and the
 /// report of that training alone.
 struct FinalTraining {
     recipe: usize,
