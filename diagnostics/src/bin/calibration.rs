@@ -5,7 +5,11 @@
 //! grid; then the protocol's model (trained on all the data) simulates the test part and the
 //! alternate excitations, scored with `δ = 0`, with the tail's `δ` and `s`, and over the grid.
 //!
-//! `cargo run --release -p msgp-diagnostics --bin calibration -- [system] [seed]`
+//! `nested` judges by the head's own procedure, cross-validated: the chosen recipe's protocol
+//! without the final training on the first 80 % (early-stopped on its own last fifth),
+//! simulating the tail.
+//!
+//! `cargo run --release -p msgp-diagnostics --bin calibration -- [system] [seed] [proxy|head|nested]`
 
 use std::path::Path;
 
@@ -17,7 +21,7 @@ use msgp_core::model::{Model, Simulation};
 use msgp_diagnostics::{Switches, usage_error};
 
 const USAGE: &str =
-    "calibration [sys1..sys5|actuator|ballbeam|drives|furnace|dryer] [seed] [proxy|head]";
+    "calibration [sys1..sys5|actuator|ballbeam|drives|furnace|dryer] [seed] [proxy|head|nested]";
 
 /// Additive output variances (normalised units: times the training outputs' variance).
 const GRID: [f64; 10] = [0.0, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 0.1, 0.3, 1.0];
@@ -47,10 +51,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .arg(1, "seed")
         .unwrap_or_else(|e| usage_error(USAGE, &e))
         .unwrap_or(0);
-    let proxy = sw
+    let judge_name = sw
         .arg::<String>(2, "judge")
         .unwrap_or_else(|e| usage_error(USAGE, &e))
-        .is_none_or(|j| j == "proxy");
+        .unwrap_or("proxy".into());
+    let proxy = judge_name == "proxy";
+    // the head's own procedure cross-validated: trained on the head with early stopping on
+    // the head's own last fifth, judged on the tail
+    let nested = judge_name == "nested";
     let (bench, alternates): (_, Vec<(String, Trajectory)>) =
         if let Some(k) = name.strip_prefix("sys") {
             let s = SyntheticSystem::new(k.parse()?)?;
@@ -78,6 +86,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (model, fitted) = fit(std::slice::from_ref(&bench.train), &settings, &mut |_| {
         // quiet
     })?;
+    // the model as it simulates without the fit's own calibration
+    let model = Model {
+        calibration: Vec::new(),
+        ..model
+    };
     let n = bench.train.len();
     let n_val = (n as f64 * msgp.validation_fraction).round() as usize;
     let w = model.spec.warmup();
@@ -98,6 +111,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 iterations: msgp.full_data_iterations.unwrap_or(400),
                 ..chosen
             }
+        } else if nested {
+            MsgpSettings {
+                full_data_iterations: None,
+                alternative: None,
+                ..chosen
+            }
         } else {
             MsgpSettings {
                 full_data_iterations: None,
@@ -107,7 +126,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .into(),
         ..settings.clone()
     };
-    let train = if proxy { &head_data } else { &bench.train };
+    let train = if proxy || nested {
+        &head_data
+    } else {
+        &bench.train
+    };
     let (judge, _) = fit(std::slice::from_ref(train), &judge_settings, &mut |_| {
         // quiet
     })?;
@@ -123,10 +146,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!(
         "{name} seed {seed} ({}): judge on tail rmse {:.4} nll {:.3} cov {:.2}; best add \
          {d_star:e} (nll {d_nll:.3}), best scale {s_star} (nll {s_nll:.3})",
-        if proxy { "proxy" } else { "head" },
-        m0.rmse,
-        m0.nll,
-        m0.coverage_2sigma
+        judge_name, m0.rmse, m0.nll, m0.coverage_2sigma
     );
     let mut tests = vec![("test".to_string(), bench.test.clone())];
     tests.extend(alternates);

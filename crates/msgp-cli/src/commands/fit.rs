@@ -290,6 +290,10 @@ pub fn calibrated(report: &FitReport, outputs: &[String]) -> Option<String> {
             "the final training's proxy on the head (its iteration {iteration}) simulating the \
              validation tail"
         ),
+        Judge::HeadProxy { iteration } => format!(
+            "the head's training repeated on the head's first part (its iteration {iteration}; \
+             the final training blew up, the head's model stands) simulating the validation tail"
+        ),
         Judge::Head => "the head's model simulating the validation tail".to_string(),
     };
     Some(format!(

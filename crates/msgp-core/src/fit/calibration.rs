@@ -11,7 +11,9 @@
 //! validation tail it never saw, and the variance `δ_j ≥ 0` added to every simulated output
 //! variance of output `j` that minimises the tail's NLL is the model's calibration
 //! ([`crate::model::Model::calibration`]). Where the final training did not replace the head's
-//! model (it blew up), the head's model is its own judge. The calibration moves no predicted
+//! model (it blew up), the procedure that made the head's model is cross-validated the same way:
+//! the chosen recipe trains on the head's first 80 % with early stopping on the head's last
+//! 20 %, and simulates the tail ([`Judge::HeadProxy`]). The calibration moves no predicted
 //! mean (it is added to the simulated outputs, not fed back), so every RMSE stays as it was.
 //!
 //! `δ_j` is the best of a grid ([`GRID_PER_DECADE`] points per decade over
@@ -47,8 +49,16 @@ pub enum Judge {
         /// The proxy's iterate that judged.
         iteration: usize,
     },
-    /// The head's model, returned because the final training did not replace it (or the
-    /// proxy's own training blew up).
+    /// Where the final training did not replace the head's model: the head's own training,
+    /// cross-validated — the chosen recipe trained on the head's first part with early stopping
+    /// on the head's last part (split as the fit splits its data); `iteration`: the iterate it
+    /// kept.
+    HeadProxy {
+        /// The iterate the head's proxy kept.
+        iteration: usize,
+    },
+    /// The model itself, where no proxy could be trained (the final training's proxy blew up,
+    /// or the head is too short to split again).
     Head,
 }
 

@@ -472,7 +472,47 @@ pub(super) fn fit_msgp(
         };
         let (params, judge) = match (report.full_data_iteration, proxy_outcome) {
             (Some(_), Some((params, iteration))) => (params, Judge::Proxy { iteration }),
-            _ => (head_model, Judge::Head),
+            // the head's model stands: its own training, cross-validated, judges it
+            (None, _) => {
+                let (inner_heads, inner_tails) =
+                    split_tails(&head_eps, msgp.validation_fraction, w);
+                let mut own = FitReport::default();
+                let mut stage = Stage {
+                    spec,
+                    config,
+                    settings,
+                    msgp: &recipes[k],
+                    start,
+                    progress: &mut *progress,
+                    report: &mut own,
+                };
+                let trained = if inner_tails.is_empty() {
+                    None
+                } else {
+                    let mut inner_start = None;
+                    match train_recipe(
+                        &mut stage,
+                        None,
+                        one_step,
+                        &inner_heads,
+                        &inner_heads,
+                        &inner_tails,
+                        4,
+                        &mut inner_start,
+                    ) {
+                        Ok(t) => Some(t),
+                        Err(e @ MsgpError::Stopped { .. }) => return Err(e),
+                        Err(_) => None,
+                    }
+                };
+                report.iterations_run += own.iterations_run;
+                report.jitter.merge(&own.jitter);
+                match trained {
+                    Some((params, iteration, _)) => (params, Judge::HeadProxy { iteration }),
+                    None => (head_model, Judge::Head),
+                }
+            }
+            (Some(_), None) => (head_model, Judge::Head),
         };
         let judged = PreparedGp::new(&params, &config, &mut report.jitter)
             .and_then(|gp| tail_calibration(&gp, &spec, &tails));
@@ -503,6 +543,28 @@ pub(super) fn fit_msgp(
         calibration,
     };
     Ok((model, report))
+}
+
+/// `episodes` split as the fit splits its training data: each feed-forward episode long enough
+/// into a head and its last `fraction` as a tail (with the `warmup` samples before it);
+/// feedback episodes and short ones stay whole in the heads.
+fn split_tails(episodes: &[Episode], fraction: f64, warmup: usize) -> (Vec<Episode>, Vec<Episode>) {
+    let mut heads = Vec::new();
+    let mut tails = Vec::new();
+    for ep in episodes {
+        let t = &ep.traj;
+        let n_val = (t.len() as f64 * fraction).round() as usize;
+        let feed_forward = matches!(ep.excitation, Excitation::FeedForward);
+        if feed_forward && fraction > 0.0 && n_val >= 10 && t.len() - n_val > warmup + 10 {
+            heads.push(Episode::feed_forward(t.slice(0, t.len() - n_val)));
+            tails.push(Episode::feed_forward(
+                t.slice(t.len() - n_val - warmup, t.len()),
+            ));
+        } else {
+            heads.push(ep.clone());
+        }
+    }
+    (heads, tails)
 }
 
 /// The final training on all the data of one recipe, or its proxy on the head
@@ -1147,5 +1209,40 @@ mod race_tests {
         let failed = || Some(Err(MsgpError::NonFinite("late".into())));
         assert_eq!(chosen(Some(Some(0.5)), failed()), Some(0));
         assert_eq!(chosen(Some(None), failed()), None, "both failed");
+    }
+}
+
+#[cfg(test)]
+mod split_tests {
+    use super::*;
+
+    /// The head's proxy splits the head as the fit splits its data: a long feed-forward
+    /// episode into its first part and its last fifth (with the window before it), feedback
+    /// and short episodes whole.
+    #[test]
+    fn the_heads_proxy_splits_the_head_as_the_fit_splits_the_data() {
+        let traj = |n: usize| {
+            let u: Vec<f64> = (0..n).map(|i| (i as f64 * 0.3).sin()).collect();
+            let y: Vec<f64> = (0..n).map(|i| i as f64).collect();
+            Trajectory::siso(&u, &y).expect("finite")
+        };
+        let (heads, tails) = split_tails(
+            &[
+                Episode::feed_forward(traj(100)),
+                Episode::feed_forward(traj(30)),
+            ],
+            0.2,
+            3,
+        );
+        assert_eq!(heads.len(), 2);
+        assert_eq!(tails.len(), 1);
+        assert_eq!((heads[0].traj.len(), heads[1].traj.len()), (80, 30));
+        // the tail: the last 20 samples and the 3 before them
+        assert_eq!(tails[0].traj.len(), 23);
+        assert_eq!(tails[0].traj.y[(0, 0)], 77.0);
+        assert_eq!(tails[0].traj.y[(22, 0)], 99.0);
+        // no fraction: nothing split
+        let (heads, tails) = split_tails(&[Episode::feed_forward(traj(100))], 0.0, 3);
+        assert!(tails.is_empty() && heads[0].traj.len() == 100);
     }
 }
