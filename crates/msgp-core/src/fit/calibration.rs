@@ -57,8 +57,9 @@ pub enum Judge {
         /// The iterate the head's proxy kept.
         iteration: usize,
     },
-    /// The model itself, where no proxy could be trained (the final training's proxy blew up,
-    /// or the head is too short to split again).
+    /// The head's model on the tail it was early-stopped on, where no proxy could be trained
+    /// (the final training's proxy blew up, or the head is too short to split again): a weak
+    /// judge, which finds the model about as honest as that tail did.
     Head,
 }
 

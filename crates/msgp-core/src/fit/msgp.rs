@@ -68,28 +68,17 @@ pub(super) fn fit_msgp(
     // split each trajectory into a training head and a validation tail.
     // Feedback episodes train in closed loop under their (normalised) policy and are not split.
     let w = spec.warmup();
-    let mut head_eps = Vec::new();
     let mut all_eps = Vec::new();
-    let mut tails = Vec::new();
     for (t, ep) in norm.iter().zip(episodes) {
-        if let Some(p) = &ep.policy {
-            let fb = Episode {
+        all_eps.push(match &ep.policy {
+            Some(p) => Episode {
                 traj: t.clone(),
                 excitation: Excitation::Feedback(Box::new(p.normalized(&normalizer)?)),
-            };
-            head_eps.push(fb.clone());
-            all_eps.push(fb);
-            continue;
-        }
-        all_eps.push(Episode::feed_forward(t.clone()));
-        let n_val = (t.len() as f64 * msgp.validation_fraction).round() as usize;
-        if msgp.validation_fraction > 0.0 && n_val >= 10 && t.len() - n_val > w + 10 {
-            head_eps.push(Episode::feed_forward(t.slice(0, t.len() - n_val)));
-            tails.push(Episode::feed_forward(t.slice(t.len() - n_val - w, t.len())));
-        } else {
-            head_eps.push(Episode::feed_forward(t.clone()));
-        }
+            },
+            None => Episode::feed_forward(t.clone()),
+        });
     }
+    let (head_eps, tails) = split_tails(&all_eps, msgp.validation_fraction, w);
     // the settings' own recipe, then the alternative (only where a validation tail can judge)
     let mut recipes = vec![msgp.clone()];
     if let (Some(r), false, None) = (msgp.alternative, tails.is_empty(), previous) {
