@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use msgp_core::data::Benchmark;
 use msgp_core::data::real::{DATA_DIR_VAR, RealSeries, data_dir};
 use msgp_core::data::{NoiseScale, SyntheticSystem};
-use msgp_core::fit::{FitOptimizer, FitSettings, MsgpSettings, fit};
+use msgp_core::fit::{FitOptimizer, FitSettings, MsgpSettings, MsgpStart, fit};
 use msgp_core::model::{Method, Metrics};
 
 fn run(bench: &Benchmark, method: Method, iterations: usize) -> Metrics {
@@ -157,6 +157,61 @@ fn msgp_reaches_paper_accuracy_on_drives_and_furnace() {
                 msgp.nll,
                 msgp.coverage_2sigma,
                 narx.nll
+            );
+        }
+    }
+}
+
+/// Actuator and ballbeam (seed 0): the one-step fit that starts the training explains the next
+/// output by the past outputs (ballbeam's input lags get length-scales of 55–110 in normalised
+/// units), and from that start the zero-mean recipe stayed behind the paper's MSGP (actuator
+/// 0.702; ballbeam 0.0822, its final training on all the data blowing up). Trained from the
+/// spread start as well (`MsgpStart::Spread`, `MsgpSettings::spread_candidate`): actuator 0.562,
+/// where the validation tail prefers that start, and ballbeam 0.0619, where the one-step start's
+/// final training blows up and the spread start's completes.
+#[test]
+fn the_spread_start_brings_actuator_below_the_paper_and_ballbeam_near_it() {
+    let Some(dir) = real_data() else { return };
+    // paper's MSGP: actuator 0.7124, ballbeam 0.0599
+    for (series, bound) in [(RealSeries::Actuator, 0.7124), (RealSeries::Ballbeam, 0.07)] {
+        let bench = series.load(&dir).expect("load");
+        let settings = FitSettings {
+            ly: bench.ly,
+            lu: bench.lu,
+            seed: 0,
+            ..FitSettings::new(Method::Msgp)
+        };
+        let (model, report) =
+            fit(std::slice::from_ref(&bench.train), &settings, &mut |_| {}).expect("fit");
+        assert_eq!(report.diverged, None, "{}", series.name());
+        let m = model.evaluate(&bench.test).expect("evaluate");
+        let chosen = &report.recipes[report.chosen_recipe];
+        println!(
+            "{}: RMSE {:.4}, NLL {:.3}, 2σ coverage {:.3}, heads {:?}, kept {:?} from {:?}",
+            series.name(),
+            m.rmse,
+            m.nll,
+            m.coverage_2sigma,
+            report
+                .recipes
+                .iter()
+                .map(|r| (r.start, r.validation, r.final_failed.is_some()))
+                .collect::<Vec<_>>(),
+            report.full_data_iteration,
+            chosen.start
+        );
+        assert_eq!(chosen.start, MsgpStart::Spread, "{}", series.name());
+        assert!(report.full_data_iteration.is_some(), "{}", series.name());
+        assert!(
+            m.rmse <= bound,
+            "{}: RMSE {} (bound {bound})",
+            series.name(),
+            m.rmse
+        );
+        if series == RealSeries::Ballbeam {
+            assert!(
+                report.recipes[0].final_failed.is_some(),
+                "ballbeam: the one-step start's final training blows up"
             );
         }
     }

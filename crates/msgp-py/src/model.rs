@@ -84,7 +84,7 @@ pub fn likelihood(m: Method, name: Option<&str>) -> Result<Option<Likelihood>> {
         })
 }
 
-/// Where an MSGP fit starts, by name (`one-step`, `linear-kf`); `None`: the default. Other
+/// Where an MSGP fit starts, by name (`one-step`, `spread`, `linear-kf`); `None`: the default. Other
 /// methods have their own fits and refuse one.
 fn start(m: Method, name: Option<&str>) -> Result<MsgpStart> {
     let Some(name) = name else {
@@ -99,8 +99,9 @@ fn start(m: Method, name: Option<&str>) -> Result<MsgpStart> {
     match name {
         "one-step" => Ok(MsgpStart::OneStep),
         "linear-kf" => Ok(MsgpStart::LinearKf),
+        "spread" => Ok(MsgpStart::Spread),
         _ => Err(input(format!(
-            "unknown start {name:?}: expected \"one-step\" or \"linear-kf\""
+            "unknown start {name:?}: expected \"one-step\", \"spread\" or \"linear-kf\""
         ))),
     }
 }
@@ -897,6 +898,7 @@ impl Msgp {
                 let start = msgp.then_some(match o.start {
                     MsgpStart::OneStep => "one-step",
                     MsgpStart::LinearKf => "linear-kf",
+                    MsgpStart::Spread => "spread",
                 });
                 let args = (
                     (o.ly, o.lu),

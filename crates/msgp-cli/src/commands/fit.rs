@@ -255,13 +255,30 @@ pub fn kept(report: &FitReport) -> String {
         .recipes
         .get(report.chosen_recipe)
         .filter(|_| report.recipes.len() > 1)
-        .map_or(String::new(), |r| match r.recipe.mean {
-            msgp_core::gp::MeanFunction::Zero => " the zero-mean recipe,".to_string(),
-            msgp_core::gp::MeanFunction::Linear => " the linear-mean recipe,".to_string(),
+        .map_or(String::new(), |r| {
+            let mean = match r.recipe.mean {
+                msgp_core::gp::MeanFunction::Zero => "zero-mean",
+                msgp_core::gp::MeanFunction::Linear => "linear-mean",
+            };
+            let start = match r.start {
+                msgp_core::fit::MsgpStart::Spread => " from the spread start",
+                _ => "",
+            };
+            format!(" the {mean} recipe{start},")
+        });
+    // a head that won on the tail but whose final training blew up, yielding to the next
+    let yielded = report
+        .recipes
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i != report.chosen_recipe)
+        .find_map(|(_, r)| r.final_failed.as_deref())
+        .map_or(String::new(), |why| {
+            format!(" (the better head's final training failed: {why})")
         });
     match (report.full_data_iteration, &report.full_data_failed) {
         (Some(j), _) => format!(
-            "kept iteration {j} of the final training on all the data; the validation tail chose{recipe} best at its iteration {}",
+            "kept iteration {j} of the final training on all the data; the validation tail chose{recipe} best at its iteration {}{yielded}",
             report.best_iteration
         ),
         (None, Some(why)) => format!(

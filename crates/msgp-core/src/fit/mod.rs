@@ -112,6 +112,15 @@ pub struct FitReport {
 pub struct RecipeOutcome {
     /// The recipe.
     pub recipe: Recipe,
+    /// Where its training started (records before 2026-12-05, second session: the one-step
+    /// fit, or the settings' start).
+    #[serde(default)]
+    pub start: MsgpStart,
+    /// Why its final training on all the data failed, if it ran and did (a recipe that wins
+    /// on the tail but cannot be trained on all the data yields to the next:
+    /// [`MsgpSettings::spread_candidate`]).
+    #[serde(default)]
+    pub final_failed: Option<String>,
     /// Its best validation NLL per step (`None` without a validation tail, or when it failed).
     pub validation: Option<f64>,
     /// Why its training failed numerically, if it did.

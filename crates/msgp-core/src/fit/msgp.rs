@@ -95,6 +95,22 @@ pub(super) fn fit_msgp(
         (Some(n), false, None, FitOptimizer::Adam) => Some(n),
         _ => None,
     };
+    // the heads that train first (side by side on two threads)
+    let racing = recipes.len();
+    // the settings' own zero-mean recipe from the spread start: its head trains only if that
+    // recipe wins the choice (`MsgpSettings::spread_candidate`)
+    let spread = (msgp.spread_candidate
+        && msgp.mean == MeanFunction::Zero
+        && msgp.start == MsgpStart::OneStep
+        && final_iterations.is_some())
+    .then(|| {
+        recipes.push(MsgpSettings {
+            start: MsgpStart::Spread,
+            alternative: None,
+            ..msgp.clone()
+        });
+        recipes.len() - 1
+    });
     // the proxy of the final training, for the calibration (only with the final training)
     let proxy_iterations = final_iterations.filter(|_| msgp.calibrate);
     // each recipe's start on the head (the proxy starts from it)
@@ -161,10 +177,9 @@ pub(super) fn fit_msgp(
             progress,
             report: &mut own,
         };
-        let init = match (init, recipe.start) {
-            (Some(init), _) => Ok(init),
-            (None, MsgpStart::OneStep) => stage.initial(episodes, one_step),
-            (None, MsgpStart::LinearKf) => stage.initial_from_kalman(episodes),
+        let init = match init {
+            Some(init) => Ok(init),
+            None => stage.start_params(episodes, one_step),
         };
         let trained = init.and_then(|init| {
             let n = iterations.min(recipe.iterations);
@@ -234,7 +249,7 @@ pub(super) fn fit_msgp(
     let mut early_final: Option<FinalTraining> = None;
     // the proxy if the second recipe's thread trained it once both heads had ended
     let mut early_proxy: Option<FinalTraining> = None;
-    let results: Vec<Result<Trained>> = if recipes.len() == 2 && settings.threads.get() >= 2 {
+    let results: Vec<Result<Trained>> = if racing == 2 && settings.threads.get() >= 2 {
         // the two recipes side by side, each on half the threads; the observer sees the
         // first, and stopping it stops both. Once the first head is done, its thread trains
         // the recipe that leads on all the data while the second head goes on (`Race`)
@@ -344,6 +359,7 @@ pub(super) fn fit_msgp(
     } else {
         recipes
             .iter()
+            .take(racing)
             .enumerate()
             .map(|(k, r)| run(k, r, settings, &mut *progress, &mut report))
             .collect()
@@ -367,8 +383,10 @@ pub(super) fn fit_msgp(
             {
                 report.recipes.push(RecipeOutcome {
                     recipe: recipe.recipe(),
+                    start: recipe.start,
                     validation: None,
                     failed: Some(e.to_string()),
+                    final_failed: None,
                 });
                 first_error.get_or_insert(e);
                 continue;
@@ -377,8 +395,10 @@ pub(super) fn fit_msgp(
         };
         report.recipes.push(RecipeOutcome {
             recipe: recipe.recipe(),
+            start: recipe.start,
             validation: validation.is_finite().then_some(validation),
             failed: None,
+            final_failed: None,
         });
         if best.as_ref().is_none_or(|b| validation < b.0) {
             best = Some((validation, params));
@@ -386,65 +406,128 @@ pub(super) fn fit_msgp(
             report.best_iteration = best_iteration;
         }
     }
-    let Some((_, mut chosen)) = best else {
+    let Some((best_validation, chosen)) = best else {
         return Err(first_error.unwrap_or_else(|| MsgpError::NonFinite("no recipe trained".into())));
     };
-    let k = report.chosen_recipe;
-    let head_model = chosen.clone();
+    // the heads in the order the final training tries them: the chosen one, and where the
+    // settings' own zero-mean recipe won, that recipe from the spread start as well, the two
+    // ordered by their validation NLL (the one-step start first on a tie)
+    let mut candidates: Vec<(usize, GpParams<f64>, usize, f64)> = vec![(
+        report.chosen_recipe,
+        chosen,
+        report.best_iteration,
+        best_validation,
+    )];
+    if let (Some(s), 0) = (spread, report.chosen_recipe) {
+        match run(s, &recipes[s], settings, &mut *progress, &mut report) {
+            Ok((params, iteration, validation)) => {
+                report.recipes.push(RecipeOutcome {
+                    recipe: recipes[s].recipe(),
+                    start: recipes[s].start,
+                    validation: validation.is_finite().then_some(validation),
+                    failed: None,
+                    final_failed: None,
+                });
+                candidates.push((s, params, iteration, validation));
+                if validation < best_validation {
+                    candidates.swap(0, 1);
+                }
+            }
+            Err(e @ (MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_))) => {
+                report.recipes.push(RecipeOutcome {
+                    recipe: recipes[s].recipe(),
+                    start: recipes[s].start,
+                    validation: None,
+                    failed: Some(e.to_string()),
+                    final_failed: None,
+                });
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    let (mut k, mut chosen, best_iteration, _) = candidates[0].clone();
+    report.chosen_recipe = k;
+    report.best_iteration = best_iteration;
+    let mut head_model = chosen.clone();
     let mut proxy = None;
     if let Some(iterations) = final_iterations {
-        let early = early_final.filter(|t| t.recipe == k);
-        proxy = early_proxy.filter(|p| p.recipe == k);
-        let proxy_needed = proxy_iterations.is_some() && proxy.is_none();
-        let trained = match early {
-            Some(t) => {
-                if proxy_needed {
-                    proxy = Some(proxy_stage(k, iterations, settings, &mut *progress));
+        let mut early_final = early_final;
+        let mut early_proxy = early_proxy;
+        for (i, (c, head, best_iteration, _)) in candidates.iter().enumerate() {
+            let c = *c;
+            let early = early_final.take_if(|t| t.recipe == c);
+            proxy = early_proxy.take_if(|p| p.recipe == c);
+            let proxy_needed = proxy_iterations.is_some() && proxy.is_none();
+            let trained = match early {
+                Some(t) => {
+                    if proxy_needed {
+                        proxy = Some(proxy_stage(c, iterations, settings, &mut *progress));
+                    }
+                    t
                 }
-                t
-            }
-            None if proxy_needed && settings.threads.get() >= 2 => {
-                // the final training and its proxy side by side, each on half the threads
-                let half = FitSettings {
-                    threads: Threads::new((settings.threads.get() / 2).max(1))?,
-                    ..settings.clone()
-                };
-                let (trained, side) = std::thread::scope(|scope| {
-                    let handle =
-                        scope.spawn(|| proxy_stage(k, iterations, &half, &mut quiet_stop.clone()));
-                    let mut observed = |p: &FitProgress| {
-                        let flow = progress(p);
-                        if flow.is_break() {
-                            stop.store(true, Ordering::Relaxed);
-                        }
-                        flow
+                None if proxy_needed && settings.threads.get() >= 2 => {
+                    // the final training and its proxy side by side, each on half the threads
+                    let half = FitSettings {
+                        threads: Threads::new((settings.threads.get() / 2).max(1))?,
+                        ..settings.clone()
                     };
-                    let trained = final_stage(k, iterations, &half, &mut observed);
-                    (trained, handle.join())
-                });
-                proxy = Some(side.map_err(|_| {
-                    MsgpError::NonFinite("the calibration's proxy training panicked".into())
-                })?);
-                trained
-            }
-            None => {
-                let trained = final_stage(k, iterations, settings, &mut *progress);
-                // (where the head's model stands, it is its own judge: no proxy)
-                if proxy_needed && matches!(trained.outcome, Ok(Some(_))) {
-                    proxy = Some(proxy_stage(k, iterations, settings, &mut *progress));
+                    let (trained, side) = std::thread::scope(|scope| {
+                        let handle = scope
+                            .spawn(|| proxy_stage(c, iterations, &half, &mut quiet_stop.clone()));
+                        let mut observed = |p: &FitProgress| {
+                            let flow = progress(p);
+                            if flow.is_break() {
+                                stop.store(true, Ordering::Relaxed);
+                            }
+                            flow
+                        };
+                        let trained = final_stage(c, iterations, &half, &mut observed);
+                        (trained, handle.join())
+                    });
+                    proxy = Some(side.map_err(|_| {
+                        MsgpError::NonFinite("the calibration's proxy training panicked".into())
+                    })?);
+                    trained
                 }
-                trained
+                None => {
+                    let trained = final_stage(c, iterations, settings, &mut *progress);
+                    // (where the head's model stands, it is its own judge: no proxy)
+                    if proxy_needed && matches!(trained.outcome, Ok(Some(_))) {
+                        proxy = Some(proxy_stage(c, iterations, settings, &mut *progress));
+                    }
+                    trained
+                }
+            };
+            report.iterations_run += trained.report.iterations_run;
+            report.jitter.merge(&trained.report.jitter);
+            if trained.report.numerical_stop.is_some() {
+                report.numerical_stop = trained.report.numerical_stop;
             }
-        };
-        report.iterations_run += trained.report.iterations_run;
-        report.jitter.merge(&trained.report.jitter);
-        if trained.report.numerical_stop.is_some() {
-            report.numerical_stop = trained.report.numerical_stop;
-        }
-        report.full_data_failed = trained.report.full_data_failed;
-        if let Some((params, iteration)) = trained.outcome? {
-            chosen = params;
-            report.full_data_iteration = Some(iteration);
+            if let Some((params, iteration)) = trained.outcome? {
+                k = c;
+                chosen = params;
+                head_model = head.clone();
+                report.chosen_recipe = c;
+                report.best_iteration = *best_iteration;
+                report.full_data_iteration = Some(iteration);
+                report.full_data_failed = None;
+                break;
+            }
+            // this head's final training blew up (or failed): the next head's, if any; the
+            // first head's model stands if none completes
+            if let Some(outcome) = report.recipes.get_mut(c) {
+                outcome.final_failed = trained.report.full_data_failed.clone();
+            }
+            if i == 0 {
+                report.full_data_failed = trained.report.full_data_failed;
+            }
+            if i + 1 < candidates.len() {
+                // (a proxy of a final training that is not kept judges nothing)
+                if let Some(p) = proxy.take() {
+                    report.iterations_run += p.report.iterations_run;
+                    report.jitter.merge(&p.report.jitter);
+                }
+            }
         }
     }
     let config = config_of(&recipes[k]);
@@ -708,10 +791,9 @@ fn train_recipe(
     stage_number: u8,
     head_start: &mut Option<GpParams<f64>>,
 ) -> Result<Trained> {
-    let init = match (previous, stage.msgp.start) {
-        (Some(p), _) => p.params.clone(),
-        (None, MsgpStart::OneStep) => stage.initial(head_eps, one_step)?,
-        (None, MsgpStart::LinearKf) => stage.initial_from_kalman(head_eps)?,
+    let init = match previous {
+        Some(p) => p.params.clone(),
+        None => stage.start_params(head_eps, one_step)?,
     };
     if previous.is_none() {
         *head_start = Some(init.clone());
@@ -726,10 +808,9 @@ fn train_recipe(
     )?;
     if stage.msgp.refit && !tails.is_empty() {
         // the same number of iterations on the whole training data
-        let init = match (previous, stage.msgp.start) {
-            (Some(p), _) => p.params.clone(),
-            (None, MsgpStart::OneStep) => stage.initial(all_eps, one_step)?,
-            (None, MsgpStart::LinearKf) => stage.initial_from_kalman(all_eps)?,
+        let init = match previous {
+            Some(p) => p.params.clone(),
+            None => stage.start_params(all_eps, one_step)?,
         };
         chosen = if best_iteration == 0 {
             init
@@ -825,6 +906,25 @@ struct Stage<'a, 'p> {
 }
 
 impl Stage<'_, '_> {
+    /// The start of a training run on `episodes`, as [`MsgpSettings::start`] says.
+    fn start_params(
+        &mut self,
+        episodes: &[Episode],
+        one_step: &OneStepSettings,
+    ) -> Result<GpParams<f64>> {
+        match self.msgp.start {
+            MsgpStart::OneStep => self.initial(episodes, one_step),
+            MsgpStart::Spread => self.initial(
+                episodes,
+                &OneStepSettings {
+                    iterations: 0,
+                    ..*one_step
+                },
+            ),
+            MsgpStart::LinearKf => self.initial_from_kalman(episodes),
+        }
+    }
+
     /// The sparse one-step GP-NARX fit on `episodes`, its noise variance starting both the
     /// process and the observation noise as [`MsgpSettings::noise_start`] says.
     fn initial(

@@ -222,6 +222,10 @@ pub struct Cell {
     /// [`crate::fit::calibration`]), when it has one.
     #[serde(default)]
     pub added_std: Option<f64>,
+    /// MSGP: the kept model's training started from the spread start
+    /// ([`crate::fit::MsgpStart::Spread`], [`crate::fit::MsgpSettings::spread_candidate`]).
+    #[serde(default)]
+    pub spread_start: bool,
     /// Why the model diverges: the fit's check on its training inputs, else the moment-matching
     /// simulation of the test part held against the test outputs (`msgp eval`'s test);
     /// `None` when neither fires.
@@ -508,6 +512,10 @@ pub fn fit_unit(
             .calibration
             .as_ref()
             .and_then(|c| c.added_std.first().copied()),
+        spread_start: report
+            .recipes
+            .get(report.chosen_recipe)
+            .is_some_and(|r| r.start == crate::fit::MsgpStart::Spread),
         diverged,
     })
 }
@@ -771,6 +779,7 @@ pub fn render(plan: &Plan, rows: &[Row], provenance: &Provenance) -> String {
          units) and the fraction of test outputs inside mean ± 2σ, per rollout, with the \
          training time (means ± standard deviations over the seeds). MSGP's iterations: all \
          solver iterations of the fit, then in brackets the iteration the validation tail kept \
+         (\"spread\": the zero-mean recipe from the spread start, `msgp_core::fit::MsgpStart::Spread`) \
          and, where the chosen recipe trained again on all the training data, the iterate of \
          that training the model is; after them, the standard deviation (original units) the \
          output-variance calibration adds to every simulated output (`msgp_core::fit::calibration`: \
@@ -790,11 +799,15 @@ pub fn render(plan: &Plan, rows: &[Row], provenance: &Provenance) -> String {
                     cells
                         .iter()
                         .map(|x| {
+                            let start = if x.spread_start { "spread " } else { "" };
                             let kept = match x.full_data_iteration {
-                                Some(j) => {
-                                    format!("{} ({}; {j})", x.iterations_run, x.best_iteration)
+                                Some(j) => format!(
+                                    "{} ({start}{}; {j})",
+                                    x.iterations_run, x.best_iteration
+                                ),
+                                None => {
+                                    format!("{} ({start}{})", x.iterations_run, x.best_iteration)
                                 }
-                                None => format!("{} ({})", x.iterations_run, x.best_iteration),
                             };
                             match x.added_std {
                                 Some(a) => format!("{kept} +{a:.3}"),
@@ -864,6 +877,7 @@ mod tests {
             best_iteration: 1,
             full_data_iteration: None,
             added_std: None,
+            spread_start: false,
             diverged: None,
         }
     }
