@@ -290,9 +290,9 @@ pub struct FitArgs {
     /// filter) [default: free-run].
     #[arg(long, value_enum)]
     pub likelihood: Option<LikelihoodArg>,
-    /// Where the MSGP training starts: one-step (the sparse GP-NARX fit, the paper's; where its
-    /// zero-mean recipe wins, that recipe also trains from the spread start and the validation
-    /// tail orders the two), spread (the one-step fit's own starting point, length-scales at the
+    /// Where the MSGP training starts: one-step (the sparse GP-NARX fit, the paper's; where the
+    /// zero-mean recipe's final training from it blows up, that recipe trains again from the
+    /// spread start), spread (the one-step fit's own starting point, length-scales at the
     /// windows' spread, not optimised) or linear-kf (the linear-Gaussian window model by the
     /// Kalman-filter likelihood under a GP that starts at zero, as the filtered policy-learning
     /// loop fits; implies `--mean linear`) [default: one-step].

@@ -162,59 +162,53 @@ fn msgp_reaches_paper_accuracy_on_drives_and_furnace() {
     }
 }
 
-/// Actuator and ballbeam (seed 0): the one-step fit that starts the training explains the next
-/// output by the past outputs (ballbeam's input lags get length-scales of 55–110 in normalised
-/// units), and from that start the zero-mean recipe stayed behind the paper's MSGP (actuator
-/// 0.702; ballbeam 0.0822, its final training on all the data blowing up). Trained from the
-/// spread start as well (`MsgpStart::Spread`, `MsgpSettings::spread_candidate`): actuator 0.562,
-/// where the validation tail prefers that start, and ballbeam 0.0619, where the one-step start's
-/// final training blows up and the spread start's completes.
+/// Ballbeam (seed 0): the one-step fit that starts the training explains the next output by the
+/// past outputs (the input lags get length-scales of 55–110 in normalised units), and from that
+/// start the zero-mean recipe's final training on all the data blows up, so the head's model
+/// stood (0.0822; the training mean predicts the test part at 0.0733). The same recipe from the
+/// spread start (`MsgpStart::Spread`, `MsgpSettings::spread_candidate`) trains on all the data
+/// without blowing up: 0.0619 (the paper's MSGP 0.0599).
 #[test]
-fn the_spread_start_brings_actuator_below_the_paper_and_ballbeam_near_it() {
+fn ballbeam_trains_on_all_its_data_from_the_spread_start() {
     let Some(dir) = real_data() else { return };
-    // paper's MSGP: actuator 0.7124, ballbeam 0.0599
-    for (series, bound) in [(RealSeries::Actuator, 0.7124), (RealSeries::Ballbeam, 0.07)] {
-        let bench = series.load(&dir).expect("load");
-        let settings = FitSettings {
-            ly: bench.ly,
-            lu: bench.lu,
-            seed: 0,
-            ..FitSettings::new(Method::Msgp)
-        };
-        let (model, report) =
-            fit(std::slice::from_ref(&bench.train), &settings, &mut |_| {}).expect("fit");
-        assert_eq!(report.diverged, None, "{}", series.name());
-        let m = model.evaluate(&bench.test).expect("evaluate");
-        let chosen = &report.recipes[report.chosen_recipe];
-        println!(
-            "{}: RMSE {:.4}, NLL {:.3}, 2σ coverage {:.3}, heads {:?}, kept {:?} from {:?}",
-            series.name(),
-            m.rmse,
-            m.nll,
-            m.coverage_2sigma,
-            report
-                .recipes
-                .iter()
-                .map(|r| (r.start, r.validation, r.final_failed.is_some()))
-                .collect::<Vec<_>>(),
-            report.full_data_iteration,
-            chosen.start
-        );
-        assert_eq!(chosen.start, MsgpStart::Spread, "{}", series.name());
-        assert!(report.full_data_iteration.is_some(), "{}", series.name());
-        assert!(
-            m.rmse <= bound,
-            "{}: RMSE {} (bound {bound})",
-            series.name(),
-            m.rmse
-        );
-        if series == RealSeries::Ballbeam {
-            assert!(
-                report.recipes[0].final_failed.is_some(),
-                "ballbeam: the one-step start's final training blows up"
-            );
-        }
-    }
+    let bench = RealSeries::Ballbeam.load(&dir).expect("load ballbeam");
+    let settings = FitSettings {
+        ly: bench.ly,
+        lu: bench.lu,
+        seed: 0,
+        ..FitSettings::new(Method::Msgp)
+    };
+    let (model, report) =
+        fit(std::slice::from_ref(&bench.train), &settings, &mut |_| {}).expect("fit");
+    assert_eq!(report.diverged, None);
+    let m = model.evaluate(&bench.test).expect("evaluate");
+    println!(
+        "ballbeam: RMSE {:.4}, NLL {:.3}, 2σ coverage {:.3}, heads {:?}, kept {:?}",
+        m.rmse,
+        m.nll,
+        m.coverage_2sigma,
+        report
+            .recipes
+            .iter()
+            .map(|r| (r.start, r.validation, r.final_failed.is_some()))
+            .collect::<Vec<_>>(),
+        report.full_data_iteration,
+    );
+    assert!(
+        report.recipes[0].final_failed.is_some(),
+        "the one-step start's final training blows up"
+    );
+    assert_eq!(
+        report.recipes[report.chosen_recipe].start,
+        MsgpStart::Spread
+    );
+    assert!(report.full_data_iteration.is_some());
+    assert!(m.rmse <= 0.07, "ballbeam RMSE {}", m.rmse);
+    assert!(
+        m.coverage_2sigma >= 0.9,
+        "2σ coverage {}",
+        m.coverage_2sigma
+    );
 }
 
 /// On the training loss itself (no held-out tail, no early stopping), L-BFGS gets lower in 40

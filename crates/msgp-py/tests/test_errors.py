@@ -217,7 +217,8 @@ def test_the_msgp_likelihood_is_an_argument():
 def test_the_msgp_start_is_an_argument():
     """`Msgp(start="linear-kf")` starts MSGP from the linear-kf model (recorded in the model
     file with the linear mean it implies, kept by pickling an unfitted model), as `msgp fit
-    --start linear-kf`; another method and an unknown start are refused by name."""
+    --start linear-kf`, and `start="spread"` from the one-step fit's starting point; another
+    method and an unknown start are refused by name."""
     import json
     import pickle
     d = msgp.synthetic_system(4, seed=0)
@@ -230,8 +231,13 @@ def test_the_msgp_start_is_an_argument():
     assert (settings["start"], settings["mean"], settings["alternative"]) == ("linear-kf", "linear", None)
     with pytest.raises(ValueError, match='start="linear-kf": where an MSGP fit starts; method "gp-narx"'):
         msgp.Msgp(method="gp-narx", start="linear-kf")
-    with pytest.raises(ValueError, match='unknown start "kalman"'):
+    with pytest.raises(ValueError, match='unknown start "kalman": expected "one-step", "spread" or "linear-kf"'):
         msgp.Msgp(start="kalman")
+    # the spread start: the one-step fit's starting point, not optimised (`msgp fit --start spread`)
+    s = msgp.Msgp(history=(2, 1), inducing=8, iterations=5, start="spread", seed=0).fit(u, y)
+    assert "start='spread'" in repr(s)
+    settings = json.loads(s.to_json())["training"]["settings"]
+    assert (settings["start"], settings["spread_candidate"]) == ("spread", True)
     with pytest.raises(ValueError, match=r'settings\["start"\]: set it with the Msgp\(start=...\) argument'):
         msgp.Msgp(settings={"start": "linear-kf"})
 

@@ -255,37 +255,42 @@ pub fn kept(report: &FitReport) -> String {
         .recipes
         .get(report.chosen_recipe)
         .filter(|_| report.recipes.len() > 1)
-        .map_or(String::new(), |r| {
-            let mean = match r.recipe.mean {
-                msgp_core::gp::MeanFunction::Zero => "zero-mean",
-                msgp_core::gp::MeanFunction::Linear => "linear-mean",
-            };
-            let start = match r.start {
-                msgp_core::fit::MsgpStart::Spread => " from the spread start",
-                _ => "",
-            };
-            format!(" the {mean} recipe{start},")
+        .map_or(String::new(), |r| match r.recipe.mean {
+            msgp_core::gp::MeanFunction::Zero => " the zero-mean recipe,".to_string(),
+            msgp_core::gp::MeanFunction::Linear => " the linear-mean recipe,".to_string(),
         });
-    // a head that won on the tail but whose final training blew up, yielding to the next
-    let yielded = report
+    // the zero-mean recipe's final training from the one-step start blew up, and the same
+    // recipe from the spread start was kept (`MsgpSettings::spread_candidate`)
+    let respread = report
         .recipes
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| *i != report.chosen_recipe)
-        .find_map(|(_, r)| r.final_failed.as_deref())
-        .map_or(String::new(), |why| {
-            format!(" (the better head's final training failed: {why})")
+        .get(report.chosen_recipe)
+        .filter(|r| r.start == msgp_core::fit::MsgpStart::Spread)
+        .and_then(|_| {
+            report
+                .recipes
+                .iter()
+                .find_map(|r| r.final_failed.as_deref())
         });
-    match (report.full_data_iteration, &report.full_data_failed) {
-        (Some(j), _) => format!(
-            "kept iteration {j} of the final training on all the data; the validation tail chose{recipe} best at its iteration {}{yielded}",
+    match (
+        report.full_data_iteration,
+        &report.full_data_failed,
+        respread,
+    ) {
+        (Some(j), _, Some(why)) => format!(
+            "kept iteration {j} of the final training on all the data from the spread start \
+             (the zero-mean recipe's from the one-step start failed: {why}); the validation \
+             tail chose the zero-mean recipe, its spread-start head best at its iteration {}",
             report.best_iteration
         ),
-        (None, Some(why)) => format!(
+        (Some(j), _, None) => format!(
+            "kept iteration {j} of the final training on all the data; the validation tail chose{recipe} best at its iteration {}",
+            report.best_iteration
+        ),
+        (None, Some(why), _) => format!(
             "kept iteration {} of the training on the head ({why}: the head's model stands)",
             report.best_iteration
         ),
-        (None, None) => format!("kept iteration {}", report.best_iteration),
+        (None, None, _) => format!("kept iteration {}", report.best_iteration),
     }
 }
 

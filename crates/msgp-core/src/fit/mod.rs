@@ -20,10 +20,10 @@ mod vfe;
 
 pub use divergence::{DIVERGENCE_RANGES, OutputRange, check_divergence};
 pub use settings::{
-    DEFAULT_FULL_DATA_ITERATIONS, DEFAULT_MAX_INDUCING, DEFAULT_ONE_STEP_ITERATIONS, FIT_LBFGS,
-    FitOptimizer, FitOptions, FitSettings, LINEAR_RECIPE, LinearKfSettings, MethodSettings,
-    MsgpSettings, MsgpStart, NoiseStart, OneStepFitSettings, OneStepObjective, OneStepSolver,
-    Recipe,
+    DEFAULT_FULL_DATA_BLOW_UP, DEFAULT_FULL_DATA_ITERATIONS, DEFAULT_MAX_INDUCING,
+    DEFAULT_ONE_STEP_ITERATIONS, FIT_LBFGS, FitOptimizer, FitOptions, FitSettings, LINEAR_RECIPE,
+    LinearKfSettings, MethodSettings, MsgpSettings, MsgpStart, NoiseStart, OneStepFitSettings,
+    OneStepObjective, OneStepSolver, Recipe,
 };
 
 use std::ops::ControlFlow;

@@ -50,8 +50,9 @@ class Msgp:
     likelihood: of an MSGP fit, "free-run" (the paper's product of a free simulation's
         per-step marginals, the default) or "filter" (the joint density of the observations by
         the moment-matched filter) — `msgp fit --likelihood`; other methods refuse it.
-    start: where an MSGP fit starts, "one-step" (the sparse GP-NARX fit, the default; where its
-        zero-mean recipe wins, that recipe also trains from the spread start), "spread" (the
+    start: where an MSGP fit starts, "one-step" (the sparse GP-NARX fit, the default; where the
+        zero-mean recipe's final training from it blows up, that recipe trains from the spread
+        start), "spread" (the
         one-step fit's starting point, not optimised) or "linear-kf" (the linear Kalman-filter
         model under a GP that starts at zero; implies the linear mean) — `msgp fit --start`.
     """
