@@ -84,6 +84,15 @@ pub fn likelihood(m: Method, name: Option<&str>) -> Result<Option<Likelihood>> {
         })
 }
 
+/// The name of an MSGP start, as [`start`] reads it.
+fn start_name(s: MsgpStart) -> &'static str {
+    match s {
+        MsgpStart::OneStep => "one-step",
+        MsgpStart::Spread => "spread",
+        MsgpStart::LinearKf => "linear-kf",
+    }
+}
+
 /// Where an MSGP fit starts, by name (`one-step`, `spread`, `linear-kf`); `None`: the default. Other
 /// methods have their own fits and refuse one.
 fn start(m: Method, name: Option<&str>) -> Result<MsgpStart> {
@@ -856,8 +865,8 @@ impl Msgp {
                 &format!(", likelihood='{}'", o.likelihood.name()),
             );
         }
-        if o.method == Method::Msgp && o.start == MsgpStart::LinearKf {
-            s.insert_str(s.len() - 1, ", start='linear-kf'");
+        if o.method == Method::Msgp && o.start != MsgpStart::default() {
+            s.insert_str(s.len() - 1, &format!(", start='{}'", start_name(o.start)));
         }
         if let Some(f) = &self.fitted {
             let t = &f.file.training;
@@ -895,11 +904,7 @@ impl Msgp {
                 };
                 let msgp = o.method == Method::Msgp;
                 let likelihood = msgp.then(|| o.likelihood.name());
-                let start = msgp.then_some(match o.start {
-                    MsgpStart::OneStep => "one-step",
-                    MsgpStart::LinearKf => "linear-kf",
-                    MsgpStart::Spread => "spread",
-                });
+                let start = msgp.then_some(start_name(o.start));
                 let args = (
                     (o.ly, o.lu),
                     o.inducing,

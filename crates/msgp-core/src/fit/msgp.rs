@@ -98,7 +98,7 @@ pub(super) fn fit_msgp(
     // the heads that train first (side by side on two threads)
     let racing = recipes.len();
     // the settings' own zero-mean recipe from the spread start: its head trains only if that
-    // recipe wins the choice (`MsgpSettings::spread_candidate`)
+    // recipe wins the choice and its final training blows up (`MsgpSettings::spread_candidate`)
     let spread = (msgp.spread_candidate
         && msgp.mean == MeanFunction::Zero
         && msgp.start == MsgpStart::OneStep
