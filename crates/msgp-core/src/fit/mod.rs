@@ -116,8 +116,8 @@ pub struct RecipeOutcome {
     /// fit, or the settings' start).
     #[serde(default)]
     pub start: MsgpStart,
-    /// Why its final training on all the data failed, if it ran and did (a recipe that wins
-    /// on the tail but cannot be trained on all the data yields to the next:
+    /// Why its final training on all the data failed, if it ran and did (the zero-mean recipe
+    /// from the one-step start then trains again from the spread start:
     /// [`MsgpSettings::spread_candidate`]).
     #[serde(default)]
     pub final_failed: Option<String>,

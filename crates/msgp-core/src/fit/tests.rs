@@ -834,13 +834,7 @@ fn the_calibration_is_the_tail_nll_of_the_final_trainings_proxy() {
         full_data_iterations: Some(40),
         ..MsgpSettings::default()
     };
-    let settings = |msgp: MsgpSettings| FitSettings {
-        ly: 2,
-        lu: 1,
-        threads: Threads::new(1).expect("threads"),
-        method: msgp.into(),
-        ..FitSettings::default()
-    };
+    let settings = |msgp: MsgpSettings| ly2_lu1(Threads::new(1).expect("threads"), msgp);
     let (model, report) = fit(
         std::slice::from_ref(&traj),
         &settings(msgp.clone()),
@@ -941,6 +935,17 @@ fn the_calibration_is_the_tail_nll_of_the_final_trainings_proxy() {
     .expect("fit");
     assert!(off.calibration.is_empty() && off_report.calibration.is_none());
     assert_eq!(off.params, model.params);
+}
+
+/// MSGP fit settings for the small single-input plants of these tests: `l_y = 2`, `l_u = 1`.
+fn ly2_lu1(threads: Threads, msgp: MsgpSettings) -> FitSettings {
+    FitSettings {
+        ly: 2,
+        lu: 1,
+        threads,
+        method: msgp.into(),
+        ..FitSettings::default()
+    }
 }
 
 fn long_memory_plant(nonlinear: f64) -> Trajectory {
@@ -1093,12 +1098,7 @@ fn the_chosen_recipe_trains_again_on_all_the_data() {
         full_data_iterations: full,
         ..MsgpSettings::default()
     };
-    let settings = |m: MsgpSettings| FitSettings {
-        ly: 2,
-        lu: 1,
-        method: m.into(),
-        ..FitSettings::default()
-    };
+    let settings = |m: MsgpSettings| ly2_lu1(Threads::default(), m);
     let mut stages = Vec::new();
     let (model, report) = fit(
         std::slice::from_ref(&traj),
@@ -1227,13 +1227,7 @@ fn the_spread_start_is_the_one_step_fits_starting_point() {
         alternative: None,
         ..MsgpSettings::default()
     };
-    let settings = |msgp: MsgpSettings| FitSettings {
-        ly: 2,
-        lu: 1,
-        threads: Threads::new(1).expect("threads"),
-        method: msgp.into(),
-        ..FitSettings::default()
-    };
+    let settings = |msgp: MsgpSettings| ly2_lu1(Threads::new(1).expect("threads"), msgp);
     // no tail and no training return the start
     let start = |start: MsgpStart, one_step_iterations: usize| {
         let s = settings(MsgpSettings {
@@ -1281,20 +1275,18 @@ fn a_blown_up_final_training_tries_the_spread_start() {
         y[t] = 0.9 * (2.0 * y[t - 1]).sin() + (2.0 * u[t - 1]).tanh();
     }
     let traj = Trajectory::siso(&u, &y).expect("finite");
-    let settings = |threads: usize, spread_candidate: bool| FitSettings {
-        ly: 2,
-        lu: 1,
-        threads: Threads::new(threads).expect("threads"),
-        method: MsgpSettings {
-            inducing: 12,
-            iterations: 60,
-            full_data_iterations: Some(40),
-            full_data_blow_up: -1.0,
-            spread_candidate,
-            ..MsgpSettings::default()
-        }
-        .into(),
-        ..FitSettings::default()
+    let settings = |threads: usize, spread_candidate: bool| {
+        ly2_lu1(
+            Threads::new(threads).expect("threads"),
+            MsgpSettings {
+                inducing: 12,
+                iterations: 60,
+                full_data_iterations: Some(40),
+                full_data_blow_up: -1.0,
+                spread_candidate,
+                ..MsgpSettings::default()
+            },
+        )
     };
     let (one, r1) = fit(std::slice::from_ref(&traj), &settings(1, true), &mut |_| {}).expect("fit");
     let starts: Vec<(MeanFunction, MsgpStart, bool)> = r1
