@@ -309,6 +309,11 @@ pub struct FitArgs {
     /// (`docs/design.md`, "Honest uncertainty on data the model never saw").
     #[arg(long)]
     pub no_calibration: bool,
+    /// msgp: keep the one-step head's model when the zero-mean recipe's final training on all
+    /// the data blows up, instead of training that recipe again from the spread start
+    /// (`docs/design.md`, "The start that ignores the input").
+    #[arg(long)]
+    pub no_spread_candidate: bool,
     /// Prior mean of the GP [default: msgp trains a zero-mean and a linear-mean recipe and
     /// keeps the one with the lower validation NLL; the baselines: zero].
     #[arg(long, value_enum)]

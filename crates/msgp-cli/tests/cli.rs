@@ -155,6 +155,34 @@ fn fit_save_eval_simulate_round_trip_is_exact() {
     assert_eq!(fit["inducing"], 10);
     assert_eq!(fit["inputs"], serde_json::json!(["u"]));
     assert_eq!(fit["outputs"], serde_json::json!(["y"]));
+    // the recipes the validation tail chose between, each with its start and validation NLL
+    let recipes = fit["recipes"]
+        .as_array()
+        .expect("fit JSON lists the recipes");
+    assert_eq!(recipes.len(), 2, "{fit}");
+    let means: Vec<&str> = recipes
+        .iter()
+        .map(|r| r["recipe"]["mean"].as_str().expect("a recipe's mean"))
+        .collect();
+    assert_eq!(means, ["zero", "linear"]);
+    for r in recipes {
+        assert_eq!(r["start"], "one-step", "{r}");
+        assert!(r["validation"].as_f64().is_some_and(f64::is_finite), "{r}");
+    }
+    let chosen = fit["chosen_recipe"].as_u64().expect("chosen_recipe") as usize;
+    let best = recipes
+        .iter()
+        .enumerate()
+        .min_by(|a, b| {
+            let v = |r: &Value| r["validation"].as_f64().unwrap_or(f64::INFINITY);
+            v(a.1).total_cmp(&v(b.1))
+        })
+        .map(|(k, _)| k);
+    assert_eq!(
+        Some(chosen),
+        best,
+        "the lower validation NLL is chosen: {fit}"
+    );
     let png = std::fs::read(dir.path("fit.png")).expect("plot written");
     assert!(png.starts_with(b"\x89PNG"), "not a PNG");
 
@@ -1069,7 +1097,28 @@ fn the_msgp_start_is_an_option_of_fit() {
     assert_eq!(settings["mean"], "linear");
     assert_eq!(settings["alternative"], Value::Null);
     assert_eq!(one_step["training"]["settings"]["start"], "one-step");
+    assert_eq!(one_step["training"]["settings"]["spread_candidate"], true);
     assert_ne!(kalman["gp"], one_step["gp"]);
+    // the fallback to the spread start can be switched off (no final training blows up here, so
+    // the model is the same)
+    let kept = model(&["--mean", "linear", "--no-spread-candidate"], "n.json");
+    assert_eq!(kept["training"]["settings"]["spread_candidate"], false);
+    assert_eq!(kept["gp"], one_step["gp"]);
+    fails(
+        &dir,
+        &args(
+            &[
+                "fit",
+                "--data",
+                "s.csv",
+                "--method",
+                "gp-narx",
+                "--no-spread-candidate",
+            ],
+            &FAST,
+        ),
+        &["--no-spread-candidate", "gp-narx"],
+    );
     fails(
         &dir,
         &args(

@@ -115,6 +115,16 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             ),
         }
     }
+    if args.no_spread_candidate {
+        match &mut settings.method {
+            MethodSettings::Msgp(s) => s.spread_candidate = false,
+            _ => bail!(
+                "--no-spread-candidate: where an msgp fit's zero-mean recipe may retrain; \
+                 --method {} has no such recipe",
+                method.name()
+            ),
+        }
+    }
     warnings.extend(options.inducing_warning(&trajs));
     for w in &warnings {
         eprintln!("warning: {w}");
@@ -198,6 +208,8 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             "best_iteration": report.best_iteration,
             "full_data_iteration": report.full_data_iteration,
             "full_data_failed": report.full_data_failed,
+            "chosen_recipe": report.chosen_recipe,
+            "recipes": report.recipes,
             "calibration": report.calibration,
             "diverged": report.diverged.is_some(),
             "divergence": report.diverged,
