@@ -291,8 +291,8 @@ pub struct FitArgs {
     #[arg(long, value_enum)]
     pub likelihood: Option<LikelihoodArg>,
     /// Where the MSGP training starts: one-step (the sparse GP-NARX fit, the paper's; where the
-    /// zero-mean recipe's final training from it blows up, that recipe trains again from the
-    /// spread start), spread (the one-step fit's own starting point, length-scales at the
+    /// zero-mean recipe's final training from it blows up, that recipe's fallback heads train,
+    /// from the spread start and with a linear mean), spread (the one-step fit's own starting point, length-scales at the
     /// windows' spread, not optimised) or linear-kf (the linear-Gaussian window model by the
     /// Kalman-filter likelihood under a GP that starts at zero, as the filtered policy-learning
     /// loop fits; implies `--mean linear`) [default: one-step].
@@ -310,10 +310,11 @@ pub struct FitArgs {
     #[arg(long)]
     pub no_calibration: bool,
     /// msgp: keep the one-step head's model when the zero-mean recipe's final training on all
-    /// the data blows up, instead of training that recipe again from the spread start
-    /// (`docs/design.md`, "The start that ignores the input").
+    /// the data blows up, instead of training that recipe's fallback heads (from the spread
+    /// start; with a linear mean) and returning the first whose final training completes
+    /// (`docs/design.md`, "A fallback with a linear mean").
     #[arg(long)]
-    pub no_spread_candidate: bool,
+    pub no_blow_up_fallback: bool,
     /// Prior mean of the GP [default: msgp trains a zero-mean and a linear-mean recipe and
     /// keeps the one with the lower validation NLL; the baselines: zero].
     #[arg(long, value_enum)]

@@ -1048,6 +1048,13 @@ fn fitted_model(dir: &Scratch, extra: &[&str], out: &str) -> Value {
     serde_json::from_str(&text).expect("model file")
 }
 
+/// `msgp fit` of `s.csv` in `dir` by `method` with `option`, which that method refuses: the
+/// message has each of `needles`.
+fn refused_by(dir: &Scratch, method: &str, option: &[&str], needles: &[&str]) {
+    let base = [&["fit", "--data", "s.csv", "--method", method][..], option].concat();
+    fails(dir, &args(&base, &FAST), needles);
+}
+
 /// `--likelihood filter` fits MSGP on the filter's joint density: the model file records it,
 /// the model differs from the free-run one, and another method refuses the option.
 #[test]
@@ -1062,20 +1069,10 @@ fn the_msgp_likelihood_is_an_option_of_fit() {
     assert_eq!(filter["training"]["settings"]["likelihood"], "filter");
     assert_eq!(free["training"]["settings"]["likelihood"], "free-run");
     assert_ne!(filter["gp"], free["gp"]);
-    fails(
+    refused_by(
         &dir,
-        &args(
-            &[
-                "fit",
-                "--data",
-                "s.csv",
-                "--method",
-                "gp-narx",
-                "--likelihood",
-                "filter",
-            ],
-            &FAST,
-        ),
+        "gp-narx",
+        &["--likelihood", "filter"],
         &["--likelihood filter", "gp-narx"],
     );
 }
@@ -1097,27 +1094,18 @@ fn the_msgp_start_is_an_option_of_fit() {
     assert_eq!(settings["mean"], "linear");
     assert_eq!(settings["alternative"], Value::Null);
     assert_eq!(one_step["training"]["settings"]["start"], "one-step");
-    assert_eq!(one_step["training"]["settings"]["spread_candidate"], true);
+    assert_eq!(one_step["training"]["settings"]["blow_up_fallback"], true);
     assert_ne!(kalman["gp"], one_step["gp"]);
-    // the fallback to the spread start can be switched off (no final training blows up here, so
+    // the fallback heads can be switched off (no final training blows up here, so
     // the model is the same)
-    let kept = model(&["--mean", "linear", "--no-spread-candidate"], "n.json");
-    assert_eq!(kept["training"]["settings"]["spread_candidate"], false);
+    let kept = model(&["--mean", "linear", "--no-blow-up-fallback"], "n.json");
+    assert_eq!(kept["training"]["settings"]["blow_up_fallback"], false);
     assert_eq!(kept["gp"], one_step["gp"]);
-    fails(
+    refused_by(
         &dir,
-        &args(
-            &[
-                "fit",
-                "--data",
-                "s.csv",
-                "--method",
-                "gp-narx",
-                "--no-spread-candidate",
-            ],
-            &FAST,
-        ),
-        &["--no-spread-candidate", "gp-narx"],
+        "gp-narx",
+        &["--no-blow-up-fallback"],
+        &["--no-blow-up-fallback", "gp-narx"],
     );
     fails(
         &dir,
@@ -1135,20 +1123,10 @@ fn the_msgp_start_is_an_option_of_fit() {
         ),
         &["linear-kf start", "mean: linear"],
     );
-    fails(
+    refused_by(
         &dir,
-        &args(
-            &[
-                "fit",
-                "--data",
-                "s.csv",
-                "--method",
-                "gp-narx",
-                "--start",
-                "linear-kf",
-            ],
-            &FAST,
-        ),
+        "gp-narx",
+        &["--start", "linear-kf"],
         &["--start", "gp-narx"],
     );
 }
@@ -1173,20 +1151,10 @@ fn the_one_step_objective_is_an_option_of_fit() {
     assert_eq!(pilco["training"]["settings"]["objective"], "exact");
     let msgp = fitted_model(&dir, &["--one-step", "vfe"], "m.json");
     assert_eq!(msgp["training"]["settings"]["one_step_objective"], "vfe");
-    fails(
+    refused_by(
         &dir,
-        &args(
-            &[
-                "fit",
-                "--data",
-                "s.csv",
-                "--method",
-                "linear-kf",
-                "--one-step",
-                "vfe",
-            ],
-            &FAST,
-        ),
+        "linear-kf",
+        &["--one-step", "vfe"],
         &["--one-step", "linear-kf"],
     );
 }

@@ -237,7 +237,7 @@ def test_the_msgp_start_is_an_argument():
     s = msgp.Msgp(history=(2, 1), inducing=8, iterations=5, start="spread", seed=0).fit(u, y)
     assert "start='spread'" in repr(s)
     settings = json.loads(s.to_json())["training"]["settings"]
-    assert (settings["start"], settings["spread_candidate"]) == ("spread", True)
+    assert (settings["start"], settings["blow_up_fallback"]) == ("spread", True)
     with pytest.raises(ValueError, match=r'settings\["start"\]: set it with the Msgp\(start=...\) argument'):
         msgp.Msgp(settings={"start": "linear-kf"})
 

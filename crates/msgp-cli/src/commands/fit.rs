@@ -115,11 +115,11 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             ),
         }
     }
-    if args.no_spread_candidate {
+    if args.no_blow_up_fallback {
         match &mut settings.method {
-            MethodSettings::Msgp(s) => s.spread_candidate = false,
+            MethodSettings::Msgp(s) => s.blow_up_fallback = false,
             _ => bail!(
-                "--no-spread-candidate: where an msgp fit's zero-mean recipe may retrain; \
+                "--no-blow-up-fallback: where an msgp fit's zero-mean recipe may retrain; \
                  --method {} has no such recipe",
                 method.name()
             ),
@@ -271,27 +271,29 @@ pub fn kept(report: &FitReport) -> String {
             msgp_core::gp::MeanFunction::Zero => " the zero-mean recipe,".to_string(),
             msgp_core::gp::MeanFunction::Linear => " the linear-mean recipe,".to_string(),
         });
-    // the zero-mean recipe's final training from the one-step start blew up, and the same
-    // recipe from the spread start was kept (`MsgpSettings::spread_candidate`)
-    let respread = report
-        .recipes
-        .get(report.chosen_recipe)
-        .filter(|r| r.start == msgp_core::fit::MsgpStart::Spread)
-        .and_then(|_| {
-            report
-                .recipes
-                .iter()
-                .find_map(|r| r.final_failed.as_deref())
-        });
+    // the zero-mean recipe's final training from the one-step start blew up, and a fallback
+    // head's completed (`MsgpSettings::blow_up_fallback`)
+    let fallback = report.fallback().map(|r| {
+        let head = match r.start {
+            MsgpStart::Spread => "the zero-mean recipe's fallback head from the spread start",
+            _ => "the zero-mean recipe's fallback head with a linear mean",
+        };
+        let why = report
+            .recipes
+            .iter()
+            .find_map(|r| r.final_failed.as_deref())
+            .unwrap_or("it failed");
+        (head, why)
+    });
     match (
         report.full_data_iteration,
         &report.full_data_failed,
-        respread,
+        fallback,
     ) {
-        (Some(j), _, Some(why)) => format!(
-            "kept iteration {j} of the final training on all the data from the spread start \
-             (the zero-mean recipe's from the one-step start failed: {why}); the validation \
-             tail chose the zero-mean recipe, its spread-start head best at its iteration {}",
+        (Some(j), _, Some((head, why))) => format!(
+            "kept iteration {j} of the final training on all the data of {head} (the zero-mean \
+             recipe's from the one-step start failed: {why}); the validation tail chose the \
+             zero-mean recipe, then ordered its fallback heads, this one best at its iteration {}",
             report.best_iteration
         ),
         (Some(j), _, None) => format!(

@@ -33,8 +33,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::data::{Normalizer, Trajectory};
 use crate::error::{MsgpError, Result};
-use crate::gp::GpConfig;
 use crate::gp::integrator::Structure;
+use crate::gp::{GpConfig, MeanFunction};
 use crate::model::{Method, Model};
 use crate::numeric::linalg::JitterLog;
 use crate::policy::PolicySpec;
@@ -107,6 +107,34 @@ pub struct FitReport {
     pub calibration: Option<calibration::CalibrationReport>,
 }
 
+impl FitReport {
+    /// MSGP: the returned model's recipe when it is a fallback head
+    /// ([`MsgpSettings::blow_up_fallback`]): another recipe's final training failed and this
+    /// one's completed; `None` otherwise.
+    pub fn fallback(&self) -> Option<&RecipeOutcome> {
+        let failed = self
+            .recipes
+            .iter()
+            .enumerate()
+            .any(|(k, r)| k != self.chosen_recipe && r.final_failed.is_some());
+        self.recipes
+            .get(self.chosen_recipe)
+            .filter(|_| failed && self.full_data_iteration.is_some())
+    }
+}
+
+impl RecipeOutcome {
+    /// How a fallback head differs from the zero-mean recipe from the one-step start, in a word:
+    /// `spread` (its start) or `linear` (its prior mean).
+    pub fn fallback_label(&self) -> &'static str {
+        match (self.start, self.recipe.mean) {
+            (MsgpStart::Spread, _) => "spread",
+            (_, MeanFunction::Linear) => "linear",
+            _ => "zero",
+        }
+    }
+}
+
 /// How one MSGP recipe did on the validation tail.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RecipeOutcome {
@@ -117,8 +145,8 @@ pub struct RecipeOutcome {
     #[serde(default)]
     pub start: MsgpStart,
     /// Why its final training on all the data failed, if it ran and did (the zero-mean recipe
-    /// from the one-step start then trains again from the spread start:
-    /// [`MsgpSettings::spread_candidate`]).
+    /// from the one-step start then trains its fallback heads:
+    /// [`MsgpSettings::blow_up_fallback`]).
     #[serde(default)]
     pub final_failed: Option<String>,
     /// Its best validation NLL per step (`None` without a validation tail, or when it failed).

@@ -97,20 +97,29 @@ pub(super) fn fit_msgp(
     };
     // the heads that train first (side by side on two threads)
     let racing = recipes.len();
-    // the settings' own zero-mean recipe from the spread start: its head trains only if that
-    // recipe wins the choice and its final training blows up (`MsgpSettings::spread_candidate`)
-    let spread = (msgp.spread_candidate
+    // the fallback heads of the settings' own zero-mean recipe: from the spread start, and with
+    // a linear mean (its step and complexity otherwise); they train only if that recipe wins the
+    // choice and its final training blows up (`MsgpSettings::blow_up_fallback`)
+    let fallbacks: Vec<usize> = if msgp.blow_up_fallback
         && msgp.mean == MeanFunction::Zero
         && msgp.start == MsgpStart::OneStep
-        && final_iterations.is_some())
-    .then(|| {
+        && final_iterations.is_some()
+    {
+        let first = recipes.len();
         recipes.push(MsgpSettings {
             start: MsgpStart::Spread,
             alternative: None,
             ..msgp.clone()
         });
-        recipes.len() - 1
-    });
+        recipes.push(MsgpSettings {
+            mean: MeanFunction::Linear,
+            alternative: None,
+            ..msgp.clone()
+        });
+        (first..recipes.len()).collect()
+    } else {
+        Vec::new()
+    };
     // the proxy of the final training, for the calibration (only with the final training)
     let proxy_iterations = final_iterations.filter(|_| msgp.calibrate);
     // each recipe's start on the head (the proxy starts from it)
@@ -410,11 +419,15 @@ pub(super) fn fit_msgp(
         return Err(first_error.unwrap_or_else(|| MsgpError::NonFinite("no recipe trained".into())));
     };
     // the heads whose final training is tried, in turn: the chosen one, and where that is the
-    // settings' own zero-mean recipe and its final training blows up, the same recipe's head
-    // from the spread start (`MsgpSettings::spread_candidate`)
+    // settings' own zero-mean recipe and its final training blows up, its fallback heads in the
+    // order of their validation NLL (`MsgpSettings::blow_up_fallback`)
     let mut candidates: Vec<(usize, GpParams<f64>, usize)> =
         vec![(report.chosen_recipe, chosen, report.best_iteration)];
-    let spread = spread.filter(|_| report.chosen_recipe == 0);
+    let fallbacks = if report.chosen_recipe == 0 {
+        fallbacks
+    } else {
+        Vec::new()
+    };
     let (mut k, mut chosen, _) = candidates[0].clone();
     let mut head_model = chosen.clone();
     let mut proxy = None;
@@ -482,19 +495,20 @@ pub(super) fn fit_msgp(
                 report.full_data_failed = None;
                 break;
             }
-            // this head's final training blew up (or failed numerically): the spread start's
-            // head trains and its final training is tried; the first head's model stands if
-            // none completes
+            // this head's final training blew up (or failed numerically): the fallback heads
+            // train, and their final trainings are tried in the order of their validation NLL;
+            // the first head's model stands if none completes
             if let Some(outcome) = report.recipes.get_mut(c) {
                 outcome.final_failed = trained.report.full_data_failed.clone();
             }
             if i == 0 {
                 report.full_data_failed = trained.report.full_data_failed;
-                if let Some(s) = spread {
+                let mut heads = Vec::new();
+                for &s in &fallbacks {
                     let outcome = run(s, &recipes[s], settings, &mut *progress, &mut report);
                     let (validation, failed) = match outcome {
                         Ok((params, iteration, validation)) => {
-                            candidates.push((s, params, iteration));
+                            heads.push((validation, s, params, iteration));
                             (validation.is_finite().then_some(validation), None)
                         }
                         Err(
@@ -510,6 +524,9 @@ pub(super) fn fit_msgp(
                         final_failed: None,
                     });
                 }
+                // (a stable sort: on a tie, the training order)
+                heads.sort_by(|a, b| a.0.total_cmp(&b.0));
+                candidates.extend(heads.into_iter().map(|(_, s, p, it)| (s, p, it)));
             }
             // (a proxy of a final training that is not kept judges nothing, and whether it ran
             // depends on the schedule: it is not counted)

@@ -130,12 +130,15 @@ pub struct MsgpSettings {
     pub calibrate: bool,
     /// With the final training and a validation tail, where the settings' own zero-mean recipe
     /// from the one-step start wins the choice and its final training on all the data blows up
-    /// (or fails numerically): the same recipe trains a head from the spread start
-    /// ([`MsgpStart::Spread`]) and that head's final training is tried; the fit returns it if it
-    /// completes, the one-step head's model otherwise (as without this setting). Records before
-    /// 2026-12-05 (second session) had no such fallback.
-    #[serde(default)]
-    pub spread_candidate: bool,
+    /// (or fails numerically): two fallback heads of the same recipe train, one from the spread
+    /// start ([`MsgpStart::Spread`]) and one with a linear prior mean (the recipe's step,
+    /// complexity and noise start otherwise), and their final trainings are tried in the order
+    /// of their validation NLL; the fit returns the first that completes, the one-step head's
+    /// model if none does (as without this setting). Records of 2026-12-05 (second session)
+    /// call it `spread_candidate` and had the spread head alone; earlier records had no
+    /// fallback.
+    #[serde(default, alias = "spread_candidate")]
+    pub blow_up_fallback: bool,
     /// The rise of the final training's loss (nats per predicted step, above its lowest since
     /// its 10th iteration) that ends it as a blow-up ([`DEFAULT_FULL_DATA_BLOW_UP`]; any finite
     /// value, a negative one ends every final training at its 11th iteration).
@@ -223,7 +226,7 @@ pub enum MsgpStart {
     /// marginal likelihood explains the next output by the output lags alone, with a tiny noise,
     /// and a free simulation from that start cannot learn how the inputs drive the plant; from
     /// this start it can (`docs/design.md`, "The start that ignores the input"). See
-    /// [`MsgpSettings::spread_candidate`].
+    /// [`MsgpSettings::blow_up_fallback`].
     Spread,
 }
 
@@ -304,7 +307,7 @@ impl Default for MsgpSettings {
             start: MsgpStart::OneStep,
             alternative: Some(LINEAR_RECIPE),
             calibrate: true,
-            spread_candidate: true,
+            blow_up_fallback: true,
             full_data_blow_up: DEFAULT_FULL_DATA_BLOW_UP,
         }
     }

@@ -593,7 +593,7 @@ fn settings_serialise_with_the_methods_own_keys() {
     msgp_1_2.push("one_step_objective");
     msgp_1_2.push("full_data_iterations");
     msgp_1_2.push("calibrate");
-    msgp_1_2.push("spread_candidate");
+    msgp_1_2.push("blow_up_fallback");
     msgp_1_2.push("full_data_blow_up");
     assert_eq!(keys(&FitSettings::new(Method::Msgp)), with(&msgp_1_2));
     for m in [Method::GpNarx, Method::PilcoNarx] {
@@ -1256,15 +1256,56 @@ fn the_spread_start_is_the_one_step_fits_starting_point() {
     assert_eq!(r.recipes.len(), 1, "{:?}", r.recipes);
 }
 
-/// Where the chosen zero-mean recipe's final training blows up (forced here by a negative
-/// limit, [`MsgpSettings::full_data_blow_up`]), the same recipe trains a head from the spread
-/// start and tries its final training; when that blows up too, the one-step head's model
-/// stands and the calibration judges the head's own training. The two recipes race on two
-/// threads first (the first thread starting the winner's final training early): one and two
-/// threads give the same model and report; `spread_candidate: false` trains no spread head.
-/// (The spread head's final training completing is `tests/benchmarks.rs`' ballbeam.)
+/// `FitReport::fallback` names the returned model's head only where it is a fallback head:
+/// another head's final training failed and this one's completed.
 #[test]
-fn a_blown_up_final_training_tries_the_spread_start() {
+fn the_report_names_a_kept_fallback_head() {
+    let outcome = |mean, start, final_failed: Option<&str>| RecipeOutcome {
+        recipe: Recipe {
+            mean,
+            ..MsgpSettings::default().recipe()
+        },
+        start,
+        final_failed: final_failed.map(String::from),
+        validation: Some(0.5),
+        failed: None,
+    };
+    let mut report = FitReport {
+        recipes: vec![
+            outcome(MeanFunction::Zero, MsgpStart::OneStep, Some("blew up")),
+            outcome(MeanFunction::Linear, MsgpStart::OneStep, None),
+            outcome(MeanFunction::Zero, MsgpStart::Spread, None),
+            outcome(MeanFunction::Linear, MsgpStart::OneStep, None),
+        ],
+        chosen_recipe: 3,
+        full_data_iteration: Some(400),
+        ..FitReport::default()
+    };
+    let label = |r: &FitReport| r.fallback().map(RecipeOutcome::fallback_label);
+    assert_eq!(label(&report), Some("linear"));
+    report.chosen_recipe = 2;
+    assert_eq!(label(&report), Some("spread"));
+    // the head's model stands: no final training completed
+    report.full_data_iteration = None;
+    assert_eq!(label(&report), None);
+    // the chosen head's own final training completed, and no other failed
+    report.full_data_iteration = Some(400);
+    report.recipes[0].final_failed = None;
+    assert_eq!(label(&report), None);
+    report.chosen_recipe = 0;
+    assert_eq!(label(&report), None);
+}
+
+/// Where the chosen zero-mean recipe's final training blows up (forced here by a negative
+/// limit, [`MsgpSettings::full_data_blow_up`]), the same recipe trains its two fallback heads
+/// (from the spread start; with a linear mean at its own step and complexity) and tries their
+/// final trainings; when those blow up too, the one-step head's model stands and the
+/// calibration judges the head's own training. The two recipes race on two threads first (the
+/// first thread starting the winner's final training early): one and two threads give the same
+/// model and report; `blow_up_fallback: false` trains no fallback head. (A fallback head's final
+/// training completing, and their order, is `tests/benchmarks.rs`' ballbeam.)
+#[test]
+fn a_blown_up_final_training_tries_the_fallback_heads() {
     // a saturating plant on which the zero-mean recipe beats the linear one on the tail
     let n = 160;
     let u: Vec<f64> = (0..n)
@@ -1275,7 +1316,7 @@ fn a_blown_up_final_training_tries_the_spread_start() {
         y[t] = 0.9 * (2.0 * y[t - 1]).sin() + (2.0 * u[t - 1]).tanh();
     }
     let traj = Trajectory::siso(&u, &y).expect("finite");
-    let settings = |threads: usize, spread_candidate: bool| {
+    let settings = |threads: usize, blow_up_fallback: bool| {
         ly2_lu1(
             Threads::new(threads).expect("threads"),
             MsgpSettings {
@@ -1283,7 +1324,7 @@ fn a_blown_up_final_training_tries_the_spread_start() {
                 iterations: 60,
                 full_data_iterations: Some(40),
                 full_data_blow_up: -1.0,
-                spread_candidate,
+                blow_up_fallback,
                 ..MsgpSettings::default()
             },
         )
@@ -1299,10 +1340,27 @@ fn a_blown_up_final_training_tries_the_spread_start() {
         [
             (MeanFunction::Zero, MsgpStart::OneStep, true),
             (MeanFunction::Linear, MsgpStart::OneStep, false),
-            (MeanFunction::Zero, MsgpStart::Spread, true)
+            (MeanFunction::Zero, MsgpStart::Spread, true),
+            (MeanFunction::Linear, MsgpStart::OneStep, true)
         ]
     );
+    // the linear fallback is the zero-mean recipe with a linear mean, not the racing linear one
+    let own = MsgpSettings::default().recipe();
+    assert_eq!(
+        r1.recipes[3].recipe,
+        Recipe {
+            mean: MeanFunction::Linear,
+            ..own
+        }
+    );
+    assert_ne!(r1.recipes[3].recipe, r1.recipes[1].recipe);
+    assert!(
+        r1.recipes.iter().all(|r| r.validation.is_some()),
+        "{:?}",
+        r1.recipes
+    );
     assert_eq!(r1.chosen_recipe, 0);
+    assert!(r1.fallback().is_none(), "no fallback head completed");
     assert_eq!(r1.full_data_iteration, None);
     assert!(r1.full_data_failed.is_some());
     assert!(matches!(
@@ -1318,7 +1376,7 @@ fn a_blown_up_final_training_tries_the_spread_start() {
     assert_eq!(r1.history, r2.history);
     assert_eq!(r1.full_data_failed, r2.full_data_failed);
     assert_eq!(r1.calibration, r2.calibration);
-    // without the fallback: the same model, no spread head
+    // without the fallback: the same model, no fallback head
     let (alone, r) = fit(
         std::slice::from_ref(&traj),
         &settings(2, false),

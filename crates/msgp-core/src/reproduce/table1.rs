@@ -222,10 +222,10 @@ pub struct Cell {
     /// [`crate::fit::calibration`]), when it has one.
     #[serde(default)]
     pub added_std: Option<f64>,
-    /// MSGP: the kept model's training started from the spread start
-    /// ([`crate::fit::MsgpStart::Spread`], [`crate::fit::MsgpSettings::spread_candidate`]).
+    /// MSGP: the kept model is a fallback head's ([`crate::fit::MsgpSettings::blow_up_fallback`]),
+    /// named by [`crate::fit::RecipeOutcome::fallback_label`]: `spread` or `linear`.
     #[serde(default)]
-    pub spread_start: bool,
+    pub fallback: Option<String>,
     /// Why the model diverges: the fit's check on its training inputs, else the moment-matching
     /// simulation of the test part held against the test outputs (`msgp eval`'s test);
     /// `None` when neither fires.
@@ -512,10 +512,7 @@ pub fn fit_unit(
             .calibration
             .as_ref()
             .and_then(|c| c.added_std.first().copied()),
-        spread_start: report
-            .recipes
-            .get(report.chosen_recipe)
-            .is_some_and(|r| r.start == crate::fit::MsgpStart::Spread),
+        fallback: report.fallback().map(|r| r.fallback_label().to_string()),
         diverged,
     })
 }
@@ -779,7 +776,8 @@ pub fn render(plan: &Plan, rows: &[Row], provenance: &Provenance) -> String {
          units) and the fraction of test outputs inside mean ± 2σ, per rollout, with the \
          training time (means ± standard deviations over the seeds). MSGP's iterations: all \
          solver iterations of the fit, then in brackets the iteration the validation tail kept \
-         (\"spread\": the zero-mean recipe from the spread start, `msgp_core::fit::MsgpStart::Spread`) \
+         (\"spread\", \"linear\": the zero-mean recipe's final training blew up and its fallback head from \
+         the spread start, or with a linear prior mean, is the model: `msgp_core::fit::MsgpSettings::blow_up_fallback`) \
          and, where the chosen recipe trained again on all the training data, the iterate of \
          that training the model is; after them, the standard deviation (original units) the \
          output-variance calibration adds to every simulated output (`msgp_core::fit::calibration`: \
@@ -799,7 +797,10 @@ pub fn render(plan: &Plan, rows: &[Row], provenance: &Provenance) -> String {
                     cells
                         .iter()
                         .map(|x| {
-                            let start = if x.spread_start { "spread " } else { "" };
+                            let start = x
+                                .fallback
+                                .as_ref()
+                                .map_or(String::new(), |f| format!("{f} "));
                             let kept = match x.full_data_iteration {
                                 Some(j) => format!(
                                     "{} ({start}{}; {j})",
@@ -877,7 +878,7 @@ mod tests {
             best_iteration: 1,
             full_data_iteration: None,
             added_std: None,
-            spread_start: false,
+            fallback: None,
             diverged: None,
         }
     }

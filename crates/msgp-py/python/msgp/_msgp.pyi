@@ -51,9 +51,9 @@ class Msgp:
         per-step marginals, the default) or "filter" (the joint density of the observations by
         the moment-matched filter) — `msgp fit --likelihood`; other methods refuse it.
     start: where an MSGP fit starts, "one-step" (the sparse GP-NARX fit, the default; where the
-        zero-mean recipe's final training from it blows up, that recipe trains from the spread
-        start), "spread" (the
-        one-step fit's starting point, not optimised) or "linear-kf" (the linear Kalman-filter
+        zero-mean recipe's final training from it blows up, that recipe's fallback heads train,
+        from the spread start and with a linear mean), "spread" (the one-step fit's starting
+        point, not optimised) or "linear-kf" (the linear Kalman-filter
         model under a GP that starts at zero; implies the linear mean) — `msgp fit --start`.
     """
 
