@@ -292,8 +292,8 @@ pub struct FitArgs {
     pub likelihood: Option<LikelihoodArg>,
     /// Where the MSGP training starts: one-step (the sparse GP-NARX fit, the paper's; where the
     /// zero-mean recipe's final training from it blows up, that recipe's fallback heads train,
-    /// from the spread start and with a linear mean), spread (the one-step fit's own starting point, length-scales at the
-    /// windows' spread, not optimised) or linear-kf (the linear-Gaussian window model by the
+    /// from the spread start and with a linear mean), spread (the one-step fit's own starting
+    /// point, length-scales at the windows' spread, not optimised) or linear-kf (the linear-Gaussian window model by the
     /// Kalman-filter likelihood under a GP that starts at zero, as the filtered policy-learning
     /// loop fits; implies `--mean linear`) [default: one-step].
     #[arg(long, value_enum)]

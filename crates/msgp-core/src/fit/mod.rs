@@ -125,7 +125,7 @@ impl FitReport {
 
 impl RecipeOutcome {
     /// How a fallback head differs from the zero-mean recipe from the one-step start, in a word:
-    /// `spread` (its start) or `linear` (its prior mean).
+    /// `spread` (its start) or `linear` (its prior mean); `zero` for that recipe itself.
     pub fn fallback_label(&self) -> &'static str {
         match (self.start, self.recipe.mean) {
             (MsgpStart::Spread, _) => "spread",

@@ -8,7 +8,9 @@
 //! well, but on short series it is a poor judge of *how long* to train (`docs/design.md`).
 //! With [`MsgpSettings::calibrate`] (the default) a proxy of that final training, on the head
 //! alone, then judges on the tail how much output variance the model must add
-//! ([`super::calibration`]).
+//! ([`super::calibration`]). Where the chosen zero-mean recipe's final training blows up, its
+//! fallback heads ([`MsgpSettings::blow_up_fallback`]) train and the first whose final training
+//! completes, in the tail's order, is returned.
 //!
 //! ## Guarding against noise collapse
 //! The trajectory likelihood can be lowered by shrinking the noise variances while the free
