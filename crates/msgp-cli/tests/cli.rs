@@ -183,6 +183,15 @@ fn fit_save_eval_simulate_round_trip_is_exact() {
         best,
         "the lower validation NLL is chosen: {fit}"
     );
+    // the model file's training record keeps them (format 1.4)
+    let file: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path("m.json")).expect("model file"))
+            .expect("model JSON");
+    let record = &file["training"];
+    assert_eq!(record["recipes"], fit["recipes"]);
+    assert_eq!(record["chosen_recipe"], fit["chosen_recipe"]);
+    assert_eq!(record["full_data_iteration"], fit["full_data_iteration"]);
+    assert!(record["full_data_iteration"].as_u64().is_some(), "{record}");
     let png = std::fs::read(dir.path("fit.png")).expect("plot written");
     assert!(png.starts_with(b"\x89PNG"), "not a PNG");
 
@@ -297,8 +306,17 @@ fn baselines_text_output_and_default_model_path() {
         serde_json::from_str(&std::fs::read_to_string(dir.path("p.json")).expect("model file"))
             .expect("model JSON");
     assert_eq!(model["format"], "msgp-model");
-    assert_eq!(model["format_version"], "1.3");
+    assert_eq!(model["format_version"], "1.4");
     assert_eq!(model["method"], "pilco-narx");
+    // a one-step fit has no recipes: its training record is written as before format 1.4
+    for key in [
+        "recipes",
+        "chosen_recipe",
+        "full_data_iteration",
+        "full_data_failed",
+    ] {
+        assert!(model["training"].get(key).is_none(), "{key}: {model}");
+    }
 }
 
 #[test]

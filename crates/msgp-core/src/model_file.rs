@@ -21,7 +21,7 @@ use serde_json::Value;
 use crate::data::Normalizer;
 use crate::data::Trajectory;
 use crate::error::{MsgpError, Result};
-use crate::fit::{FitReport, FitSettings};
+use crate::fit::{FitReport, FitSettings, RecipeOutcome};
 use crate::gp::{GpConfig, GpParams, MeanFunction, PreparedGp};
 use crate::model::{Method, Model};
 use crate::narx::NarxSpec;
@@ -32,7 +32,7 @@ pub const FORMAT: &str = "msgp-model";
 /// Major format version written and read by this build.
 pub const FORMAT_MAJOR: u32 = 1;
 /// Minor format version written by this build (readers accept any minor of their major).
-pub const FORMAT_MINOR: u32 = 3;
+pub const FORMAT_MINOR: u32 = 4;
 
 /// NARX history lengths.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -117,6 +117,21 @@ pub struct Training {
     /// (`msgp_core::fit::check_divergence`); `null` when it does not.
     #[serde(default)]
     pub diverged: Option<String>,
+    /// MSGP: each recipe the fit trained, with its start, validation NLL and why its training
+    /// or final training failed (format 1.4; `msgp_core::fit::FitReport::recipes`); empty for
+    /// the other methods and in older files.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub recipes: Vec<RecipeOutcome>,
+    /// MSGP: the index in `recipes` of the model's recipe (format 1.4).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chosen_recipe: Option<usize>,
+    /// MSGP: the iterate of the final training on all the data that the model is (format 1.4);
+    /// absent where the head's model stands or there was no final training.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub full_data_iteration: Option<usize>,
+    /// MSGP: why the final training on all the data failed, where it did (format 1.4).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub full_data_failed: Option<String>,
     /// Every fit setting, as `msgp_core::fit::FitSettings` serialises it (informational).
     pub settings: Value,
 }
@@ -343,6 +358,11 @@ impl ModelFile {
                 iterations_run: record.report.iterations_run,
                 best_iteration: record.report.best_iteration,
                 diverged: record.report.diverged.clone(),
+                recipes: record.report.recipes.clone(),
+                chosen_recipe: (!record.report.recipes.is_empty())
+                    .then_some(record.report.chosen_recipe),
+                full_data_iteration: record.report.full_data_iteration,
+                full_data_failed: record.report.full_data_failed.clone(),
                 settings: serde_json::to_value(record.settings)
                     .map_err(|e| MsgpError::Data(format!("cannot serialise the settings: {e}")))?,
             },

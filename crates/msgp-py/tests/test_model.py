@@ -162,7 +162,7 @@ def test_save_load_round_trip_is_exact(fitted, tmp_path):
     assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
     assert model.score(data["u_test"], data["y_test"]) == loaded.score(data["u_test"], data["y_test"])
     doc = json.loads(path.read_text())
-    assert doc["format"] == "msgp-model" and doc["format_version"] == "1.3"
+    assert doc["format"] == "msgp-model" and doc["format_version"] == "1.4"
     assert msgp.Msgp.from_json(model.to_json()).to_json() == model.to_json()
 
 
