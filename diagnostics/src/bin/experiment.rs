@@ -5,7 +5,8 @@
 //! [complexity] [noise] [lr=F] [lbfgs=true] [every=N] [patience=N] [valfrac=F] [floor=F]
 //! [inducing=N] [freeze_x=true] [free_x=true] [nstart=full] [onestep=N] [filter=true] [dump=true]
 //! [threads=N] [ly=N] [lu=N] [mean=linear] [init=adam|lbfgs] [alt=false] [sparse=exact|vfe]
-//! [from=N] [to=N] [final=N|none] [calibrate=false] (train on samples `from..to` of the training part only)
+//! [from=N] [to=N] [final=N|none] [calibrate=false] (train on samples `from..to` of the
+//! training part only)
 //!`
 //!
 //! Positional: `system` `sys1`…`sys5` or a real series (`actuator`, `ballbeam`, `drives`,
@@ -21,8 +22,9 @@
 //! history, `mean=linear` the linear prior mean, `init` the one-step start's solver,
 //! `sparse=exact|vfe` the one-step baselines' objective (`OneStepFitSettings::objective`),
 //! `init_sparse=exact|vfe` that of MSGP's one-step start (`MsgpSettings::one_step_objective`), `alt=false` train the settings' recipe alone (default: the protocol's linear-mean recipe
-//! beside it, `MsgpSettings::alternative`), `onestep` the one-step iterations, `final` the final training's iterations on all the data
-//! (`none`: no final training), `calibrate=false` no calibration, `filter=true` train on the
+//! beside it, `MsgpSettings::alternative`), `onestep` the one-step iterations, `final` the
+//! final training's iterations on all the data (`none`: no final training), `calibrate=false`
+//! no calibration, `filter=true` train on the
 //! filter likelihood instead of the free run's, `dump=true` print the settings
 //! (JSON, stderr), `threads` the fit's threads (default every core; results do not depend on it).
 

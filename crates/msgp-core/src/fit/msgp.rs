@@ -425,11 +425,6 @@ pub(super) fn fit_msgp(
     // order of their validation NLL (`MsgpSettings::blow_up_fallback`)
     let mut candidates: Vec<(usize, GpParams<f64>, usize)> =
         vec![(report.chosen_recipe, chosen, report.best_iteration)];
-    let fallbacks = if report.chosen_recipe == 0 {
-        fallbacks
-    } else {
-        Vec::new()
-    };
     let (mut k, mut chosen, _) = candidates[0].clone();
     let mut head_model = chosen.clone();
     let mut proxy = None;
@@ -505,8 +500,9 @@ pub(super) fn fit_msgp(
             }
             if i == 0 {
                 report.full_data_failed = trained.report.full_data_failed;
+                // (only the settings' own recipe, the first, has fallback heads)
                 let mut heads = Vec::new();
-                for &s in &fallbacks {
+                for &s in fallbacks.iter().filter(|_| c == 0) {
                     let outcome = run(s, &recipes[s], settings, &mut *progress, &mut report);
                     let (validation, failed) = match outcome {
                         Ok((params, iteration, validation)) => {
