@@ -356,8 +356,10 @@ pub struct EvalArgs {
     /// the simulation).
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub from: usize,
-    /// How the simulation propagates predictions: `mm` moment matching (the paper's), `mean`
-    /// feeding back predicted means only (how one-step GP-NARX baselines are often scored).
+    /// How the simulation propagates predictions: `mm` moment matching (the paper's means;
+    /// variances that keep the function's uncertainty correlated over time), `mm-independent`
+    /// the paper's moment matching as it is, `mean` feeding back predicted means only (how
+    /// one-step GP-NARX baselines are often scored).
     #[arg(long, value_enum, default_value_t = RolloutArg::Mm)]
     pub rollout: RolloutArg,
     /// Write a PNG of the free simulation.
@@ -405,8 +407,11 @@ pub struct SimulateArgs {
 /// How a free simulation propagates the model's predictions.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum RolloutArg {
-    /// Moment matching over the window's joint Gaussian (the paper's).
+    /// Moment matching over the window's joint Gaussian (the paper's means), with variances
+    /// that keep the GP's uncertainty about its function correlated over time.
     Mm,
+    /// The paper's moment matching as it is: each step's function uncertainty independent.
+    MmIndependent,
     /// Predicted means fed back, no uncertainty propagated.
     Mean,
 }
@@ -415,6 +420,7 @@ impl From<RolloutArg> for Rollout {
     fn from(r: RolloutArg) -> Self {
         match r {
             RolloutArg::Mm => Rollout::MomentMatching,
+            RolloutArg::MmIndependent => Rollout::MomentMatchingIndependent,
             RolloutArg::Mean => Rollout::MeanFeedback,
         }
     }

@@ -115,15 +115,15 @@ fn start(m: Method, name: Option<&str>) -> Result<MsgpStart> {
     }
 }
 
-/// A rollout by name (`mm`, `mean`).
+/// A rollout by name (`mm`, `mm-independent`, `mean`).
 fn rollout(name: &str) -> Result<Rollout> {
     Rollout::ALL
         .into_iter()
         .find(|r| r.name() == name)
         .ok_or_else(|| {
             input(format!(
-                "unknown rollout {name:?}: expected \"mm\" (moment matching) or \"mean\" \
-                 (mean feedback)"
+                "unknown rollout {name:?}: expected \"mm\" (moment matching), \
+                 \"mm-independent\" (the paper's moment matching) or \"mean\" (mean feedback)"
             ))
         })
 }
@@ -565,8 +565,8 @@ impl Msgp {
     /// `max(l_y, l_u)` measured outputs in `y_init` (further rows are ignored). Returns
     /// `(mean, var)`, each of shape (T − max(l_y, l_u), d_y): row `i` predicts sample
     /// `max(l_y, l_u) + i`, variance including observation noise, original units. `rollout`:
-    /// "mm" (moment matching, the default) or "mean" (mean feedback), as `msgp simulate
-    /// --rollout`.
+    /// "mm" (moment matching, the default), "mm-independent" (the paper's moment matching) or
+    /// "mean" (mean feedback), as `msgp simulate --rollout`.
     #[pyo3(signature = (u, y_init, *, rollout = "mm"))]
     fn simulate<'py>(
         slf: &Bound<'py, Self>,

@@ -264,6 +264,18 @@ def test_filtered_and_mean_feedback_predictions_match_the_cli(sys4, cli, tmp_pat
     assert max_diff(table["y_mean"], sim_mean[:, 0]) == 0.0
     assert max_diff(table["y_std"], np.sqrt(sim_var[:, 0])) == 0.0
 
+    # the paper's moment matching: the same means, each step's function uncertainty drawn
+    # afresh, so no wider a band than the default's; the CLI agrees
+    paper = model.score(u, y, rollout="mm-independent")
+    report = cli("eval", *base, "--rollout", "mm-independent")
+    for k in METRICS:
+        assert abs(report[k] - paper[k]) <= TOL, k
+    assert paper["rmse"] == mine["rmse"]
+    default_mean, default_var = model.simulate(u, y[:w])
+    paper_mean, paper_var = model.simulate(u, y[:w], rollout="mm-independent")
+    assert max_diff(paper_mean, default_mean) == 0.0
+    assert np.all(paper_var <= default_var)
+
     with pytest.raises(ValueError, match='unknown rollout "exact"'):
         model.simulate(u, y[:w], rollout="exact")
     with pytest.raises(ValueError, match="needs more than"):

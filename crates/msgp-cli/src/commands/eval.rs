@@ -183,6 +183,7 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
 fn rollout_note(rollout: Rollout) -> &'static str {
     match rollout {
         Rollout::MomentMatching => "",
+        Rollout::MomentMatchingIndependent => " (moment matching, independent function draws)",
         Rollout::MeanFeedback => " (mean feedback)",
     }
 }

@@ -15,6 +15,9 @@
 //! the chosen recipe trains on the head's first 80 % with early stopping on the head's last
 //! 20 %, and simulates the tail ([`Judge::HeadProxy`]). The calibration moves no predicted
 //! mean (it is added to the simulated outputs, not fed back), so every RMSE stays as it was.
+//! The tail is simulated as a model's free simulation is reported, with the correlated function
+//! uncertainty ([`crate::rollout::function_uncertainty`]): the calibration adds what that
+//! still misses.
 //!
 //! `δ_j` is the best of a grid ([`GRID_PER_DECADE`] points per decade over
 //! [`SMALLEST`]`..=`[`LARGEST`], and 0), in normalised units (multiples of the training
@@ -28,7 +31,7 @@ use crate::error::{MsgpError, Result};
 use crate::gp::PreparedGp;
 use crate::narx::NarxSpec;
 use crate::numeric::linalg::JitterLog;
-use crate::rollout::{Control, Episode, Excitation, simulate};
+use crate::rollout::{Episode, Excitation, simulate_correlated};
 
 /// The calibration a fit made ([`super::FitReport::calibration`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -87,7 +90,7 @@ pub(super) fn tail_calibration(
         }
         let traj: &Trajectory = &tail.traj;
         let mut log = JitterLog::default();
-        let steps = simulate(gp, spec, traj, &Control::FeedForward, traj.len(), &mut log)?;
+        let steps = simulate_correlated(gp, spec, traj, traj.len(), &mut log)?;
         for (i, s) in steps.iter().enumerate() {
             for (j, p) in pairs.iter_mut().enumerate() {
                 let r = traj.y[(spec.warmup() + i, j)] - s.mean[j];

@@ -11,7 +11,7 @@ use crate::error::{MsgpError, Result};
 use crate::gp::{GpConfig, GpParams, PreparedGp};
 use crate::narx::NarxSpec;
 use crate::numeric::linalg::JitterLog;
-use crate::rollout::{Control, simulate, simulate_mean_feedback};
+use crate::rollout::{Control, simulate, simulate_correlated, simulate_mean_feedback};
 
 mod metrics;
 
@@ -60,10 +60,16 @@ impl Method {
 /// How a free simulation propagates the model's predictions through the NARX window.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Rollout {
-    /// Moment matching over the window's joint Gaussian (the paper's, the default).
+    /// Moment matching over the window's joint Gaussian (the paper's), reporting output
+    /// variances that keep the GP's uncertainty about its function correlated over time
+    /// ([`crate::rollout::function_uncertainty`]): the default. The means are the paper's.
     #[default]
     #[serde(rename = "mm")]
     MomentMatching,
+    /// The paper's moment matching as it is: each step's function uncertainty counted as
+    /// independent of the others'.
+    #[serde(rename = "mm-independent")]
+    MomentMatchingIndependent,
     /// Predicted means fed back, no uncertainty propagated
     /// ([`crate::rollout::mean_feedback`]): how one-step GP-NARX baselines are often simulated.
     #[serde(rename = "mean")]
@@ -71,16 +77,24 @@ pub enum Rollout {
 }
 
 impl Rollout {
-    /// Name on the command line and in reports: `mm` or `mean`.
+    /// Name on the command line and in reports: `mm`, `mm-independent` or `mean`.
     pub fn name(&self) -> &'static str {
         match self {
             Rollout::MomentMatching => "mm",
+            Rollout::MomentMatchingIndependent => "mm-independent",
             Rollout::MeanFeedback => "mean",
         }
     }
 
-    /// Both, the default first.
-    pub const ALL: [Rollout; 2] = [Rollout::MomentMatching, Rollout::MeanFeedback];
+    /// Every rollout, the default first.
+    pub const ALL: [Rollout; 3] = [
+        Rollout::MomentMatching,
+        Rollout::MomentMatchingIndependent,
+        Rollout::MeanFeedback,
+    ];
+
+    /// The two a table reports: moment matching (the default) and mean feedback.
+    pub const REPORTED: [Rollout; 2] = [Rollout::MomentMatching, Rollout::MeanFeedback];
 }
 
 /// A model ready to simulate.
@@ -116,7 +130,7 @@ pub struct Simulation {
 
 impl Model {
     /// Open-loop free simulation of `traj` (original units) from its first `max(l_y, l_u)`
-    /// samples, driven by its inputs.
+    /// samples, driven by its inputs, by the default rollout ([`Rollout::MomentMatching`]).
     pub fn simulate(&self, traj: &Trajectory) -> Result<Simulation> {
         self.simulate_as(traj, Rollout::MomentMatching)
     }
@@ -144,14 +158,21 @@ impl Model {
                 var,
             });
         }
-        let steps = simulate(
-            &gp,
-            &self.spec,
-            &norm,
-            &Control::FeedForward,
-            traj.len(),
-            &mut log,
-        )?;
+        // the linear-Gaussian model has no GP whose function could be drawn: its one dummy
+        // pseudo-input carries no data
+        let steps =
+            if rollout == Rollout::MomentMatchingIndependent || self.method == Method::LinearKf {
+                simulate(
+                    &gp,
+                    &self.spec,
+                    &norm,
+                    &Control::FeedForward,
+                    traj.len(),
+                    &mut log,
+                )?
+            } else {
+                simulate_correlated(&gp, &self.spec, &norm, traj.len(), &mut log)?
+            };
         let n = steps.len();
         let mut mean = DMatrix::zeros(n, dy);
         let mut var = DMatrix::zeros(n, dy);

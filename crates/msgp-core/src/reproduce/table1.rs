@@ -206,7 +206,7 @@ impl Column {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Cell {
     /// Test metrics of the moment-matching and the mean-feedback simulation
-    /// ([`Rollout::ALL`] order).
+    /// ([`Rollout::REPORTED`] order).
     pub metrics: [Metrics; 2],
     /// Training wall time \[s\].
     pub train_seconds: f64,
@@ -486,7 +486,7 @@ pub fn fit_unit(
         }),
         e => Err(e),
     };
-    let (mm, mut diverged) = match model.simulate_as(&bench.test, Rollout::ALL[MM]) {
+    let (mm, mut diverged) = match model.simulate_as(&bench.test, Rollout::REPORTED[MM]) {
         Ok(sim) => (
             score(&sim, &bench.test)?,
             OutputRange::of(&[&bench.test], model.spec.dy).divergence(&sim, "the test part"),
@@ -497,7 +497,7 @@ pub fn fit_unit(
         }
     };
     let mean = model
-        .evaluate_as(&bench.test, Rollout::ALL[MEAN])
+        .evaluate_as(&bench.test, Rollout::REPORTED[MEAN])
         .or_else(failed)?;
     if report.diverged.is_some() {
         diverged = report.diverged.clone();
@@ -568,7 +568,7 @@ pub fn rows_json(plan: &Plan, rows: &[Row]) -> Vec<serde_json::Value> {
     for row in rows {
         for &column in &plan.columns {
             for (cell, seed) in row.cells[column.index()].iter().zip(&plan.seeds) {
-                for (k, rollout) in Rollout::ALL.into_iter().enumerate() {
+                for (k, rollout) in Rollout::REPORTED.into_iter().enumerate() {
                     let m = &cell.metrics[k];
                     list.push(serde_json::json!({
                         "benchmark": row.task.key,
@@ -792,7 +792,7 @@ pub fn render(plan: &Plan, rows: &[Row], provenance: &Provenance) -> String {
             if cells.is_empty() {
                 continue;
             }
-            for (k, rollout) in Rollout::ALL.into_iter().enumerate() {
+            for (k, rollout) in Rollout::REPORTED.into_iter().enumerate() {
                 let iters = if c.method() == Method::Msgp {
                     cells
                         .iter()

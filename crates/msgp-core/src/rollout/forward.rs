@@ -79,6 +79,20 @@ pub fn rollout<T: MomentMatch>(
     )
 }
 
+/// A widening of each step's reported output covariance that is not fed back (the correlated
+/// function uncertainty, [`super::function_uncertainty`]): it sees the window and the step's
+/// moments, and adds to the observation covariance `ycov` only.
+pub(crate) trait Widen<T: Scalar> {
+    /// Adds to `ycov` at the window `N(mu, sigma)` whose moments are `mm`.
+    fn widen(
+        &mut self,
+        mu: &DVector<T>,
+        sigma: &DMatrix<T>,
+        mm: &crate::moments::Moments<T>,
+        ycov: &mut DMatrix<T>,
+    ) -> Result<()>;
+}
+
 /// [`rollout`] from the start `how` (the training loss's [`PreparedGp::start`]): predictions
 /// begin at [`TrajectoryStart::t0`].
 #[allow(clippy::too_many_arguments)]
@@ -90,6 +104,22 @@ pub(crate) fn rollout_started<T: MomentMatch>(
     horizon: usize,
     how: StartWindow,
     log: &mut JitterLog,
+    visit: impl FnMut(StepPrediction<T>) -> Result<()>,
+) -> Result<()> {
+    rollout_widened(gp, spec, traj, control, horizon, how, log, None, visit)
+}
+
+/// [`rollout_started`] whose reported covariances `widen` adds to.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn rollout_widened<T: MomentMatch>(
+    gp: &PreparedGp<T>,
+    spec: &NarxSpec,
+    traj: &Trajectory,
+    control: &Control<'_, T>,
+    horizon: usize,
+    how: StartWindow,
+    log: &mut JitterLog,
+    widen: Option<&mut dyn Widen<T>>,
     mut visit: impl FnMut(StepPrediction<T>) -> Result<()>,
 ) -> Result<()> {
     let d = spec.input_dim();
@@ -131,7 +161,7 @@ pub(crate) fn rollout_started<T: MomentMatch>(
         Control::Feedback(p) => Some(*p),
     };
     let start = first.state(policy, traj)?;
-    rollout_from(
+    rollout_from_widened(
         gp,
         spec,
         &start,
@@ -140,6 +170,7 @@ pub(crate) fn rollout_started<T: MomentMatch>(
         t0,
         horizon,
         log,
+        widen,
         |p| visit(p).map(|()| Flow::Continue),
     )
 }
@@ -148,6 +179,7 @@ pub(crate) fn rollout_started<T: MomentMatch>(
 /// absolute time steps) supplies `u_t` for `t0 ≤ t < horizon − 1`. `visit` sees every step's
 /// prediction; [`Flow::Stop`] ends the rollout there (a bounded cost that is already too
 /// high, [`crate::policy_search::PolicyProblem::evaluate_bounded`]).
+#[allow(clippy::too_many_arguments)]
 pub fn rollout_from<T: MomentMatch>(
     gp: &PreparedGp<T>,
     spec: &NarxSpec,
@@ -157,6 +189,25 @@ pub fn rollout_from<T: MomentMatch>(
     t0: usize,
     horizon: usize,
     log: &mut JitterLog,
+    visit: impl FnMut(StepPrediction<T>) -> Result<Flow>,
+) -> Result<()> {
+    rollout_from_widened(
+        gp, spec, start, control, inputs, t0, horizon, log, None, visit,
+    )
+}
+
+/// [`rollout_from`] whose reported covariances `widen` adds to.
+#[allow(clippy::too_many_arguments)]
+fn rollout_from_widened<T: MomentMatch>(
+    gp: &PreparedGp<T>,
+    spec: &NarxSpec,
+    start: &StartState<T>,
+    control: &Control<'_, T>,
+    inputs: Option<&DMatrix<f64>>,
+    t0: usize,
+    horizon: usize,
+    log: &mut JitterLog,
+    mut widen: Option<&mut dyn Widen<T>>,
     mut visit: impl FnMut(StepPrediction<T>) -> Result<Flow>,
 ) -> Result<()> {
     let d = spec.input_dim();
@@ -191,10 +242,14 @@ pub fn rollout_from<T: MomentMatch>(
         let wsigma = sigma.view((0, 0), (d, d)).into_owned();
         let StepMoments { mm, xcov, ycov } =
             predict_step(gp, &wmu, &wsigma, "rollout prediction", t, log)?;
+        let mut reported = ycov.clone();
+        if let Some(w) = widen.as_deref_mut() {
+            w.widen(&wmu, &wsigma, &mm, &mut reported)?;
+        }
         let flow = visit(StepPrediction {
             t,
             mean: mm.mean.clone(),
-            cov: ycov.clone(),
+            cov: reported,
         })?;
         if flow == Flow::Stop || t + 1 >= horizon {
             break;

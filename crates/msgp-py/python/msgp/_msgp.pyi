@@ -86,7 +86,9 @@ class Msgp:
     ) -> Tuple[Array, Array]:
         """Free simulation driven by `u` (T samples) from the first max(l_y, l_u) rows of
         `y_init`; returns (mean, var), each (T − max(l_y, l_u), d_y), original units.
-        rollout: "mm" (moment matching) or "mean" (mean feedback) — `msgp simulate --rollout`."""
+        rollout: "mm" (moment matching, the function's uncertainty correlated over time),
+        "mm-independent" (the paper's moment matching) or "mean" (mean feedback) —
+        `msgp simulate --rollout`."""
     def filtered(self, u: ArrayLike, y: ArrayLike) -> Tuple[Array, Array]:
         """One-step-ahead filtered predictions of the measured `u`, `y`: row i predicts sample
         max(l_y, l_u) + i given every measured output before it (`msgp simulate --filtered`);
