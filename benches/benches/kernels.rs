@@ -11,7 +11,7 @@ use msgp_core::gp::kernel::kernel_matrix;
 use msgp_core::gp::{GpConfig, PreparedGp};
 use msgp_core::moments::moment_match;
 use msgp_core::numeric::linalg::JitterLog;
-use msgp_core::rollout::{Control, simulate};
+use msgp_core::rollout::{Control, simulate, simulate_correlated};
 
 /// (D, m, T) of the two comparison problems.
 const SIZES: [(usize, usize, usize); 2] = [(4, 100, 500), (20, 100, 512)];
@@ -81,6 +81,20 @@ fn bench_blocks(c: &mut Criterion) {
                             &mut log,
                         )
                         .expect("rollout"),
+                    )
+                })
+            },
+        );
+        // what a free simulation reports: the same rollout with the correlated function
+        // uncertainty's recursion beside it
+        roll.bench_function(
+            BenchmarkId::from_parameter(format!("correlated_D{d}_m{m}_T{t}")),
+            |b| {
+                b.iter(|| {
+                    let mut log = JitterLog::default();
+                    black_box(
+                        simulate_correlated(&gp, &spec, traj, traj.len(), &mut log)
+                            .expect("rollout"),
                     )
                 })
             },

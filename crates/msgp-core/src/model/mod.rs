@@ -124,7 +124,9 @@ pub struct Simulation {
     pub start: usize,
     /// Predicted output means (steps × d_y).
     pub mean: DMatrix<f64>,
-    /// Predicted output variances, observation noise included (steps × d_y).
+    /// Predicted output variances, observation noise included (steps × d_y); by default
+    /// ([`Rollout::MomentMatching`]) with the function's uncertainty kept correlated over time
+    /// and the calibration's added variance.
     pub var: DMatrix<f64>,
 }
 

@@ -2,38 +2,41 @@
 //!
 //! Moment matching (paper section 3.3, [`super::forward`]) draws the latent function afresh at
 //! every step: the GP's uncertainty about `f` at the window enters each step's variance as if
-//! it were fresh process noise. A real model is *one* function, wrong in the same way every time
-//! it visits the same region. Under an input that dwells (a held level, a slow sine) the same
-//! error repeats and is summed by the plant's dynamics: with a static gain of 10 the mean's
-//! error is 10× the function's, while independent draws grow the standard deviation by only
-//! `√(Σ_k g_k²)` (about 2.9× for the same plant). Coverage on such inputs then collapses although
-//! the model is as good as its data allow (synthetic system 4's steps in the generalisation
-//! table: 2σ coverage 0.44–0.82).
+//! it were fresh process noise. A fitted model is *one* function, wrong in the same way every
+//! time the window comes back to the same region. Under an input that dwells (a held level, a
+//! slow sine) the same error repeats and the plant's dynamics sum it: with a static gain of 10
+//! the mean's error is 10× the function's, while independent draws grow the standard deviation
+//! by only `√(Σ_k g_k²)` (about 2.9× for the same plant). Coverage on such inputs collapses
+//! although the model is as good as its data allow (synthetic system 4 in the generalisation
+//! table: 2σ coverage 0.44–0.88 on held levels and slow sines).
 //!
-//! The fitted GP is the posterior given its pseudo-data `(X̄, ȳ)` with noise `σ_x²`. Its
-//! function's posterior deviation is represented at the pseudo-inputs: `δu ~ N(0, K − K K̃⁻¹ K)`
-//! (`K = K(X̄, X̄)`, `K̃ = K + σ_x² I`), that is pseudo-targets moved by `δȳ = K̃ K⁻¹ δu =
-//! B ξ`, `ξ ~ N(0, I)`, `B = V diag(√(σ_x² (λ+σ_x²)/λ))` from `K = V diag(λ) Vᵀ` (directions
-//! with `λ < 10⁻⁹ λ_max` carry no variance the kernel can express and are left out). With the
-//! linear prior mean, its coefficients are uncertain too: under a flat-ish prior (variance
-//! 100 per coefficient, normalised units) the pseudo-data give `Cov(A_a) = (X̄ᵀ K̃⁻¹ X̄ +
-//! 10⁻² I)⁻¹` (Rasmussen & Williams §2.7), drawn as `δA_a = L_a ζ` with the residual targets
-//! moved by `−X̄ δA_aᵀ`.
+//! The fitted GP is the posterior given its pseudo-data `(X̄, ȳ)` with noise `σ_x²`. With the
+//! linear prior mean its coefficients are uncertain too, under a vague prior (variance 100 per
+//! coefficient, normalised units). The function's posterior covariance between two windows is
+//! then (Rasmussen & Williams, eq. 2.41)
+//! `C(x, x') = k(x, x') − k(x, X̄) K̃⁻¹ k(X̄, x') + R(x)ᵀ Σ_A R(x')`,
+//! `R(x) = x − X̄ᵀ K̃⁻¹ k(X̄, x)`, `Σ_A = (X̄ᵀ K̃⁻¹ X̄ + 10⁻² I)⁻¹` — the same posterior whose
+//! variance moment matching uses at each step (the last term, which it does not have, aside).
 //!
-//! Each drawn function gives a rollout mean `μ_t(ξ, ζ)`; its first-order spread is carried
-//! forward exactly, with the window's covariance held at the moment-matching values:
-//! `∂M_a/∂μ = V_a` (the moments' `Σ⁻¹ Cov[x̃, f]`, by Stein's lemma `E[∇f]`), `∂M_a/∂ȳ_a =
-//! K̃_a⁻¹ q_a` (`q_a` the expected kernel vector of moment matching) and `∂M_a/∂A_a = μᵀ`.
-//! The window's tangent `T` (D × directions) shifts with the window; inputs, measured, have
-//! none. Moment matching has already counted each step's own function variance once, as
-//! independent noise: the same linear recursion with independent injections (the pseudo-target
-//! part of each step's direct term, propagated with no correlation) is subtracted, so
-//! what is added to `Var[y_t]` is `max(0, ‖T_y‖² − P_y)`: the part the correlation adds, and
-//! the linear mean's uncertainty, which moment matching does not have. On a white-noise input
-//! the two nearly cancel; on a held input the correlated sum dominates.
+//! Each step's function value, taken at the window's mean, is a perturbation `δf_s` of the
+//! rollout's mean, and `Cov(δf_s, δf_{s'}) = C(x_s, x_{s'})`. Its effect on later means is
+//! carried forward to first order with the window's covariance held at the moment-matching
+//! values: `∂M/∂μ = V` (the moments' `Σ⁻¹ Cov[x̃, f]`, by Stein's lemma `E[∇f]`), so the window's
+//! tangent `G` (D × past steps) shifts with the window and each new output adds its own step;
+//! inputs, measured, have none. The variance of the mean's error is
+//! `Var(δμ_t) = Σ_{s,s'} G_{t,s} G_{t,s'} C(x_s, x_{s'})`, kept by a recursion over the
+//! window's covariance and its covariance with each new step's function value. Moment matching
+//! has already counted each step's own function variance once, as independent noise: the same
+//! recursion with the diagonal `C_GP(x_s, x_s)` only is subtracted, so what is added to
+//! `Var[y_t]` is `max(0, ·)` of the cross terms `s ≠ s'` plus the linear mean's part — what
+//! the correlation adds. On a white-noise input the cross terms nearly cancel; on a held input
+//! they dominate, and far outside the data they approach `(Σ_s G_{t,s})² σ_f²`: the model does
+//! not know its function there, and says so. Steps whose tangent has decayed below 10⁻⁸ of a
+//! fresh one's are dropped from the sums (a stable plant forgets them), so the cost per step
+//! is the number of steps still remembered times `m + D`.
 //!
-//! It widens the reported outputs of open-loop free simulations only, and is never fed back:
-//! no mean moves, so no RMSE does; the training loss, filtered predictions and closed-loop
+//! It widens the reported outputs of open-loop free simulations only and is never fed back: no
+//! mean moves, so no RMSE does; the training loss, filtered predictions and closed-loop
 //! rollouts (policy search) keep the paper's moment matching. [`crate::model::Rollout`]
 //! `MomentMatchingIndependent` simulates without it.
 
@@ -43,64 +46,60 @@ use super::forward::{Control, StepPrediction, Widen, rollout_widened};
 use crate::data::Trajectory;
 use crate::error::{MsgpError, Result};
 use crate::gp::PreparedGp;
-use crate::gp::kernel::kernel_matrix;
+use crate::gp::kernel::{kernel_matrix, se_ard};
 use crate::moments::Moments;
 use crate::narx::NarxSpec;
 use crate::narx::start_window::StartWindow;
 use crate::numeric::linalg::JitterLog;
 
-/// Relative eigenvalue of `K(X̄, X̄)` below which a direction is left out of the draws.
-const EIGEN_FLOOR: f64 = 1e-9;
-
 /// Prior precision of each linear-mean coefficient (normalised units): variance 100.
-const LINEAR_PRIOR_PRECISION: f64 = 1e-2;
+pub const LINEAR_PRIOR_PRECISION: f64 = 1e-2;
 
-/// One output's draws.
+/// A step's tangent norm (against a fresh step's 1) below which it is dropped from the sums.
+const FORGOTTEN: f64 = 1e-8;
+
+/// One output's posterior given the pseudo-data.
 #[derive(Clone, Debug)]
-struct OutputDraws {
-    /// `K̃⁻¹ B` (m × r): the mean's sensitivity to `ξ` is `qᵀ K̃⁻¹ B`.
-    targets: DMatrix<f64>,
-    /// With the linear mean: `K̃⁻¹ X̄` (m × D) and `L` (D × D, `L Lᵀ = Cov(A_a)`).
-    linear: Option<(DMatrix<f64>, DMatrix<f64>)>,
-    /// `ℓ_d²`.
-    l2: Vec<f64>,
+struct OutputPosterior {
+    /// `1/ℓ_d²`.
+    inv_l2: Vec<f64>,
     /// `σ_f²`.
     sf2: f64,
+    /// `K̃⁻¹`.
+    kinv: DMatrix<f64>,
+    /// With the linear mean: `K̃⁻¹ X̄` (m × D) and `L` (D × D) with `L Lᵀ = Σ_A`.
+    linear: Option<(DMatrix<f64>, DMatrix<f64>)>,
 }
 
-/// The draws of a GP's function: per output, how its pseudo-targets (and linear mean) move
-/// with standard normal coordinates. Built once per model.
+/// The posterior of a GP's function given its pseudo-data (and, with the linear mean, of its
+/// coefficients): the covariance `C(x, x')` of the module docs, per output.
 #[derive(Clone, Debug)]
-pub struct FunctionDraws {
-    outputs: Vec<OutputDraws>,
-    /// First direction of each output's block, and the total as the last entry.
-    offsets: Vec<usize>,
+pub struct FunctionPosterior {
+    pseudo_inputs: DMatrix<f64>,
+    outputs: Vec<OutputPosterior>,
 }
 
-impl FunctionDraws {
-    /// The draws of `gp`.
+/// What the covariance needs of one window, for one output.
+#[derive(Clone, Debug)]
+struct Point {
+    x: DVector<f64>,
+    /// `k(X̄, x)`.
+    k: DVector<f64>,
+    /// `K̃⁻¹ k(X̄, x)`.
+    kk: DVector<f64>,
+    /// `Lᵀ R(x)` (empty without the linear mean).
+    lr: DVector<f64>,
+    /// `C_GP(x, x) = σ_f² − kᵀ K̃⁻¹ k`.
+    gp_var: f64,
+}
+
+impl FunctionPosterior {
+    /// The posterior of `gp`'s function.
     pub fn new(gp: &PreparedGp<f64>) -> Result<Self> {
         let z = &gp.pseudo_inputs;
-        let (m, d) = (z.nrows(), z.ncols());
+        let d = z.ncols();
         let mut outputs = Vec::with_capacity(gp.outputs.len());
-        let mut offsets = vec![0];
         for (a, o) in gp.outputs.iter().enumerate() {
-            let k = kernel_matrix(z, z, &o.inv_l2, o.sf2);
-            let eig = nalgebra::SymmetricEigen::new(k);
-            let top = eig.eigenvalues.iter().copied().fold(0.0, f64::max);
-            let kept: Vec<usize> = (0..m)
-                .filter(|&i| eig.eigenvalues[i] > EIGEN_FLOOR * top)
-                .collect();
-            // K̃⁻¹ B = V diag(σ / √(λ (λ + σ²))) on the kept directions
-            let sigma = o.sx2.sqrt();
-            let mut targets = DMatrix::zeros(m, kept.len());
-            for (c, &i) in kept.iter().enumerate() {
-                let l = eig.eigenvalues[i];
-                let s = sigma / (l * (l + o.sx2)).sqrt();
-                for r in 0..m {
-                    targets[(r, c)] = eig.eigenvectors[(r, i)] * s;
-                }
-            }
             let linear = match &gp.linear_mean {
                 None => None,
                 Some(_) => {
@@ -110,226 +109,207 @@ impl FunctionDraws {
                         prec[(i, i)] += LINEAR_PRIOR_PRECISION;
                     }
                     let prec = (&prec + prec.transpose()) * 0.5;
+                    let not_pd = |what: &str| {
+                        MsgpError::NonFinite(format!(
+                            "the linear mean's {what} from the pseudo-data of output {a}"
+                        ))
+                    };
                     let cov = prec
                         .cholesky()
-                        .ok_or_else(|| {
-                            MsgpError::NonFinite(format!(
-                                "the linear mean's precision from the pseudo-data of output {a}"
-                            ))
-                        })?
+                        .ok_or_else(|| not_pd("precision"))?
                         .inverse();
                     let cov = (&cov + cov.transpose()) * 0.5;
-                    let l = cov
-                        .cholesky()
-                        .ok_or_else(|| {
-                            MsgpError::NonFinite(format!(
-                                "the linear mean's covariance of output {a}"
-                            ))
-                        })?
-                        .l();
+                    let l = cov.cholesky().ok_or_else(|| not_pd("covariance"))?.l();
                     Some((w, l))
                 }
             };
-            let next = offsets[a] + kept.len() + linear.as_ref().map_or(0, |_| d);
-            offsets.push(next);
-            outputs.push(OutputDraws {
-                targets,
-                linear,
-                l2: o.inv_l2.iter().map(|v| 1.0 / v).collect(),
+            outputs.push(OutputPosterior {
+                inv_l2: o.inv_l2.clone(),
                 sf2: o.sf2,
+                kinv: o.kinv.clone(),
+                linear,
             });
         }
-        Ok(Self { outputs, offsets })
+        Ok(Self {
+            pseudo_inputs: z.clone(),
+            outputs,
+        })
     }
 
-    /// Number of standard normal coordinates of a draw.
-    pub fn directions(&self) -> usize {
-        self.offsets.last().copied().unwrap_or(0)
-    }
-
-    /// The pseudo-target and linear-mean moves `(δȳ (m × E), δA (E × D))` of the draw with
-    /// coordinates `x` (length [`directions`](Self::directions)), given `gp`'s factors (the
-    /// draws' own, for tests and Monte Carlo: `δȳ = K̃ (K̃⁻¹ B) ξ − X̄ δAᵀ`).
-    pub fn moves(&self, gp: &PreparedGp<f64>, x: &[f64]) -> (DMatrix<f64>, DMatrix<f64>) {
-        let z = &gp.pseudo_inputs;
-        let (m, d) = (z.nrows(), z.ncols());
-        let e = self.outputs.len();
-        let mut dy = DMatrix::zeros(m, e);
-        let mut da = DMatrix::zeros(e, d);
-        for (a, od) in self.outputs.iter().enumerate() {
-            let o = &gp.outputs[a];
-            let r = od.targets.ncols();
-            let off = self.offsets[a];
-            let xi = DVector::from_column_slice(&x[off..off + r]);
-            let kt = o.chol.l.clone() * o.chol.l.transpose();
-            let mut col = kt * (&od.targets * xi);
-            if let Some((_, l)) = &od.linear {
-                let zeta = DVector::from_column_slice(&x[off + r..off + r + d]);
-                let dai = l * zeta;
-                col -= z * &dai;
-                for j in 0..d {
-                    da[(a, j)] = dai[j];
-                }
-            }
-            dy.set_column(a, &col);
+    fn point(&self, a: usize, x: &DVector<f64>) -> Point {
+        let o = &self.outputs[a];
+        let xr = DMatrix::from_row_slice(1, x.len(), x.as_slice());
+        let k = DVector::from_column_slice(
+            kernel_matrix(&self.pseudo_inputs, &xr, &o.inv_l2, o.sf2).as_slice(),
+        );
+        let kk = &o.kinv * &k;
+        let lr = match &o.linear {
+            Some((w, l)) => l.tr_mul(&(x - w.tr_mul(&k))),
+            None => DVector::zeros(0),
+        };
+        let gp_var = o.sf2 - k.dot(&kk);
+        Point {
+            x: x.clone(),
+            k,
+            kk,
+            lr,
+            gp_var,
         }
-        (dy, da)
+    }
+
+    /// `C_GP(x, x')` of output `a` between two points.
+    fn gp_cov(&self, a: usize, p: &Point, q: &Point) -> f64 {
+        let o = &self.outputs[a];
+        se_ard(p.x.as_slice(), q.x.as_slice(), &o.inv_l2, o.sf2) - p.k.dot(&q.kk)
+    }
+
+    /// `C(x, x')` of output `a`: the posterior covariance of its function at two windows
+    /// (normalised units), the linear mean's uncertainty included.
+    pub fn covariance(&self, a: usize, x: &DVector<f64>, x2: &DVector<f64>) -> f64 {
+        let (p, q) = (self.point(a, x), self.point(a, x2));
+        self.gp_cov(a, &p, &q) + p.lr.dot(&q.lr)
     }
 }
 
-/// The expected kernel vector `q_i = σ_f² |Σ Λ⁻¹ + I|^{-½} exp(−½ ν_iᵀ (Σ + Λ)⁻¹ ν_i)`,
-/// `ν_i = x̄_i − μ`, of one output at `N(mu, sigma)` (the module docs of [`crate::moments`]).
-fn expected_kernel(
-    od: &OutputDraws,
-    z: &DMatrix<f64>,
-    mu: &DVector<f64>,
-    sigma: &DMatrix<f64>,
-) -> Result<DVector<f64>> {
-    let d = mu.len();
-    let mut r = sigma.clone();
-    for i in 0..d {
-        r[(i, i)] += od.l2[i];
-    }
-    let chol = r.cholesky().ok_or_else(|| {
-        MsgpError::NonFinite("Σ + Λ of the function draws' expected kernel".into())
-    })?;
-    let l = chol.l();
-    let log_det_r: f64 = (0..d).map(|i| 2.0 * l[(i, i)].ln()).sum();
-    let log_det_l: f64 = od.l2.iter().map(|v| v.ln()).sum();
-    let scale = od.sf2 * (0.5 * (log_det_l - log_det_r)).exp();
-    let mut q = DVector::zeros(z.nrows());
-    let mut nu = DVector::zeros(d);
-    for i in 0..z.nrows() {
-        for k in 0..d {
-            nu[k] = z[(i, k)] - mu[k];
-        }
-        let y = l
-            .solve_lower_triangular(&nu)
-            .ok_or_else(|| MsgpError::NonFinite("the expected kernel's solve".into()))?;
-        q[i] = scale * (-0.5 * y.norm_squared()).exp();
-    }
-    Ok(q)
-}
-
-/// The first-order spread of the drawn functions' rollout means, carried along an open-loop
-/// rollout: the window's tangent and the independent-injection covariance it is compared with.
+/// The first-order spread of the rollout's mean under the function's posterior, carried along
+/// an open-loop rollout.
 pub(crate) struct Tangents<'a> {
-    draws: &'a FunctionDraws,
+    post: &'a FunctionPosterior,
     spec: &'a NarxSpec,
-    pseudo_inputs: &'a DMatrix<f64>,
-    /// `∂μ_window / ∂(ξ, ζ)` (D × directions).
-    t: DMatrix<f64>,
-    /// The same spread were each step's function draw independent (D × D).
+    /// The steps still remembered: output and window.
+    steps: Vec<(usize, Point)>,
+    /// `∂μ_window / ∂δf_s` for each remembered step (D × steps).
+    g: DMatrix<f64>,
+    /// `Var(δμ_window)` (D × D).
+    var: DMatrix<f64>,
+    /// The same with each step's own `C_GP` only (independent draws, D × D).
     indep: DMatrix<f64>,
-    /// The output tangents of the last step (d_y × directions), for tests.
-    pub(crate) last: DMatrix<f64>,
 }
 
 impl<'a> Tangents<'a> {
     /// Zero tangents: the start window is measured, not predicted.
-    pub(crate) fn new(
-        draws: &'a FunctionDraws,
-        spec: &'a NarxSpec,
-        pseudo_inputs: &'a DMatrix<f64>,
-    ) -> Self {
-        let (d, p) = (spec.input_dim(), draws.directions());
+    pub(crate) fn new(post: &'a FunctionPosterior, spec: &'a NarxSpec) -> Self {
+        let d = spec.input_dim();
         Self {
-            draws,
+            post,
             spec,
-            pseudo_inputs,
-            t: DMatrix::zeros(d, p),
+            steps: Vec::new(),
+            g: DMatrix::zeros(d, 0),
+            var: DMatrix::zeros(d, d),
             indep: DMatrix::zeros(d, d),
-            last: DMatrix::zeros(spec.dy, p),
         }
     }
 
-    /// One step at the window `N(mu, sigma)` whose moments are `mm`: the variance the
-    /// correlation adds to each output, and the tangents shifted to the next window.
-    pub(crate) fn step(
-        &mut self,
-        mu: &DVector<f64>,
-        sigma: &DMatrix<f64>,
-        mm: &Moments<f64>,
-    ) -> Result<DVector<f64>> {
-        let (dy, p) = (self.spec.dy, self.draws.directions());
-        let z = self.pseudo_inputs;
-        let mut direct = DMatrix::zeros(dy, p);
-        let mut injected = DVector::zeros(dy);
-        for (a, od) in self.draws.outputs.iter().enumerate() {
-            let q = expected_kernel(od, z, mu, sigma)?;
-            let off = self.draws.offsets[a];
-            let r = od.targets.ncols();
-            let row = od.targets.tr_mul(&q); // r
-            injected[a] = row.norm_squared();
-            for c in 0..r {
-                direct[(a, off + c)] = row[c];
-            }
-            if let Some((w, l)) = &od.linear {
-                let g = mu - w.tr_mul(&q); // D
-                let row = l.tr_mul(&g);
-                for c in 0..row.len() {
-                    direct[(a, off + r + c)] = row[c];
-                }
+    /// One step at the window whose mean is `mu` and moments `mm`: the variance the
+    /// correlation adds to each output; the tangents move on to the next window.
+    pub(crate) fn step(&mut self, mu: &DVector<f64>, mm: &Moments<f64>) -> DVector<f64> {
+        let (d, dy) = (self.spec.input_dim(), self.spec.dy);
+        let points: Vec<Point> = (0..dy).map(|a| self.post.point(a, mu)).collect();
+        // p_a = Cov(δμ_window, δf_a at this window)
+        let mut p = DMatrix::zeros(d, dy);
+        for (j, (a, q)) in self.steps.iter().enumerate() {
+            let c = self.post.gp_cov(*a, q, &points[*a]) + q.lr.dot(&points[*a].lr);
+            if c != 0.0 {
+                let mut col = p.column_mut(*a);
+                col.axpy(c, &self.g.column(j), 1.0);
             }
         }
         let v = &mm.v; // D × E
-        let out = v.tr_mul(&self.t) + direct; // E × P
-        let iv = &self.indep * v; // D × E
-        let mut out_indep = v.tr_mul(&iv);
-        for a in 0..dy {
-            out_indep[(a, a)] += injected[a];
+        let vv = &self.var * v;
+        let cross = v.tr_mul(&p);
+        let mut full = v.tr_mul(&vv) + &cross + cross.transpose();
+        let iv = &self.indep * v;
+        let mut ind = v.tr_mul(&iv);
+        for (a, q) in points.iter().enumerate() {
+            full[(a, a)] += q.gp_var + q.lr.norm_squared();
+            ind[(a, a)] += q.gp_var;
         }
-        let added = DVector::from_fn(dy, |a, _| {
-            (out.row(a).norm_squared() - out_indep[(a, a)]).max(0.0)
-        });
-        self.shift(&out, &iv, &out_indep);
-        self.last = out;
-        Ok(added)
+        let added = DVector::from_fn(dy, |a, _| (full[(a, a)] - ind[(a, a)]).max(0.0));
+        // the new outputs' tangents: through the window, and their own step
+        let mut out_g = v.tr_mul(&self.g).insert_columns(self.g.ncols(), dy, 0.0);
+        for a in 0..dy {
+            out_g[(a, self.g.ncols() + a)] = 1.0;
+        }
+        self.steps.extend(points.into_iter().enumerate());
+        self.shift(&out_g, &(vv + p), &full, &iv, &ind);
+        self.forget();
+        added
     }
 
     /// Moves the window one step on: the new outputs enter at lag 0, the oldest drop out,
-    /// inputs (measured) carry no tangent.
-    fn shift(&mut self, out: &DMatrix<f64>, iv: &DMatrix<f64>, out_indep: &DMatrix<f64>) {
+    /// inputs (measured) carry no tangent. `wf`/`wi`: the window's covariance with the new
+    /// outputs, `full`/`ind`: theirs, with and without the correlation.
+    fn shift(
+        &mut self,
+        out_g: &DMatrix<f64>,
+        wf: &DMatrix<f64>,
+        full: &DMatrix<f64>,
+        wi: &DMatrix<f64>,
+        ind: &DMatrix<f64>,
+    ) {
         let spec = self.spec;
         let d = spec.input_dim();
         // source of each new window entry in [window (D), new outputs (d_y)], None for inputs
         let src: Vec<Option<usize>> = (0..d)
             .map(|i| {
-                if i >= spec.ly * spec.dy {
-                    return None;
-                }
-                let (k, j) = (i / spec.dy, i % spec.dy);
-                Some(if k == 0 {
-                    d + j
-                } else {
-                    spec.y_index(k - 1, j)
+                (i < spec.ly * spec.dy).then(|| {
+                    let (k, j) = (i / spec.dy, i % spec.dy);
+                    if k == 0 {
+                        d + j
+                    } else {
+                        spec.y_index(k - 1, j)
+                    }
                 })
             })
             .collect();
-        let p = self.t.ncols();
-        let mut t = DMatrix::zeros(d, p);
-        let mut indep = DMatrix::zeros(d, d);
-        let aug_cov = |s: usize, s2: usize| match (s >= d, s2 >= d) {
-            (false, false) => self.indep[(s, s2)],
-            (false, true) => iv[(s, s2 - d)],
-            (true, false) => iv[(s2, s - d)],
-            (true, true) => out_indep[(s - d, s2 - d)],
+        let aug = |win: &DMatrix<f64>, w_out: &DMatrix<f64>, out: &DMatrix<f64>| {
+            let at = |s: usize, s2: usize| match (s >= d, s2 >= d) {
+                (false, false) => win[(s, s2)],
+                (false, true) => w_out[(s, s2 - d)],
+                (true, false) => w_out[(s2, s - d)],
+                (true, true) => out[(s - d, s2 - d)],
+            };
+            DMatrix::from_fn(d, d, |i, i2| match (src[i], src[i2]) {
+                (Some(s), Some(s2)) => at(s, s2),
+                _ => 0.0,
+            })
         };
+        let var = aug(&self.var, wf, full);
+        let indep = aug(&self.indep, wi, ind);
+        let n = out_g.ncols();
+        let mut g = DMatrix::zeros(d, n);
         for i in 0..d {
-            let Some(s) = src[i] else { continue };
-            if s >= d {
-                t.row_mut(i).copy_from(&out.row(s - d));
-            } else {
-                t.row_mut(i).copy_from(&self.t.row(s));
-            }
-            for i2 in 0..d {
-                if let Some(s2) = src[i2] {
-                    indep[(i, i2)] = aug_cov(s, s2);
-                }
+            match src[i] {
+                Some(s) if s >= d => g.row_mut(i).copy_from(&out_g.row(s - d)),
+                Some(s) => g
+                    .row_mut(i)
+                    .columns_mut(0, self.g.ncols())
+                    .copy_from(&self.g.row(s)),
+                None => {}
             }
         }
-        self.t = t;
+        self.var = var;
         self.indep = indep;
+        self.g = g;
+    }
+
+    /// Drops the steps whose tangent has decayed below [`FORGOTTEN`].
+    fn forget(&mut self) {
+        let keep: Vec<usize> = (0..self.steps.len())
+            .filter(|&j| self.g.column(j).norm() >= FORGOTTEN)
+            .collect();
+        if keep.len() == self.steps.len() {
+            return;
+        }
+        let mut steps = std::mem::take(&mut self.steps);
+        let mut kept = Vec::with_capacity(keep.len());
+        for (j, s) in steps.drain(..).enumerate() {
+            if keep.binary_search(&j).is_ok() {
+                kept.push(s);
+            }
+        }
+        self.steps = kept;
+        self.g = self.g.select_columns(keep.iter());
     }
 }
 
@@ -337,12 +317,17 @@ impl Widen<f64> for Tangents<'_> {
     fn widen(
         &mut self,
         mu: &DVector<f64>,
-        sigma: &DMatrix<f64>,
+        _sigma: &DMatrix<f64>,
         mm: &Moments<f64>,
         ycov: &mut DMatrix<f64>,
     ) -> Result<()> {
-        let added = self.step(mu, sigma, mm)?;
+        let added = self.step(mu, mm);
         for (j, v) in added.iter().enumerate() {
+            if !v.is_finite() {
+                return Err(MsgpError::NonFinite(
+                    "the correlated function uncertainty of a free simulation".into(),
+                ));
+            }
             ycov[(j, j)] += v;
         }
         Ok(())
@@ -359,8 +344,8 @@ pub fn simulate_correlated(
     horizon: usize,
     log: &mut JitterLog,
 ) -> Result<Vec<StepPrediction<f64>>> {
-    let draws = FunctionDraws::new(gp)?;
-    let mut tangents = Tangents::new(&draws, spec, &gp.pseudo_inputs);
+    let post = FunctionPosterior::new(gp)?;
+    let mut tangents = Tangents::new(&post, spec);
     let mut out = Vec::with_capacity(horizon.saturating_sub(spec.warmup()));
     rollout_widened(
         gp,
