@@ -286,7 +286,8 @@ fn render(args: &GeneralisationArgs, cases: &[Case], seconds: f64) -> String {
          round: its last `n_train` samples (Table 3's training length) train, the samples \
          before them test. Every method with its default settings (MSGP: the default protocol). \
          *mean*: RMSE of always predicting the training outputs' mean; *ratio*: RMSE / mean's. \
-         Free simulation by moment matching; 2σ coverage of the noise-free (synthetic) or \
+         Free simulation by moment matching, whose variances keep the function's uncertainty \
+         correlated over time (`msgp_core::rollout::function_uncertainty`); 2σ coverage of the noise-free (synthetic) or \
          measured (real) outputs. Seeds: {}.\n",
         args.common
             .seeds

@@ -740,7 +740,9 @@ pub fn render(plan: &Plan, rows: &[Row], provenance: &Provenance) -> String {
          data, with at most {iters} {solver} iterations each and early stopping on the last \
          20 %, which also chooses the recipe; the chosen recipe then trains again from its start \
          on all the training data for {full} iterations). MM: \
-         moment-matching simulation (the paper's method for every column and our default); \
+         moment-matching simulation (the paper's method for every column and our default), \
+         whose variances keep the function's uncertainty correlated over time (the same means; \
+         `msgp_core::rollout::function_uncertainty`); \
          mean: the predicted means fed back, no uncertainty propagated (`msgp eval --rollout \
          mean`).\n",
         seeds = seeds.join(", "),
