@@ -220,6 +220,7 @@ pub fn msgp_loss<T: MomentMatch>(
                 ep.traj.len(),
                 gp.start,
                 log,
+                None,
                 |p| {
                     for j in 0..spec.dy {
                         row[j] = y[(p.t, j)];

@@ -75,6 +75,7 @@ pub fn rollout<T: MomentMatch>(
         horizon,
         StartWindow::Measured,
         log,
+        None,
         visit,
     )
 }
@@ -83,35 +84,20 @@ pub fn rollout<T: MomentMatch>(
 /// function uncertainty, [`super::function_uncertainty`]): it sees the window and the step's
 /// moments, and adds to the observation covariance `ycov` only.
 pub(crate) trait Widen<T: Scalar> {
-    /// Adds to `ycov` at the window `N(mu, sigma)` whose moments are `mm`.
+    /// Adds to `ycov` at the window whose mean is `mu` and moments `mm`.
     fn widen(
         &mut self,
         mu: &DVector<T>,
-        sigma: &DMatrix<T>,
         mm: &crate::moments::Moments<T>,
         ycov: &mut DMatrix<T>,
     ) -> Result<()>;
 }
 
 /// [`rollout`] from the start `how` (the training loss's [`PreparedGp::start`]): predictions
-/// begin at [`TrajectoryStart::t0`].
+/// begin at [`TrajectoryStart::t0`]. `widen`, if any, adds to each step's reported covariance
+/// ([`Widen`]).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn rollout_started<T: MomentMatch>(
-    gp: &PreparedGp<T>,
-    spec: &NarxSpec,
-    traj: &Trajectory,
-    control: &Control<'_, T>,
-    horizon: usize,
-    how: StartWindow,
-    log: &mut JitterLog,
-    visit: impl FnMut(StepPrediction<T>) -> Result<()>,
-) -> Result<()> {
-    rollout_widened(gp, spec, traj, control, horizon, how, log, None, visit)
-}
-
-/// [`rollout_started`] whose reported covariances `widen` adds to.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn rollout_widened<T: MomentMatch>(
     gp: &PreparedGp<T>,
     spec: &NarxSpec,
     traj: &Trajectory,
@@ -244,7 +230,7 @@ fn rollout_from_widened<T: MomentMatch>(
             predict_step(gp, &wmu, &wsigma, "rollout prediction", t, log)?;
         let mut reported = ycov.clone();
         if let Some(w) = widen.as_deref_mut() {
-            w.widen(&wmu, &wsigma, &mm, &mut reported)?;
+            w.widen(&wmu, &mm, &mut reported)?;
         }
         let flow = visit(StepPrediction {
             t,

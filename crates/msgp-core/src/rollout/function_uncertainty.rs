@@ -42,7 +42,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::forward::{Control, StepPrediction, Widen, rollout_widened};
+use super::forward::{Control, StepPrediction, Widen, rollout_started};
 use crate::data::Trajectory;
 use crate::error::{MsgpError, Result};
 use crate::gp::PreparedGp;
@@ -317,7 +317,6 @@ impl Widen<f64> for Tangents<'_> {
     fn widen(
         &mut self,
         mu: &DVector<f64>,
-        _sigma: &DMatrix<f64>,
         mm: &Moments<f64>,
         ycov: &mut DMatrix<f64>,
     ) -> Result<()> {
@@ -347,7 +346,7 @@ pub fn simulate_correlated(
     let post = FunctionPosterior::new(gp)?;
     let mut tangents = Tangents::new(&post, spec);
     let mut out = Vec::with_capacity(horizon.saturating_sub(spec.warmup()));
-    rollout_widened(
+    rollout_started(
         gp,
         spec,
         traj,
