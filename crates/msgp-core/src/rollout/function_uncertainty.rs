@@ -58,25 +58,14 @@ pub const LINEAR_PRIOR_PRECISION: f64 = 1e-2;
 /// A step's tangent norm (against a fresh step's 1) below which it is dropped from the sums.
 const FORGOTTEN: f64 = 1e-8;
 
-/// One output's posterior given the pseudo-data.
-#[derive(Clone, Debug)]
-struct OutputPosterior {
-    /// `1/ℓ_d²`.
-    inv_l2: Vec<f64>,
-    /// `σ_f²`.
-    sf2: f64,
-    /// `K̃⁻¹`.
-    kinv: DMatrix<f64>,
-    /// With the linear mean: `K̃⁻¹ X̄` (m × D) and `L` (D × D) with `L Lᵀ = Σ_A`.
-    linear: Option<(DMatrix<f64>, DMatrix<f64>)>,
-}
-
 /// The posterior of a GP's function given its pseudo-data (and, with the linear mean, of its
-/// coefficients): the covariance `C(x, x')` of the module docs, per output.
+/// coefficients): the covariance `C(x, x')` of the module docs, per output. The GP's own
+/// factors (`K̃⁻¹`, length-scales, `σ_f²`) are read from it; only the linear mean's are added.
 #[derive(Clone, Debug)]
-pub struct FunctionPosterior {
-    pseudo_inputs: DMatrix<f64>,
-    outputs: Vec<OutputPosterior>,
+pub struct FunctionPosterior<'a> {
+    gp: &'a PreparedGp<f64>,
+    /// Per output, with the linear mean: `K̃⁻¹ X̄` (m × D) and `L` (D × D) with `L Lᵀ = Σ_A`.
+    linear: Vec<Option<(DMatrix<f64>, DMatrix<f64>)>>,
 }
 
 /// What the covariance needs of one window, for one output.
@@ -93,57 +82,47 @@ struct Point {
     gp_var: f64,
 }
 
-impl FunctionPosterior {
+impl<'a> FunctionPosterior<'a> {
     /// The posterior of `gp`'s function.
-    pub fn new(gp: &PreparedGp<f64>) -> Result<Self> {
+    pub fn new(gp: &'a PreparedGp<f64>) -> Result<Self> {
         let z = &gp.pseudo_inputs;
         let d = z.ncols();
-        let mut outputs = Vec::with_capacity(gp.outputs.len());
+        let mut linear = Vec::with_capacity(gp.outputs.len());
         for (a, o) in gp.outputs.iter().enumerate() {
-            let linear = match &gp.linear_mean {
-                None => None,
-                Some(_) => {
-                    let w = &o.kinv * z; // m × D
-                    let mut prec = z.transpose() * &w;
-                    for i in 0..d {
-                        prec[(i, i)] += LINEAR_PRIOR_PRECISION;
-                    }
-                    let prec = (&prec + prec.transpose()) * 0.5;
-                    let not_pd = |what: &str| {
-                        MsgpError::NonFinite(format!(
-                            "the linear mean's {what} from the pseudo-data of output {a}"
-                        ))
-                    };
-                    let cov = prec
-                        .cholesky()
-                        .ok_or_else(|| not_pd("precision"))?
-                        .inverse();
-                    let cov = (&cov + cov.transpose()) * 0.5;
-                    let l = cov.cholesky().ok_or_else(|| not_pd("covariance"))?.l();
-                    Some((w, l))
-                }
+            if gp.linear_mean.is_none() {
+                linear.push(None);
+                continue;
+            }
+            let w = &o.kinv * z; // m × D
+            let mut prec = z.transpose() * &w;
+            for i in 0..d {
+                prec[(i, i)] += LINEAR_PRIOR_PRECISION;
+            }
+            let prec = (&prec + prec.transpose()) * 0.5;
+            let not_pd = |what: &str| {
+                MsgpError::NonFinite(format!(
+                    "the linear mean's {what} from the pseudo-data of output {a}"
+                ))
             };
-            outputs.push(OutputPosterior {
-                inv_l2: o.inv_l2.clone(),
-                sf2: o.sf2,
-                kinv: o.kinv.clone(),
-                linear,
-            });
+            let cov = prec
+                .cholesky()
+                .ok_or_else(|| not_pd("precision"))?
+                .inverse();
+            let cov = (&cov + cov.transpose()) * 0.5;
+            let l = cov.cholesky().ok_or_else(|| not_pd("covariance"))?.l();
+            linear.push(Some((w, l)));
         }
-        Ok(Self {
-            pseudo_inputs: z.clone(),
-            outputs,
-        })
+        Ok(Self { gp, linear })
     }
 
     fn point(&self, a: usize, x: &DVector<f64>) -> Point {
-        let o = &self.outputs[a];
+        let o = &self.gp.outputs[a];
         let xr = DMatrix::from_row_slice(1, x.len(), x.as_slice());
         let k = DVector::from_column_slice(
-            kernel_matrix(&self.pseudo_inputs, &xr, &o.inv_l2, o.sf2).as_slice(),
+            kernel_matrix(&self.gp.pseudo_inputs, &xr, &o.inv_l2, o.sf2).as_slice(),
         );
         let kk = &o.kinv * &k;
-        let lr = match &o.linear {
+        let lr = match &self.linear[a] {
             Some((w, l)) => l.tr_mul(&(x - w.tr_mul(&k))),
             None => DVector::zeros(0),
         };
@@ -157,24 +136,28 @@ impl FunctionPosterior {
         }
     }
 
-    /// `C_GP(x, x')` of output `a` between two points.
+    /// `C_GP(x, x')` of output `a` between two points: the SE kernel's posterior part.
     fn gp_cov(&self, a: usize, p: &Point, q: &Point) -> f64 {
-        let o = &self.outputs[a];
+        let o = &self.gp.outputs[a];
         se_ard(p.x.as_slice(), q.x.as_slice(), &o.inv_l2, o.sf2) - p.k.dot(&q.kk)
+    }
+
+    /// `C(x, x')` of output `a` between two points, the linear mean's part included.
+    fn cov(&self, a: usize, p: &Point, q: &Point) -> f64 {
+        self.gp_cov(a, p, q) + p.lr.dot(&q.lr)
     }
 
     /// `C(x, x')` of output `a`: the posterior covariance of its function at two windows
     /// (normalised units), the linear mean's uncertainty included.
     pub fn covariance(&self, a: usize, x: &DVector<f64>, x2: &DVector<f64>) -> f64 {
-        let (p, q) = (self.point(a, x), self.point(a, x2));
-        self.gp_cov(a, &p, &q) + p.lr.dot(&q.lr)
+        self.cov(a, &self.point(a, x), &self.point(a, x2))
     }
 }
 
 /// The first-order spread of the rollout's mean under the function's posterior, carried along
 /// an open-loop rollout.
 pub(crate) struct Tangents<'a> {
-    post: &'a FunctionPosterior,
+    post: &'a FunctionPosterior<'a>,
     spec: &'a NarxSpec,
     /// The steps still remembered: output and window.
     steps: Vec<(usize, Point)>,
@@ -188,7 +171,7 @@ pub(crate) struct Tangents<'a> {
 
 impl<'a> Tangents<'a> {
     /// Zero tangents: the start window is measured, not predicted.
-    pub(crate) fn new(post: &'a FunctionPosterior, spec: &'a NarxSpec) -> Self {
+    pub(crate) fn new(post: &'a FunctionPosterior<'a>, spec: &'a NarxSpec) -> Self {
         let d = spec.input_dim();
         Self {
             post,
@@ -208,7 +191,7 @@ impl<'a> Tangents<'a> {
         // p_a = Cov(δμ_window, δf_a at this window)
         let mut p = DMatrix::zeros(d, dy);
         for (j, (a, q)) in self.steps.iter().enumerate() {
-            let c = self.post.gp_cov(*a, q, &points[*a]) + q.lr.dot(&points[*a].lr);
+            let c = self.post.cov(*a, q, &points[*a]);
             if c != 0.0 {
                 let mut col = p.column_mut(*a);
                 col.axpy(c, &self.g.column(j), 1.0);
@@ -295,21 +278,17 @@ impl<'a> Tangents<'a> {
 
     /// Drops the steps whose tangent has decayed below [`FORGOTTEN`].
     fn forget(&mut self) {
-        let keep: Vec<usize> = (0..self.steps.len())
-            .filter(|&j| self.g.column(j).norm() >= FORGOTTEN)
+        let keep: Vec<bool> = (0..self.steps.len())
+            .map(|j| self.g.column(j).norm() >= FORGOTTEN)
             .collect();
-        if keep.len() == self.steps.len() {
+        if keep.iter().all(|k| *k) {
             return;
         }
-        let mut steps = std::mem::take(&mut self.steps);
-        let mut kept = Vec::with_capacity(keep.len());
-        for (j, s) in steps.drain(..).enumerate() {
-            if keep.binary_search(&j).is_ok() {
-                kept.push(s);
-            }
-        }
-        self.steps = kept;
-        self.g = self.g.select_columns(keep.iter());
+        let mut flags = keep.iter();
+        self.steps
+            .retain(|_| flags.next().copied().unwrap_or(false));
+        let columns: Vec<usize> = (0..keep.len()).filter(|&j| keep[j]).collect();
+        self.g = self.g.select_columns(columns.iter());
     }
 }
 
