@@ -285,7 +285,19 @@ pub fn kept(report: &FitReport) -> String {
             .unwrap_or("it failed");
         (head, why)
     });
-    match (
+    // a recipe the tail preferred whose model diverged over the training inputs
+    let set_aside = report.set_aside().map_or(String::new(), |r| {
+        let mean = match r.recipe.mean {
+            msgp_core::gp::MeanFunction::Zero => "zero",
+            msgp_core::gp::MeanFunction::Linear => "linear",
+        };
+        let why = r.diverged.as_deref().unwrap_or("it diverges");
+        format!(
+            "; the {mean}-mean recipe the tail preferred was set aside, its model diverging \
+             over the training inputs: {why}"
+        )
+    });
+    let kept = match (
         report.full_data_iteration,
         &report.full_data_failed,
         fallback,
@@ -305,7 +317,8 @@ pub fn kept(report: &FitReport) -> String {
             report.best_iteration
         ),
         (None, None, _) => format!("kept iteration {}", report.best_iteration),
-    }
+    };
+    kept + &set_aside
 }
 
 /// The output-variance calibration of an MSGP fit, in words ([`msgp_core::fit::calibration`]);

@@ -121,6 +121,17 @@ impl FitReport {
             .get(self.chosen_recipe)
             .filter(|_| failed && self.full_data_iteration.is_some())
     }
+
+    /// MSGP: the recipe the validation tail preferred whose model diverged over the training
+    /// inputs and was set aside for the returned one's ([`RecipeOutcome::diverged`]); `None`
+    /// when the returned model is the tail's first choice.
+    pub fn set_aside(&self) -> Option<&RecipeOutcome> {
+        self.recipes
+            .iter()
+            .enumerate()
+            .find(|(k, r)| *k != self.chosen_recipe && r.diverged.is_some())
+            .map(|(_, r)| r)
+    }
 }
 
 impl RecipeOutcome {
@@ -149,6 +160,11 @@ pub struct RecipeOutcome {
     /// [`MsgpSettings::blow_up_fallback`]).
     #[serde(default)]
     pub final_failed: Option<String>,
+    /// Why its model (its final training's, or its head's where none ran) diverges over the
+    /// training inputs ([`check_divergence`]), when that set it aside: another recipe's model,
+    /// next in the tail's order, did not diverge and is returned instead.
+    #[serde(default)]
+    pub diverged: Option<String>,
     /// Its best validation NLL per step (`None` without a validation tail, or when it failed).
     pub validation: Option<f64>,
     /// Why its training failed numerically, if it did.

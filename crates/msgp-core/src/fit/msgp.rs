@@ -28,6 +28,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use super::calibration::{CalibrationReport, Judge, tail_calibration};
+use super::divergence::check_divergence;
 use super::linear_kf::{KF_NOISE_FLOOR, fit_linear_kf};
 use super::one_step::{OneStepSettings, column_std, fit_one_step, one_step_pairs};
 use super::{
@@ -383,6 +384,9 @@ pub(super) fn fit_msgp(
         return Err(e);
     }
     let mut best: Option<(f64, GpParams<f64>)> = None;
+    // every racing head that trained, with its validation NLL and kept iteration: where the
+    // chosen recipe's model diverges, the others are tried in the tail's order
+    let mut raced: Vec<(f64, usize, GpParams<f64>, usize)> = Vec::new();
     let mut first_error = None;
     for (k, (trained, recipe)) in results.into_iter().zip(&recipes).enumerate() {
         let (params, best_iteration, validation) = match trained {
@@ -398,6 +402,7 @@ pub(super) fn fit_msgp(
                     validation: None,
                     failed: Some(e.to_string()),
                     final_failed: None,
+                    diverged: None,
                 });
                 first_error.get_or_insert(e);
                 continue;
@@ -410,13 +415,39 @@ pub(super) fn fit_msgp(
             validation: validation.is_finite().then_some(validation),
             failed: None,
             final_failed: None,
+            diverged: None,
         });
         if best.as_ref().is_none_or(|b| validation < b.0) {
-            best = Some((validation, params));
+            best = Some((validation, params.clone()));
             report.chosen_recipe = k;
             report.best_iteration = best_iteration;
         }
+        raced.push((validation, k, params, best_iteration));
     }
+    // (a stable sort: on a tie, the training order, as the choice above)
+    raced.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // why recipe `k`'s model with `params` diverges over the feed-forward training trajectories
+    // (`check_divergence`, before any calibration), or `None`
+    let open_loop: Vec<&Trajectory> = episodes
+        .iter()
+        .filter(|e| e.policy.is_none())
+        .map(|e| &e.traj)
+        .collect();
+    let diverges = |k: usize, params: &GpParams<f64>| {
+        let model = Model {
+            method: Method::Msgp,
+            spec,
+            params: params.clone(),
+            config: config_of(&recipes[k]),
+            normalizer: normalizer.clone(),
+            calibration: Vec::new(),
+        };
+        #[cfg(test)]
+        if let Some(why) = DIVERGENCE_JUDGE.with_borrow_mut(|j| j.as_mut().map(|j| j(&model))) {
+            return why;
+        }
+        check_divergence(&model, &open_loop)
+    };
     let Some((_, chosen)) = best else {
         return Err(first_error.unwrap_or_else(|| MsgpError::NonFinite("no recipe trained".into())));
     };
@@ -428,6 +459,10 @@ pub(super) fn fit_msgp(
     let (mut k, mut chosen, _) = candidates[0].clone();
     let mut head_model = chosen.clone();
     let mut proxy = None;
+    // the final model kept, with its head, kept iterations and calibration proxy; and the
+    // first that diverged and was set aside for the next candidate's
+    let mut accepted = None;
+    let mut set_aside = None;
     if let Some(iterations) = final_iterations {
         let mut early_final = early_final;
         let mut early_proxy = early_proxy;
@@ -483,13 +518,39 @@ pub(super) fn fit_msgp(
                 report.numerical_stop = trained.report.numerical_stop;
             }
             if let Some((params, iteration)) = trained.outcome? {
-                k = c;
-                chosen = params;
-                head_model = head;
-                report.chosen_recipe = c;
-                report.best_iteration = best_iteration;
-                report.full_data_iteration = Some(iteration);
-                report.full_data_failed = None;
+                // a final model that diverges over the training inputs gives way to the racing
+                // heads not yet tried, in the tail's order; where each of them diverges too,
+                // the first diverging model stands
+                let why = diverges(c, &params);
+                let untried: Vec<(usize, GpParams<f64>, usize)> = raced
+                    .iter()
+                    .filter(|h| !candidates.iter().any(|t| t.0 == h.1))
+                    .map(|h| (h.1, h.2.clone(), h.3))
+                    .collect();
+                match why {
+                    Some(why) if !untried.is_empty() => {
+                        if let Some(outcome) = report.recipes.get_mut(c) {
+                            outcome.diverged = Some(why);
+                        }
+                        set_aside.get_or_insert((
+                            c,
+                            params,
+                            head,
+                            best_iteration,
+                            iteration,
+                            proxy,
+                        ));
+                        proxy = None;
+                        candidates.extend(untried);
+                        i += 1;
+                        continue;
+                    }
+                    // (the first set aside stands, below)
+                    Some(_) if set_aside.is_some() => {}
+                    _ => {
+                        accepted = Some((c, params, head, best_iteration, iteration, proxy.take()))
+                    }
+                }
                 break;
             }
             // this head's final training blew up (or failed numerically): the fallback heads
@@ -520,6 +581,7 @@ pub(super) fn fit_msgp(
                         validation,
                         failed,
                         final_failed: None,
+                        diverged: None,
                     });
                 }
                 // (a stable sort: on a tie, the training order)
@@ -530,6 +592,41 @@ pub(super) fn fit_msgp(
             // depends on the schedule: it is not counted)
             proxy = None;
             i += 1;
+        }
+        // where no final model was kept, the first one set aside for diverging stands: it
+        // was set aside for nothing
+        if accepted.is_none() && set_aside.is_some() {
+            report.recipes.iter_mut().for_each(|r| r.diverged = None);
+            accepted = set_aside;
+        }
+        if let Some((c, params, head, best_iteration, iteration, kept_proxy)) = accepted {
+            proxy = kept_proxy;
+            k = c;
+            chosen = params;
+            head_model = head;
+            report.chosen_recipe = c;
+            report.best_iteration = best_iteration;
+            report.full_data_iteration = Some(iteration);
+            report.full_data_failed = None;
+        }
+    } else if raced.len() > 1 {
+        // no final training: a head whose model diverges over the training inputs gives way
+        // to the next in the tail's order that does not
+        if let Some(why) = diverges(k, &chosen) {
+            let stable = raced
+                .iter()
+                .filter(|h| h.1 != k)
+                .find(|h| diverges(h.1, &h.2).is_none());
+            if let Some((_, c, params, best_iteration)) = stable {
+                if let Some(outcome) = report.recipes.get_mut(k) {
+                    outcome.diverged = Some(why);
+                }
+                k = *c;
+                chosen = params.clone();
+                head_model = chosen.clone();
+                report.chosen_recipe = k;
+                report.best_iteration = *best_iteration;
+            }
         }
     }
     let config = config_of(&recipes[k]);
@@ -618,6 +715,18 @@ pub(super) fn fit_msgp(
     };
     Ok((model, report))
 }
+
+#[cfg(test)]
+thread_local! {
+    /// A test's judge of which models diverge, in place of [`check_divergence`] where the
+    /// protocol chooses among its recipes' models (on the test's own thread).
+    pub(super) static DIVERGENCE_JUDGE: std::cell::RefCell<Option<DivergenceJudge>> =
+        const { std::cell::RefCell::new(None) };
+}
+
+/// See [`DIVERGENCE_JUDGE`].
+#[cfg(test)]
+pub(super) type DivergenceJudge = Box<dyn FnMut(&Model) -> Option<String>>;
 
 /// `episodes` split as the fit splits its training data: each feed-forward episode long enough
 /// into a head and its last `fraction` as a tail (with the `warmup` samples before it);

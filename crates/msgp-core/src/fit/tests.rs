@@ -633,6 +633,23 @@ fn settings_serialise_with_the_methods_own_keys() {
         back.msgp().map(|s| s.one_step_objective),
         Some(OneStepObjective::Exact)
     );
+    // the complexity term by its kebab-case name; records with its Rust name read back
+    let mut v = serde_json::to_value(FitSettings::new(Method::Msgp)).expect("json");
+    assert_eq!(v["complexity"], "pseudo-data-nll");
+    for (old, term) in [
+        ("None", Complexity::None),
+        ("PseudoDataNll", Complexity::PseudoDataNll),
+        ("NegHalfLogDet", Complexity::NegHalfLogDet),
+        ("HalfLogDet", Complexity::HalfLogDet),
+    ] {
+        v["complexity"] = old.into();
+        let back: FitSettings = serde_json::from_value(v.clone()).expect("reads back");
+        assert_eq!(back.msgp().map(|s| s.complexity), Some(term));
+    }
+    assert_eq!(
+        serde_json::to_value(Complexity::NegHalfLogDet).expect("json"),
+        "neg-half-log-det"
+    );
     let mut v = serde_json::to_value(FitSettings::new(Method::GpNarx)).expect("json");
     assert_eq!(v["objective"], "vfe");
     v.as_object_mut().expect("object").remove("objective");
@@ -1267,6 +1284,7 @@ fn the_report_names_a_kept_fallback_head() {
         },
         start,
         final_failed: final_failed.map(String::from),
+        diverged: None,
         validation: Some(0.5),
         failed: None,
     };
@@ -1385,4 +1403,96 @@ fn a_blown_up_final_training_tries_the_fallback_heads() {
     .expect("fit");
     assert_eq!(r.recipes.len(), 2, "{:?}", r.recipes);
     assert_eq!(alone.params, one.params);
+}
+
+/// Runs `f` with `judge` deciding which models the protocol's choice counts as diverging
+/// (`msgp::DIVERGENCE_JUDGE`), then puts the real check back.
+fn with_divergence_judge<R>(judge: msgp::DivergenceJudge, f: impl FnOnce() -> R) -> R {
+    msgp::DIVERGENCE_JUDGE.set(Some(judge));
+    let out = f();
+    msgp::DIVERGENCE_JUDGE.set(None);
+    out
+}
+
+/// A judge by the model's prior mean: `mean`'s models diverge.
+fn diverging(mean: MeanFunction) -> msgp::DivergenceJudge {
+    Box::new(move |m: &Model| (m.config.mean == mean).then(|| "it runs away".to_string()))
+}
+
+/// Where the recipe the validation tail chose ends in a model that diverges over the training
+/// inputs, the other racing recipe's final training runs and its model is returned (bit for bit
+/// that recipe's fit alone on all the data), with the first set aside and why; where every
+/// model diverges, the tail's choice stands as without the check; without a final training
+/// (L-BFGS), the other head's model is returned.
+#[test]
+fn a_model_that_diverges_gives_way_to_the_next_recipe() {
+    const FINAL: usize = 60;
+    let traj = long_memory_plant(0.1);
+    let msgp = |optimizer: FitOptimizer| MsgpSettings {
+        inducing: 12,
+        iterations: FINAL,
+        validation_fraction: 0.2,
+        full_data_iterations: Some(FINAL),
+        optimizer,
+        ..MsgpSettings::default()
+    };
+    let settings = |m: MsgpSettings| ly2_lu1(Threads::default(), m);
+    let adam = settings(msgp(FitOptimizer::Adam));
+    let (first, r0) = fit(std::slice::from_ref(&traj), &adam, &mut |_| {}).expect("fit");
+    assert_eq!(r0.recipes.len(), 2, "{:?}", r0.recipes);
+    assert!(r0.set_aside().is_none());
+    let preferred = r0.chosen_recipe;
+    let other = 1 - preferred;
+    let preferred_mean = r0.recipes[preferred].recipe.mean;
+
+    let (model, r) = with_divergence_judge(diverging(preferred_mean), || {
+        fit(std::slice::from_ref(&traj), &adam, &mut |_| {}).expect("fit")
+    });
+    assert_eq!(r.chosen_recipe, other, "{:?}", r.recipes);
+    let aside = r.set_aside().expect("the preferred recipe was set aside");
+    assert_eq!(aside.recipe, r0.recipes[preferred].recipe);
+    assert_eq!(aside.diverged.as_deref(), Some("it runs away"));
+    assert_eq!(r.recipes[other].diverged, None);
+    assert!(r.full_data_iteration.is_some(), "{r:?}");
+    assert_ne!(model.config.mean, preferred_mean);
+    assert!(r.calibration.is_some(), "the kept model is calibrated");
+    assert_eq!(
+        r.recipes[preferred].validation,
+        r0.recipes[preferred].validation
+    );
+    // the other recipe alone, on all the data, without a tail
+    let alone = MsgpSettings {
+        validation_fraction: 0.0,
+        full_data_iterations: None,
+        alternative: None,
+        ..msgp(FitOptimizer::Adam).with_recipe(r.recipes[other].recipe)
+    };
+    let (reference, _) =
+        fit(std::slice::from_ref(&traj), &settings(alone), &mut |_| {}).expect("fit alone");
+    assert_eq!(model.params, reference.params);
+
+    // every model diverges: the tail's choice, as without the check
+    let (same, r) = with_divergence_judge(Box::new(|_| Some("always".into())), || {
+        fit(std::slice::from_ref(&traj), &adam, &mut |_| {}).expect("fit")
+    });
+    assert_eq!(same.params, first.params);
+    assert_eq!(same.calibration, first.calibration);
+    assert_eq!(r.chosen_recipe, preferred);
+    assert!(r.set_aside().is_none());
+    assert!(r.recipes.iter().all(|o| o.diverged.is_none()), "{r:?}");
+
+    // no final training: the other head
+    let lbfgs = settings(msgp(FitOptimizer::Lbfgs));
+    let (_, h0) = fit(std::slice::from_ref(&traj), &lbfgs, &mut |_| {}).expect("fit");
+    let head_mean = h0.recipes[h0.chosen_recipe].recipe.mean;
+    let (head, h) = with_divergence_judge(diverging(head_mean), || {
+        fit(std::slice::from_ref(&traj), &lbfgs, &mut |_| {}).expect("fit")
+    });
+    assert_eq!(h.full_data_iteration, None);
+    assert_eq!(h.chosen_recipe, 1 - h0.chosen_recipe);
+    assert_ne!(head.config.mean, head_mean);
+    assert_eq!(
+        h.set_aside().map(|o| o.recipe),
+        Some(h0.recipes[h0.chosen_recipe].recipe)
+    );
 }

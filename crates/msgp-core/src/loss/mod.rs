@@ -79,18 +79,25 @@ impl Likelihood {
 }
 
 /// Which complexity term is added to the trajectory likelihood.
+/// Serialised in kebab-case (`pseudo-data-nll`); the Rust names that model files and reports
+/// written before 2026-12-05 (fifth session) hold are read as well.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum Complexity {
     /// No complexity term.
+    #[serde(alias = "None")]
     None,
     /// `½ ȳᵀK̃⁻¹ȳ + ½ log|K̃| + (m/2) log 2π` per output (default; bounded).
     #[default]
+    #[serde(alias = "PseudoDataNll")]
     PseudoDataNll,
     /// The paper's literal `−½ log|K̃|`.
+    #[serde(alias = "NegHalfLogDet")]
     NegHalfLogDet,
     /// `+½ log|K̃|` alone: unbounded below over long training (the signal and process
     /// variances drift to zero together), so used only with early stopping on a validation
     /// tail, as in the default protocol's linear-mean recipe (`fit::LINEAR_RECIPE`).
+    #[serde(alias = "HalfLogDet")]
     HalfLogDet,
 }
 
