@@ -1496,3 +1496,50 @@ fn a_model_that_diverges_gives_way_to_the_next_recipe() {
         Some(h0.recipes[h0.chosen_recipe].recipe)
     );
 }
+
+/// `Model::sample_free_runs`: the same seed gives the same paths, another seed others; the
+/// paths are in original units (their first step is the moment-matching simulation's, in a
+/// plant's units far from the normalised ones); a linear-kf model is refused.
+#[test]
+fn sampled_free_runs_are_seeded_and_in_original_units() {
+    let plant = long_memory_plant(0.1);
+    let y = plant.y.map(|v| 50.0 + 20.0 * v);
+    let traj = Trajectory::new(plant.u.clone(), y).expect("finite");
+    let settings = ly2_lu1(
+        Threads::default(),
+        MsgpSettings {
+            inducing: 12,
+            iterations: 30,
+            validation_fraction: 0.0,
+            ..MsgpSettings::default()
+        },
+    );
+    let (model, _) = fit(std::slice::from_ref(&traj), &settings, &mut |_| {}).expect("fit");
+    const PATHS: usize = 400;
+    let a = model.sample_free_runs(&traj, PATHS, 5).expect("paths");
+    assert_eq!(a, model.sample_free_runs(&traj, PATHS, 5).expect("again"));
+    assert_ne!(
+        a,
+        model
+            .sample_free_runs(&traj, PATHS, 6)
+            .expect("another seed")
+    );
+    let sim = model.simulate(&traj).expect("simulate");
+    assert_eq!(a[0].nrows(), sim.mean.nrows());
+    // the first step, from the measured window, is moment matching's distribution (later
+    // ones drift apart on this briefly trained model: whole functions are not its Gaussian)
+    let first = a.iter().map(|p| p[(0, 0)]).sum::<f64>() / PATHS as f64;
+    let sd = sim.var[(0, 0)].sqrt();
+    assert!(
+        (first - sim.mean[(0, 0)]).abs() < 0.1 * sd + 4.0 * sd / (PATHS as f64).sqrt(),
+        "the paths' first step {first}, the simulation's {} ± {sd}",
+        sim.mean[(0, 0)]
+    );
+    let kf = FitSettings {
+        method: MethodSettings::LinearKf(LinearKfSettings::default()),
+        ..settings
+    };
+    let (linear, _) = fit(std::slice::from_ref(&traj), &kf, &mut |_| {}).expect("linear-kf");
+    let refused = linear.sample_free_runs(&traj, 10, 0).expect_err("refused");
+    assert!(refused.to_string().contains("linear-kf"), "{refused}");
+}

@@ -11,7 +11,9 @@ use crate::error::{MsgpError, Result};
 use crate::gp::{GpConfig, GpParams, PreparedGp};
 use crate::narx::NarxSpec;
 use crate::numeric::linalg::JitterLog;
-use crate::rollout::{Control, simulate, simulate_correlated, simulate_mean_feedback};
+use crate::rollout::{
+    Control, FunctionDraws, sample_free_runs, simulate, simulate_correlated, simulate_mean_feedback,
+};
 
 mod metrics;
 
@@ -191,6 +193,49 @@ impl Model {
             mean,
             var,
         })
+    }
+
+    /// `paths` free simulations of `traj` (original units), each under one whole function drawn
+    /// from the GP's posterior and its own process noise, seeded by `seed`
+    /// ([`crate::rollout::function_uncertainty::sample_free_runs`]): the Monte Carlo picture of
+    /// what [`Model::simulate`]'s band summarises. Each path holds the latent outputs (steps ×
+    /// d_y, from `max(l_y, l_u)`), without observation noise or the calibration's variance. A
+    /// linear-kf model has no function posterior to draw from and is refused.
+    pub fn sample_free_runs(
+        &self,
+        traj: &Trajectory,
+        paths: usize,
+        seed: u64,
+    ) -> Result<Vec<DMatrix<f64>>> {
+        use rand::SeedableRng;
+        if self.method == Method::LinearKf {
+            return Err(MsgpError::InvalidSetting {
+                name: "method",
+                reason: "a linear-kf model has no GP whose function could be drawn".into(),
+            });
+        }
+        traj.check(&self.spec)?;
+        let norm = self.normalizer.apply(traj);
+        let mut log = JitterLog::default();
+        let gp = PreparedGp::new(&self.params, &self.config, &mut log)?;
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        let mut out = sample_free_runs(
+            &gp,
+            &self.spec,
+            &norm,
+            traj.len(),
+            paths,
+            FunctionDraws::Whole,
+            &mut rng,
+        )?;
+        for y in &mut out {
+            for j in 0..self.spec.dy {
+                for v in y.column_mut(j).iter_mut() {
+                    *v = self.normalizer.y_to_original(j, *v);
+                }
+            }
+        }
+        Ok(out)
     }
 
     /// The calibration's added variance of output `j` (normalised units; 0 without one).

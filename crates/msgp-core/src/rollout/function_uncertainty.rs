@@ -43,6 +43,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::forward::{Control, StepPrediction, Widen, rollout_started};
+use super::window::initial_window;
 use crate::data::Trajectory;
 use crate::error::{MsgpError, Result};
 use crate::gp::PreparedGp;
@@ -339,6 +340,115 @@ pub fn simulate_correlated(
             Ok(())
         },
     )?;
+    Ok(out)
+}
+
+/// How a sampled free run draws the GP's function ([`sample_free_runs`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FunctionDraws {
+    /// One whole function per path: each value conditioned on the values the path drew before
+    /// (what the model believes; [`simulate_correlated`] approximates its spread).
+    Whole,
+    /// A fresh, independent value at every step (the paper's moment matching's picture).
+    PerStep,
+}
+
+/// Free simulations of `traj`'s inputs (normalised units) up to `horizon`, each drawing the
+/// function from the posterior of the module docs as `draws` says, with its own process noise:
+/// the Monte Carlo reference of [`simulate_correlated`] (whole functions) and of the paper's
+/// moment matching (per-step draws). A path draws its function where it goes: at each window,
+/// conditioned on the values it drew at the windows it visited before (a Cholesky factor of
+/// their covariance, grown by a row per step), plus `σ_x²` noise fed back as the rollout's
+/// latent state is; its start window is drawn from the rollout's (the measured outputs with
+/// their observation noise `σ_y²`, or the smoothed start's). Returns each path's latent
+/// outputs, without observation noise (steps × d_y, the first row at the rollout's first
+/// step); their spread plus `σ_y²` is what a rollout's reported variance approximates. The cost
+/// per path grows with the cube of the steps.
+pub fn sample_free_runs<R: rand::Rng + ?Sized>(
+    gp: &PreparedGp<f64>,
+    spec: &NarxSpec,
+    traj: &Trajectory,
+    horizon: usize,
+    paths: usize,
+    draws: FunctionDraws,
+    rng: &mut R,
+) -> Result<Vec<DMatrix<f64>>> {
+    use rand_distr::{Distribution, StandardNormal};
+    let post = FunctionPosterior::new(gp)?;
+    let horizon = horizon.min(traj.len());
+    // the rollout's Gaussian start window: its output lags drawn with it
+    let first = initial_window(gp, spec, traj, gp.start)?;
+    let t0 = first.t0;
+    if horizon <= t0 {
+        return Err(MsgpError::Data(format!(
+            "a simulation needs more than {t0} samples, got {horizon}"
+        )));
+    }
+    let lags = first
+        .pattern
+        .clone()
+        .cholesky()
+        .or_else(|| (&first.pattern + DMatrix::identity(spec.ly, spec.ly) * 1e-12).cholesky())
+        .ok_or_else(|| MsgpError::NonFinite("the start window's covariance".into()))?
+        .l();
+    let mut out = Vec::with_capacity(paths);
+    for _ in 0..paths {
+        let mut y = traj.y.rows(0, horizon).into_owned();
+        for j in 0..spec.dy {
+            let z = DVector::from_fn(spec.ly, |_, _| StandardNormal.sample(rng));
+            let e = &lags * z * gp.outputs[j].sy2.sqrt();
+            for k in 0..spec.ly {
+                y[(t0 - 1 - k, j)] = first.mean[spec.y_index(k, j)] + e[k];
+            }
+        }
+        // per output: the windows visited, the rows of the Cholesky factor of their
+        // covariance, and the standard normal draws that made the function's values there
+        let mut visited: Vec<Vec<Point>> = vec![Vec::new(); spec.dy];
+        let mut chol: Vec<Vec<Vec<f64>>> = vec![Vec::new(); spec.dy];
+        let mut normals: Vec<Vec<f64>> = vec![Vec::new(); spec.dy];
+        for t in t0..horizon {
+            let x = DVector::from_vec(spec.window(&y, &traj.u, t - 1));
+            let means = gp.predict(x.as_slice());
+            for (a, (mean, _)) in means.into_iter().enumerate() {
+                let p = post.point(a, &x);
+                let scale = post.cov(a, &p, &p).max(0.0);
+                // the new row `l` of the factor: `L l = C(X_visited, x)`
+                let mut row = Vec::with_capacity(visited[a].len() + 1);
+                for (i, q) in visited[a].iter().enumerate() {
+                    let r = &chol[a][i];
+                    let s = post.cov(a, q, &p)
+                        - r[..i].iter().zip(&row).map(|(u, v)| u * v).sum::<f64>();
+                    // (a window the path's earlier ones already determine adds nothing)
+                    row.push(if r[i] > 1e-12 * (1.0 + scale) {
+                        s / r[i]
+                    } else {
+                        0.0
+                    });
+                }
+                let rest = scale - row.iter().map(|v| v * v).sum::<f64>();
+                row.push(rest.max(0.0).sqrt());
+                let z: f64 = StandardNormal.sample(rng);
+                normals[a].push(z);
+                let f = mean + row.iter().zip(&normals[a]).map(|(l, z)| l * z).sum::<f64>();
+                match draws {
+                    FunctionDraws::Whole => {
+                        chol[a].push(row);
+                        visited[a].push(p);
+                    }
+                    FunctionDraws::PerStep => normals[a].clear(),
+                }
+                let e: f64 = StandardNormal.sample(rng);
+                let value = f + gp.outputs[a].sx2.sqrt() * e;
+                if !value.is_finite() {
+                    return Err(MsgpError::NonFinite(format!(
+                        "a sampled free simulation: output {a} at step {t}"
+                    )));
+                }
+                y[(t, a)] = value;
+            }
+        }
+        out.push(y.rows(t0, horizon - t0).into_owned());
+    }
     Ok(out)
 }
 

@@ -17,6 +17,8 @@ pub(crate) mod window;
 pub use episode::{Episode, Excitation};
 pub(crate) use forward::rollout_started;
 pub use forward::{Control, StepPrediction, rollout, rollout_from, simulate};
-pub use function_uncertainty::{FunctionPosterior, simulate_correlated};
+pub use function_uncertainty::{
+    FunctionDraws, FunctionPosterior, sample_free_runs, simulate_correlated,
+};
 pub use mean_feedback::simulate_mean_feedback;
 pub use window::StartState;
