@@ -343,6 +343,10 @@ pub fn simulate_correlated(
     Ok(out)
 }
 
+/// The jitter (per unit of the larger of `σ_f²` and the value's own variance) on the
+/// covariance of a sampled path's function values.
+const SAMPLE_JITTER: f64 = 1e-6;
+
 /// How a sampled free run draws the GP's function ([`sample_free_runs`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FunctionDraws {
@@ -411,22 +415,23 @@ pub fn sample_free_runs<R: rand::Rng + ?Sized>(
             let means = gp.predict(x.as_slice());
             for (a, (mean, _)) in means.into_iter().enumerate() {
                 let p = post.point(a, &x);
-                let scale = post.cov(a, &p, &p).max(0.0);
+                // (a path that settles visits nearly the same window again and again: the
+                // covariance of its values is nearly singular, and a jitter of 10⁻⁶ of the
+                // larger of σ_f² and the value's own variance keeps the factor's pivots away from
+                // rounding noise; at 10⁻⁸ and below, rounding blows a few paths up)
+                let own = post.cov(a, &p, &p).max(0.0);
+                let jitter = SAMPLE_JITTER * gp.outputs[a].sf2.max(own);
+                let scale = own + jitter;
                 // the new row `l` of the factor: `L l = C(X_visited, x)`
                 let mut row = Vec::with_capacity(visited[a].len() + 1);
                 for (i, q) in visited[a].iter().enumerate() {
                     let r = &chol[a][i];
                     let s = post.cov(a, q, &p)
                         - r[..i].iter().zip(&row).map(|(u, v)| u * v).sum::<f64>();
-                    // (a window the path's earlier ones already determine adds nothing)
-                    row.push(if r[i] > 1e-12 * (1.0 + scale) {
-                        s / r[i]
-                    } else {
-                        0.0
-                    });
+                    row.push(s / r[i]);
                 }
                 let rest = scale - row.iter().map(|v| v * v).sum::<f64>();
-                row.push(rest.max(0.0).sqrt());
+                row.push(rest.max(jitter).sqrt());
                 let z: f64 = StandardNormal.sample(rng);
                 normals[a].push(z);
                 let f = mean + row.iter().zip(&normals[a]).map(|(l, z)| l * z).sum::<f64>();
