@@ -383,9 +383,8 @@ pub(super) fn fit_msgp(
     {
         return Err(e);
     }
-    let mut best: Option<(f64, GpParams<f64>)> = None;
-    // every racing head that trained, with its validation NLL and kept iteration: where the
-    // chosen recipe's model diverges, the others are tried in the tail's order
+    // every racing head that trained, with its validation NLL and kept iteration, in the tail's
+    // order: the first is chosen, and where its model diverges, the others are tried in turn
     let mut raced: Vec<(f64, usize, GpParams<f64>, usize)> = Vec::new();
     let mut first_error = None;
     for (k, (trained, recipe)) in results.into_iter().zip(&recipes).enumerate() {
@@ -417,14 +416,9 @@ pub(super) fn fit_msgp(
             final_failed: None,
             diverged: None,
         });
-        if best.as_ref().is_none_or(|b| validation < b.0) {
-            best = Some((validation, params.clone()));
-            report.chosen_recipe = k;
-            report.best_iteration = best_iteration;
-        }
         raced.push((validation, k, params, best_iteration));
     }
-    // (a stable sort: on a tie, the training order, as the choice above)
+    // (a stable sort: on a tie, the training order)
     raced.sort_by(|a, b| a.0.total_cmp(&b.0));
     // why recipe `k`'s model with `params` diverges over the feed-forward training trajectories
     // (`check_divergence`, before any calibration), or `None`
@@ -448,9 +442,11 @@ pub(super) fn fit_msgp(
         }
         check_divergence(&model, &open_loop)
     };
-    let Some((_, chosen)) = best else {
+    let Some((_, first, chosen, best_iteration)) = raced.first().cloned() else {
         return Err(first_error.unwrap_or_else(|| MsgpError::NonFinite("no recipe trained".into())));
     };
+    report.chosen_recipe = first;
+    report.best_iteration = best_iteration;
     // the heads whose final training is tried, in turn: the chosen one, and where that is the
     // settings' own zero-mean recipe and its final training blows up, its fallback heads in the
     // order of their validation NLL (`MsgpSettings::blow_up_fallback`)

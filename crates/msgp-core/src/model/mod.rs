@@ -199,7 +199,8 @@ impl Model {
     /// from the GP's posterior and its own process noise, seeded by `seed`
     /// ([`crate::rollout::function_uncertainty::sample_free_runs`]): the Monte Carlo picture of
     /// what [`Model::simulate`]'s band summarises. Each path holds the latent outputs (steps ×
-    /// d_y, from `max(l_y, l_u)`), without observation noise or the calibration's variance. A
+    /// d_y, from the simulation's first step), without observation noise or the calibration's
+    /// variance. A
     /// linear-kf model has no function posterior to draw from and is refused.
     pub fn sample_free_runs(
         &self,
