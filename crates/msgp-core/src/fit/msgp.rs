@@ -518,11 +518,14 @@ pub(super) fn fit_msgp(
                 // heads not yet tried, in the tail's order; where each of them diverges too,
                 // the first diverging model stands
                 let why = diverges(c, &params);
-                let untried: Vec<(usize, GpParams<f64>, usize)> = raced
-                    .iter()
-                    .filter(|h| !candidates.iter().any(|t| t.0 == h.1))
-                    .map(|h| (h.1, h.2.clone(), h.3))
-                    .collect();
+                let untried = || -> Vec<(usize, GpParams<f64>, usize)> {
+                    raced
+                        .iter()
+                        .filter(|h| !candidates.iter().any(|t| t.0 == h.1))
+                        .map(|h| (h.1, h.2.clone(), h.3))
+                        .collect()
+                };
+                let untried = if why.is_some() { untried() } else { Vec::new() };
                 match why {
                     Some(why) if !untried.is_empty() => {
                         if let Some(outcome) = report.recipes.get_mut(c) {

@@ -200,8 +200,7 @@ impl Model {
     /// ([`crate::rollout::function_uncertainty::sample_free_runs`]): the Monte Carlo picture of
     /// what [`Model::simulate`]'s band summarises. Each path holds the latent outputs (steps ×
     /// d_y, from the simulation's first step), without observation noise or the calibration's
-    /// variance. A
-    /// linear-kf model has no function posterior to draw from and is refused.
+    /// variance. A linear-kf model has no function posterior to draw from and is refused.
     pub fn sample_free_runs(
         &self,
         traj: &Trajectory,

@@ -412,9 +412,13 @@ pub fn sample_free_runs<R: rand::Rng + ?Sized>(
         let mut normals: Vec<Vec<f64>> = vec![Vec::new(); spec.dy];
         for t in t0..horizon {
             let x = DVector::from_vec(spec.window(&y, &traj.u, t - 1));
-            let means = gp.predict(x.as_slice());
-            for (a, (mean, _)) in means.into_iter().enumerate() {
+            for a in 0..spec.dy {
                 let p = post.point(a, &x);
+                // the posterior mean (eq. 13) from the point's own kernel vector
+                let mean = p.k.dot(&gp.outputs[a].beta)
+                    + gp.linear_mean
+                        .as_ref()
+                        .map_or(0.0, |lm| lm.row(a).dot(&x.transpose()));
                 // (a path that settles visits nearly the same window again and again: the
                 // covariance of its values is nearly singular, and a jitter of 10⁻⁶ of the
                 // larger of σ_f² and the value's own variance keeps the factor's pivots away from
