@@ -109,17 +109,12 @@ pub struct FitReport {
 
 impl FitReport {
     /// MSGP: the returned model's recipe when it is a fallback head
-    /// ([`MsgpSettings::blow_up_fallback`]): another recipe's final training failed and this
-    /// one's completed; `None` otherwise.
+    /// ([`MsgpSettings::blow_up_fallback`]): the settings' own recipe's final training failed
+    /// and this head's completed ([`RecipeOutcome::fallback_head`]); `None` otherwise.
     pub fn fallback(&self) -> Option<&RecipeOutcome> {
-        let failed = self
-            .recipes
-            .iter()
-            .enumerate()
-            .any(|(k, r)| k != self.chosen_recipe && r.final_failed.is_some());
         self.recipes
             .get(self.chosen_recipe)
-            .filter(|_| failed && self.full_data_iteration.is_some())
+            .filter(|r| r.fallback_head && self.full_data_iteration.is_some())
     }
 
     /// MSGP: the recipe the validation tail preferred whose model diverged over the training
@@ -165,6 +160,11 @@ pub struct RecipeOutcome {
     /// next in the tail's order, did not diverge and is returned instead.
     #[serde(default)]
     pub diverged: Option<String>,
+    /// A fallback head ([`MsgpSettings::blow_up_fallback`]): trained because the settings' own
+    /// recipe's final training failed (records before 2026-12-05, sixth session, do not mark
+    /// them).
+    #[serde(default)]
+    pub fallback_head: bool,
     /// Its best validation NLL per step (`None` without a validation tail, or when it failed).
     pub validation: Option<f64>,
     /// Why its training failed numerically, if it did.

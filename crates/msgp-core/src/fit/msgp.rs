@@ -402,6 +402,7 @@ pub(super) fn fit_msgp(
                     failed: Some(e.to_string()),
                     final_failed: None,
                     diverged: None,
+                    fallback_head: false,
                 });
                 first_error.get_or_insert(e);
                 continue;
@@ -415,6 +416,7 @@ pub(super) fn fit_msgp(
             failed: None,
             final_failed: None,
             diverged: None,
+            fallback_head: false,
         });
         raced.push((validation, k, params, best_iteration));
     }
@@ -581,6 +583,7 @@ pub(super) fn fit_msgp(
                         failed,
                         final_failed: None,
                         diverged: None,
+                        fallback_head: true,
                     });
                 }
                 // (a stable sort: on a tie, the training order)

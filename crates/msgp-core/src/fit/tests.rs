@@ -1277,7 +1277,7 @@ fn the_spread_start_is_the_one_step_fits_starting_point() {
 /// another head's final training failed and this one's completed.
 #[test]
 fn the_report_names_a_kept_fallback_head() {
-    let outcome = |mean, start, final_failed: Option<&str>| RecipeOutcome {
+    let outcome = |mean, start, final_failed: Option<&str>, fallback_head| RecipeOutcome {
         recipe: Recipe {
             mean,
             ..MsgpSettings::default().recipe()
@@ -1285,15 +1285,21 @@ fn the_report_names_a_kept_fallback_head() {
         start,
         final_failed: final_failed.map(String::from),
         diverged: None,
+        fallback_head,
         validation: Some(0.5),
         failed: None,
     };
     let mut report = FitReport {
         recipes: vec![
-            outcome(MeanFunction::Zero, MsgpStart::OneStep, Some("blew up")),
-            outcome(MeanFunction::Linear, MsgpStart::OneStep, None),
-            outcome(MeanFunction::Zero, MsgpStart::Spread, None),
-            outcome(MeanFunction::Linear, MsgpStart::OneStep, None),
+            outcome(
+                MeanFunction::Zero,
+                MsgpStart::OneStep,
+                Some("blew up"),
+                false,
+            ),
+            outcome(MeanFunction::Linear, MsgpStart::OneStep, None, false),
+            outcome(MeanFunction::Zero, MsgpStart::Spread, None, true),
+            outcome(MeanFunction::Linear, MsgpStart::OneStep, None, true),
         ],
         chosen_recipe: 3,
         full_data_iteration: Some(400),
@@ -1306,9 +1312,10 @@ fn the_report_names_a_kept_fallback_head() {
     // the head's model stands: no final training completed
     report.full_data_iteration = None;
     assert_eq!(label(&report), None);
-    // the chosen head's own final training completed, and no other failed
+    // a racing recipe's model, returned after another's final training failed (the first
+    // set aside for diverging, the next one's final training blew up): no fallback head
     report.full_data_iteration = Some(400);
-    report.recipes[0].final_failed = None;
+    report.chosen_recipe = 1;
     assert_eq!(label(&report), None);
     report.chosen_recipe = 0;
     assert_eq!(label(&report), None);
@@ -1348,18 +1355,21 @@ fn a_blown_up_final_training_tries_the_fallback_heads() {
         )
     };
     let (one, r1) = fit(std::slice::from_ref(&traj), &settings(1, true), &mut |_| {}).expect("fit");
-    let starts: Vec<(MeanFunction, MsgpStart, bool)> = r1
+    let starts: Vec<(MeanFunction, MsgpStart, bool, bool)> = r1
         .recipes
         .iter()
-        .map(|r| (r.recipe.mean, r.start, r.final_failed.is_some()))
+        .map(|r| {
+            let failed = r.final_failed.is_some();
+            (r.recipe.mean, r.start, failed, r.fallback_head)
+        })
         .collect();
     assert_eq!(
         starts,
         [
-            (MeanFunction::Zero, MsgpStart::OneStep, true),
-            (MeanFunction::Linear, MsgpStart::OneStep, false),
-            (MeanFunction::Zero, MsgpStart::Spread, true),
-            (MeanFunction::Linear, MsgpStart::OneStep, true)
+            (MeanFunction::Zero, MsgpStart::OneStep, true, false),
+            (MeanFunction::Linear, MsgpStart::OneStep, false, false),
+            (MeanFunction::Zero, MsgpStart::Spread, true, true),
+            (MeanFunction::Linear, MsgpStart::OneStep, true, true)
         ]
     );
     // the linear fallback is the zero-mean recipe with a linear mean, not the racing linear one

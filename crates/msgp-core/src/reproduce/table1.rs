@@ -226,6 +226,11 @@ pub struct Cell {
     /// named by [`crate::fit::RecipeOutcome::fallback_label`]: `spread` or `linear`.
     #[serde(default)]
     pub fallback: Option<String>,
+    /// MSGP: the recipe the validation tail preferred whose model diverged over the training
+    /// inputs and was set aside for this one's ([`crate::fit::FitReport::set_aside`]), named
+    /// by [`crate::fit::RecipeOutcome::fallback_label`]'s word for its mean or start.
+    #[serde(default)]
+    pub set_aside: Option<String>,
     /// Why the model diverges: the fit's check on its training inputs, else the moment-matching
     /// simulation of the test part held against the test outputs (`msgp eval`'s test);
     /// `None` when neither fires.
@@ -513,6 +518,7 @@ pub fn fit_unit(
             .as_ref()
             .and_then(|c| c.added_std.first().copied()),
         fallback: report.fallback().map(|r| r.fallback_label().to_string()),
+        set_aside: report.set_aside().map(|r| r.fallback_label().to_string()),
         diverged,
     })
 }
@@ -779,7 +785,10 @@ pub fn render(plan: &Plan, rows: &[Row], provenance: &Provenance) -> String {
          training time (means ± standard deviations over the seeds). MSGP's iterations: all \
          solver iterations of the fit, then in brackets the iteration the validation tail kept \
          (\"spread\", \"linear\": the zero-mean recipe's final training blew up and its fallback head from \
-         the spread start, or with a linear prior mean, is the model: `msgp_core::fit::MsgpSettings::blow_up_fallback`) \
+         the spread start, or with a linear prior mean, is the model: `msgp_core::fit::MsgpSettings::blow_up_fallback`; \
+         \"linear set aside\", \"zero set aside\": the recipe the tail preferred, with that prior mean, \
+         had a model whose free simulation of the training inputs diverges, and the next recipe's \
+         is the model: `msgp_core::fit::FitReport::set_aside`) \
          and, where the chosen recipe trained again on all the training data, the iterate of \
          that training the model is; after them, the standard deviation (original units) the \
          output-variance calibration adds to every simulated output (`msgp_core::fit::calibration`: \
@@ -803,14 +812,14 @@ pub fn render(plan: &Plan, rows: &[Row], provenance: &Provenance) -> String {
                                 .fallback
                                 .as_ref()
                                 .map_or(String::new(), |f| format!("{f} "));
+                            let aside = x
+                                .set_aside
+                                .as_ref()
+                                .map_or(String::new(), |r| format!(", {r} set aside"));
+                            let (run, best) = (x.iterations_run, x.best_iteration);
                             let kept = match x.full_data_iteration {
-                                Some(j) => format!(
-                                    "{} ({start}{}; {j})",
-                                    x.iterations_run, x.best_iteration
-                                ),
-                                None => {
-                                    format!("{} ({start}{})", x.iterations_run, x.best_iteration)
-                                }
+                                Some(j) => format!("{run} ({start}{best}{aside}; {j})"),
+                                None => format!("{run} ({start}{best}{aside})"),
                             };
                             match x.added_std {
                                 Some(a) => format!("{kept} +{a:.3}"),
@@ -881,6 +890,7 @@ mod tests {
             full_data_iteration: None,
             added_std: None,
             fallback: None,
+            set_aside: None,
             diverged: None,
         }
     }
@@ -961,6 +971,63 @@ mod tests {
         )
         .expect_err("unknown benchmark");
         assert!(e.to_string().contains("unknown benchmark `x`"), "{e}");
+    }
+
+    /// The iteration column says which MSGP models are not the tail's first recipe's own: a
+    /// fallback head's, or the next recipe's after the first diverged.
+    #[test]
+    fn the_iteration_column_marks_fallback_heads_and_set_aside_recipes() {
+        let only = ["synthetic4".to_string()];
+        let plan = Plan::new(
+            &[0, 1, 2],
+            &only,
+            &[Method::Msgp],
+            &[Likelihood::FreeRun],
+            10,
+            None,
+            FitOptimizer::Adam,
+            Path::new("nowhere"),
+        )
+        .expect("plan");
+        let marked = |k: usize| {
+            let mut c = cell(k as f64);
+            c.iterations_run = 1000 + k;
+            c.best_iteration = 10 * k;
+            match k {
+                0 => c.fallback = Some("linear".into()),
+                1 => {
+                    c.set_aside = Some("linear".into());
+                    c.full_data_iteration = Some(388);
+                    c.added_std = Some(0.079);
+                }
+                _ => c.full_data_iteration = Some(400),
+            }
+            c
+        };
+        let results = plan
+            .units()
+            .iter()
+            .enumerate()
+            .map(|(k, u)| (u.clone(), marked(k)))
+            .collect();
+        let rows = assemble(&plan, results).expect("rows");
+        let provenance = Provenance {
+            command: "msgp reproduce table1".into(),
+            seconds: 1.0,
+            machine: "test".into(),
+            date: "2026-12-05".into(),
+        };
+        let text = render(&plan, &rows, &provenance);
+        let line = text
+            .lines()
+            .find(|l| l.starts_with("| Synthetic system 4 | msgp | mm |"))
+            .expect("the MSGP line");
+        assert!(
+            line.ends_with(
+                "| 1000 (linear 0), 1001 (10, linear set aside; 388) +0.079, 1002 (20; 400) |"
+            ),
+            "{line}"
+        );
     }
 
     #[test]
