@@ -132,6 +132,15 @@ pub struct Training {
     /// MSGP: why the final training on all the data failed, where it did (format 1.4).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub full_data_failed: Option<String>,
+    /// MSGP: the lengths of the final training considered and their proxies' RMSE on the
+    /// validation tail (`msgp_core::fit::FitReport::final_budgets`; files since 2026-12-05,
+    /// sixth session); absent where no length was chosen.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub final_budgets: Vec<(usize, Option<f64>)>,
+    /// MSGP: the length of the final training chosen among them
+    /// (`msgp_core::fit::FitReport::final_budget`); absent where none was.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub final_budget: Option<usize>,
     /// Every fit setting, as `msgp_core::fit::FitSettings` serialises it (informational).
     pub settings: Value,
 }
@@ -363,6 +372,8 @@ impl ModelFile {
                     .then_some(record.report.chosen_recipe),
                 full_data_iteration: record.report.full_data_iteration,
                 full_data_failed: record.report.full_data_failed.clone(),
+                final_budgets: record.report.final_budgets.clone(),
+                final_budget: record.report.final_budget,
                 settings: serde_json::to_value(record.settings)
                     .map_err(|e| MsgpError::Data(format!("cannot serialise the settings: {e}")))?,
             },

@@ -823,8 +823,10 @@ impl Msgp {
     /// The fit's report (iterations_run, best_iteration, history of (iteration, training loss,
     /// validation NLL), train_seconds, jitter; MSGP: recipes, chosen_recipe and
     /// full_data_iteration, the iterate of the final training on all the data that the model
-    /// is, or full_data_failed; calibration, the output-variance calibration: added_std per
-    /// output, original units, and its judge); None for a loaded model.
+    /// is, or full_data_failed; final_budget, the length of that training, and final_budgets,
+    /// the lengths considered, each with its proxy's RMSE on the validation tail (normalised
+    /// units); calibration, the output-variance calibration: added_std
+    /// per output, original units, and its judge); None for a loaded model.
     #[getter]
     fn report<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
         self.fitted()?

@@ -115,6 +115,16 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             ),
         }
     }
+    if args.choose_final_length {
+        match &mut settings.method {
+            MethodSettings::Msgp(s) => s.choose_final_budget = true,
+            _ => bail!(
+                "--choose-final-length: only msgp fits train on all the data after a \
+                 validation tail; --method {} does not",
+                method.name()
+            ),
+        }
+    }
     if args.no_blow_up_fallback {
         match &mut settings.method {
             MethodSettings::Msgp(s) => s.blow_up_fallback = false,
@@ -208,6 +218,8 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             "best_iteration": report.best_iteration,
             "full_data_iteration": report.full_data_iteration,
             "full_data_failed": report.full_data_failed,
+            "final_budget": report.final_budget,
+            "final_budgets": report.final_budgets,
             "chosen_recipe": report.chosen_recipe,
             "recipes": report.recipes,
             "calibration": report.calibration,
@@ -318,7 +330,29 @@ pub fn kept(report: &FitReport) -> String {
         ),
         (None, None, _) => format!("kept iteration {}", report.best_iteration),
     };
-    kept + &set_aside
+    kept + &budget(report) + &set_aside
+}
+
+/// How long the final training was, where the proxy chose it
+/// ([`msgp_core::fit::MsgpSettings::choose_final_budget`]); empty otherwise.
+fn budget(report: &FitReport) -> String {
+    let Some(chosen) = report.final_budget else {
+        return String::new();
+    };
+    let scores: Vec<String> = report
+        .final_budgets
+        .iter()
+        .map(|(n, r)| match r {
+            Some(r) => format!("{n}: {r:.3}"),
+            None => format!("{n}: failed"),
+        })
+        .collect();
+    format!(
+        "; its length, {chosen} iterations, chosen by the proxy of each length (the same \
+         training on the head) simulating the validation tail, a shorter one only where its \
+         RMSE is at least 10 % lower (normalised: {})",
+        scores.join(", ")
+    )
 }
 
 /// The output-variance calibration of an MSGP fit, in words ([`msgp_core::fit::calibration`]);

@@ -23,7 +23,7 @@ pub use settings::{
     DEFAULT_FULL_DATA_BLOW_UP, DEFAULT_FULL_DATA_ITERATIONS, DEFAULT_MAX_INDUCING,
     DEFAULT_ONE_STEP_ITERATIONS, FIT_LBFGS, FitOptimizer, FitOptions, FitSettings, LINEAR_RECIPE,
     LinearKfSettings, MethodSettings, MsgpSettings, MsgpStart, NoiseStart, OneStepFitSettings,
-    OneStepObjective, OneStepSolver, Recipe,
+    OneStepObjective, OneStepSolver, Recipe, SHORTEST_FINAL_BUDGET, final_budgets,
 };
 
 use std::ops::ControlFlow;
@@ -101,6 +101,15 @@ pub struct FitReport {
     /// the head is returned then).
     #[serde(default)]
     pub full_data_failed: Option<String>,
+    /// MSGP with [`MsgpSettings::choose_final_budget`]: the length of the final training
+    /// chosen (`None` where no choice was made: no final training kept, or no proxy).
+    #[serde(default)]
+    pub final_budget: Option<usize>,
+    /// … and each length considered, longest first, with the free-simulation RMSE of the
+    /// validation tail (pooled over the outputs, normalised units) under the proxy trained for
+    /// as long (`None` where that simulation failed).
+    #[serde(default)]
+    pub final_budgets: Vec<(usize, Option<f64>)>,
     /// MSGP with the final training and [`MsgpSettings::calibrate`]: the output-variance
     /// calibration of the returned model ([`calibration`]).
     #[serde(default)]

@@ -33,7 +33,7 @@ use super::linear_kf::{KF_NOISE_FLOOR, fit_linear_kf};
 use super::one_step::{OneStepSettings, column_std, fit_one_step, one_step_pairs};
 use super::{
     FIT_LBFGS, FitOptimizer, FitProgress, FitReport, FitSettings, MsgpSettings, MsgpStart,
-    NoiseStart, RecipeOutcome, TrainingEpisode,
+    NoiseStart, RecipeOutcome, TrainingEpisode, final_budgets,
 };
 use crate::data::{Normalizer, Trajectory};
 use crate::error::{MsgpError, Result};
@@ -49,7 +49,7 @@ use crate::narx::NarxSpec;
 use crate::numeric::linalg::JitterLog;
 use crate::numeric::parallel::Threads;
 use crate::optim::{Adam, Flow, Objective, Solver, minimize};
-use crate::rollout::{Episode, Excitation};
+use crate::rollout::{Episode, Excitation, simulate_correlated};
 use nalgebra::{DMatrix, DVector};
 
 /// The MSGP fit of normalised trajectories `norm` (the `episodes`' own, in order), from the
@@ -123,8 +123,9 @@ pub(super) fn fit_msgp(
     } else {
         Vec::new()
     };
-    // the proxy of the final training, for the calibration (only with the final training)
-    let proxy_iterations = final_iterations.filter(|_| msgp.calibrate);
+    // the proxy of the final training, for the calibration and the choice of the final
+    // training's length (only with the final training)
+    let proxy_iterations = final_iterations.filter(|_| msgp.calibrate || msgp.choose_final_budget);
     // each recipe's start on the head (the proxy starts from it)
     let starts: Mutex<Vec<Option<GpParams<f64>>>> = Mutex::new(vec![None; recipes.len()]);
     // set when the user stops the fit: stops whatever trains on another thread
@@ -150,6 +151,8 @@ pub(super) fn fit_msgp(
             start,
             progress,
             report,
+            checkpoints: Vec::new(),
+            snapshots: Vec::new(),
         };
         let stage_number = if k == 0 { 1 } else { 3 };
         let mut head_start = None;
@@ -179,6 +182,12 @@ pub(super) fn fit_msgp(
                           progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>|
      -> FinalTraining {
         let recipe = &recipes[k];
+        let n = iterations.min(recipe.iterations);
+        let checkpoints = if recipe.choose_final_budget {
+            final_budgets(n)
+        } else {
+            Vec::new()
+        };
         let mut own = FitReport::default();
         let mut stage = Stage {
             spec,
@@ -188,13 +197,14 @@ pub(super) fn fit_msgp(
             start,
             progress,
             report: &mut own,
+            checkpoints: checkpoints.to_vec(),
+            snapshots: Vec::new(),
         };
         let init = match init {
             Some(init) => Ok(init),
             None => stage.start_params(episodes, one_step),
         };
         let trained = init.and_then(|init| {
-            let n = iterations.min(recipe.iterations);
             stage.train(
                 init,
                 episodes,
@@ -204,6 +214,7 @@ pub(super) fn fit_msgp(
                 Some(recipe.full_data_blow_up),
             )
         });
+        let raw = std::mem::take(&mut stage.snapshots);
         let outcome = match trained {
             // a blow-up: the head's model stands (`train` wrote why into the report)
             Ok(_) if own.full_data_failed.is_some() => Ok(None),
@@ -215,10 +226,21 @@ pub(super) fn fit_msgp(
                 Ok(None)
             }
         };
+        // (the snapshots of a training that completed)
+        let shape = match &outcome {
+            Ok(Some((params, _))) => params.shape().ok(),
+            _ => None,
+        };
+        let snapshots = shape.map_or_else(Vec::new, |shape| {
+            raw.iter()
+                .filter_map(|(b, x, it)| Some((*b, GpParams::from_flat(shape, x).ok()?, *it)))
+                .collect()
+        });
         FinalTraining {
             recipe: k,
             outcome,
             report: own,
+            snapshots,
         }
     };
     // recipe `k` once more, from its start on all the training data
@@ -246,6 +268,7 @@ pub(super) fn fit_msgp(
                     recipe: k,
                     outcome: Ok(None),
                     report: FitReport::default(),
+                    snapshots: Vec::new(),
                 },
             }
         };
@@ -516,6 +539,26 @@ pub(super) fn fit_msgp(
                 report.numerical_stop = trained.report.numerical_stop;
             }
             if let Some((params, iteration)) = trained.outcome? {
+                // how long the final training is: the length whose proxy simulates the tail best
+                // (`MsgpSettings::choose_final_budget`)
+                let (params, iteration, budgets) = match proxy.as_mut() {
+                    Some(p) if !trained.snapshots.is_empty() => {
+                        let config = config_of(&recipes[c]);
+                        match choose_budget(&trained.snapshots, p, &config, &spec, &tails)? {
+                            Some((chosen, budgets)) => {
+                                let kept = trained.snapshots.iter().find(|s| s.0 == chosen);
+                                match kept {
+                                    Some((_, params, iteration)) => {
+                                        (params.clone(), *iteration, (Some(chosen), budgets))
+                                    }
+                                    None => (params, iteration, (None, Vec::new())),
+                                }
+                            }
+                            None => (params, iteration, (None, Vec::new())),
+                        }
+                    }
+                    _ => (params, iteration, (None, Vec::new())),
+                };
                 // a final model that diverges over the training inputs gives way to the racing
                 // heads not yet tried, in the tail's order; where each of them diverges too,
                 // the first diverging model stands
@@ -540,6 +583,7 @@ pub(super) fn fit_msgp(
                             best_iteration,
                             iteration,
                             proxy,
+                            budgets,
                         ));
                         proxy = None;
                         candidates.extend(untried);
@@ -549,7 +593,15 @@ pub(super) fn fit_msgp(
                     // (the first set aside stands, below)
                     Some(_) if set_aside.is_some() => {}
                     _ => {
-                        accepted = Some((c, params, head, best_iteration, iteration, proxy.take()))
+                        accepted = Some((
+                            c,
+                            params,
+                            head,
+                            best_iteration,
+                            iteration,
+                            proxy.take(),
+                            budgets,
+                        ))
                     }
                 }
                 break;
@@ -601,8 +653,9 @@ pub(super) fn fit_msgp(
             report.recipes.iter_mut().for_each(|r| r.diverged = None);
             accepted = set_aside;
         }
-        if let Some((c, params, head, best_iteration, iteration, kept_proxy)) = accepted {
+        if let Some((c, params, head, best_iteration, iteration, kept_proxy, budgets)) = accepted {
             proxy = kept_proxy;
+            (report.final_budget, report.final_budgets) = budgets;
             k = c;
             chosen = params;
             head_model = head;
@@ -634,15 +687,16 @@ pub(super) fn fit_msgp(
     let config = config_of(&recipes[k]);
     // the calibration: the proxy judges the final training's model, the head's model itself
     let mut calibration = Vec::new();
-    if proxy_iterations.is_some() {
-        let proxy_outcome = match proxy {
-            Some(p) if report.full_data_iteration.is_some() => {
-                report.iterations_run += p.report.iterations_run;
-                report.jitter.merge(&p.report.jitter);
-                p.outcome?
-            }
-            _ => None,
-        };
+    // (a proxy counts where the final training it stands for is the model)
+    let proxy_outcome = match proxy {
+        Some(p) if report.full_data_iteration.is_some() => {
+            report.iterations_run += p.report.iterations_run;
+            report.jitter.merge(&p.report.jitter);
+            p.outcome?
+        }
+        _ => None,
+    };
+    if proxy_iterations.is_some() && msgp.calibrate {
         let (params, judge) = match (report.full_data_iteration, proxy_outcome) {
             (Some(_), Some((params, iteration))) => (params, Judge::Proxy { iteration }),
             // the head's model stands: its own training, cross-validated, judges it
@@ -658,6 +712,8 @@ pub(super) fn fit_msgp(
                     start,
                     progress: &mut *progress,
                     report: &mut own,
+                    checkpoints: Vec::new(),
+                    snapshots: Vec::new(),
                 };
                 let trained = if inner_tails.is_empty() {
                     None
@@ -752,6 +808,101 @@ fn split_tails(episodes: &[Episode], fraction: f64, warmup: usize) -> (Vec<Episo
     (heads, tails)
 }
 
+/// The length of the final training ([`MsgpSettings::choose_final_budget`]) among those both
+/// it and its `proxy` reached, by [`shorter_if_clearly_better`] on the free simulations of the
+/// validation `tails` (normalised) by the proxy's iterates; the proxy's outcome becomes the
+/// chosen length's iterate. Returns that length with every length's tail RMSE (longest first;
+/// `None` where the simulation failed), or `None` where the longest length's failed.
+fn choose_budget(
+    snapshots: &[(usize, GpParams<f64>, usize)],
+    proxy: &mut FinalTraining,
+    config: &GpConfig,
+    spec: &NarxSpec,
+    tails: &[Episode],
+) -> Result<Option<(usize, Vec<(usize, Option<f64>)>)>> {
+    let mut scored = Vec::new();
+    for (budget, params, iteration) in proxy.snapshots.iter().rev() {
+        if !snapshots.iter().any(|s| s.0 == *budget) {
+            continue;
+        }
+        let errors = match tail_errors(params, config, spec, tails) {
+            Ok(e) => Some(e),
+            Err(MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_)) => None,
+            Err(e) => return Err(e),
+        };
+        scored.push((*budget, errors, params, *iteration));
+    }
+    let candidates: Vec<Option<&[f64]>> = scored.iter().map(|s| s.1.as_deref()).collect();
+    let Some(k) = shorter_if_clearly_better(&candidates) else {
+        return Ok(None);
+    };
+    let (budget, _, params, iteration) = &scored[k];
+    proxy.outcome = Ok(Some(((*params).clone(), *iteration)));
+    let rmse = |e: &[f64]| (e.iter().sum::<f64>() / e.len() as f64).sqrt();
+    let budgets = scored
+        .iter()
+        .map(|s| (s.0, s.1.as_deref().map(rmse)))
+        .collect();
+    Ok(Some((*budget, budgets)))
+}
+
+/// How much lower a shorter final training's tail RMSE must be than the longest's to replace
+/// it in [`shorter_if_clearly_better`]: by 10 %.
+pub const CLEARLY_BETTER: f64 = 0.1;
+
+/// Which of the candidates — each a sequence of squared errors of the same tail steps, the
+/// longest training first, `None` where its simulation failed — is chosen: the one of lowest
+/// RMSE among the first and those whose RMSE is at least [`CLEARLY_BETTER`] below the
+/// first's; the first where none is. The longest training is the protocol's default, chosen
+/// on the training data of every row; a short tail that chooses among several close
+/// candidates chooses its own noise, so a shorter one replaces it only by a clear margin
+/// (`docs/design.md`, "How long the final training is"). `None` where the first failed.
+fn shorter_if_clearly_better(candidates: &[Option<&[f64]>]) -> Option<usize> {
+    let rmse = |e: &[f64]| (e.iter().sum::<f64>() / e.len().max(1) as f64).sqrt();
+    let first = (*candidates.first()?)?;
+    let bar = (1.0 - CLEARLY_BETTER) * rmse(first);
+    let mut chosen = (0, rmse(first));
+    for (k, c) in candidates.iter().enumerate().skip(1) {
+        let Some(e) = c.filter(|e| !e.is_empty()) else {
+            continue;
+        };
+        let r = rmse(e);
+        if r <= bar && r < chosen.1 {
+            chosen = (k, r);
+        }
+    }
+    Some(chosen.0)
+}
+
+/// The squared errors of the free simulation of the feed-forward `tails` (normalised units;
+/// per step and output, in order) under the model of `params`.
+fn tail_errors(
+    params: &GpParams<f64>,
+    config: &GpConfig,
+    spec: &NarxSpec,
+    tails: &[Episode],
+) -> Result<Vec<f64>> {
+    let mut log = JitterLog::default();
+    let gp = PreparedGp::new(params, config, &mut log)?;
+    let mut errors = Vec::new();
+    for tail in tails {
+        let traj = &tail.traj;
+        let steps = simulate_correlated(&gp, spec, traj, traj.len(), &mut log)?;
+        for (i, s) in steps.iter().enumerate() {
+            for j in 0..spec.dy {
+                let r = traj.y[(spec.warmup() + i, j)] - s.mean[j];
+                errors.push(r * r);
+            }
+        }
+    }
+    if errors.is_empty() || errors.iter().any(|e| !e.is_finite()) {
+        return Err(MsgpError::NonFinite(
+            "the validation tail's simulation".into(),
+        ));
+    }
+    Ok(errors)
+}
+
 /// The final training on all the data of one recipe, or its proxy on the head
 /// ([`calibration`]): its outcome (the parameters and iteration kept; `None` where it blew up
 /// or failed numerically — the head's model standing — or the proxy had no start) and the
@@ -760,6 +911,9 @@ struct FinalTraining {
     recipe: usize,
     outcome: Result<Option<(GpParams<f64>, usize)>>,
     report: FitReport,
+    /// With [`MsgpSettings::choose_final_budget`], where it completed: at each length of
+    /// [`final_budgets`] reached, `(length, its iterate of lowest loss so far, that iterate)`.
+    snapshots: Vec<(usize, GpParams<f64>, usize)>,
 }
 
 /// What the first recipe's thread knows of the second recipe's head while both train side by
@@ -1007,6 +1161,12 @@ struct Stage<'a, 'p> {
     start: Instant,
     progress: &'p mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
     report: &'a mut FitReport,
+    /// Iterations at which a training without a validation tail keeps a snapshot of its
+    /// iterate of lowest loss so far, into `snapshots` (the final training and its proxy, for
+    /// [`MsgpSettings::choose_final_budget`]).
+    checkpoints: Vec<usize>,
+    /// `(checkpoint, flat parameters, their iteration)`, in the order reached.
+    snapshots: Vec<(usize, Vec<f64>, usize)>,
 }
 
 impl Stage<'_, '_> {
@@ -1200,6 +1360,8 @@ impl Stage<'_, '_> {
             FitOptimizer::Lbfgs => 1,
         };
         let mut best: (f64, Vec<f64>, usize) = (f64::INFINITY, init.to_flat(), 0);
+        let checkpoints = std::mem::take(&mut self.checkpoints);
+        let mut snapshots = Vec::new();
         let mut blow_up = blow_up.map(BlowUp::new);
         let mut since_best = 0usize;
         let mut good: Option<(Vec<f64>, usize)> = None;
@@ -1225,6 +1387,9 @@ impl Stage<'_, '_> {
                 // 2.7 nats per step on the loop's data), for tens of iterations, also at the last
                 if tails.is_empty() && loss < best.0 {
                     best = (loss, x.to_vec(), it);
+                }
+                if tails.is_empty() && best.0.is_finite() && checkpoints.contains(&it) {
+                    snapshots.push((it, best.1.clone(), best.2));
                 }
                 if let (true, Some(watch)) = (tails.is_empty(), blow_up.as_mut())
                     && let Some(why) = watch.observe(it, loss)
@@ -1266,6 +1431,8 @@ impl Stage<'_, '_> {
             },
         )?;
         report.jitter.merge(&objective.log);
+        self.checkpoints = checkpoints;
+        self.snapshots = snapshots;
         if let Some(iteration) = stopped {
             return Err(MsgpError::Stopped { iteration });
         }
@@ -1291,6 +1458,54 @@ impl Stage<'_, '_> {
             (None, _) => (best.1, best.2),
         };
         Ok((GpParams::from_flat(shape, &x)?, it, validation))
+    }
+}
+
+#[cfg(test)]
+mod budget_tests {
+    use super::{CLEARLY_BETTER, shorter_if_clearly_better};
+
+    /// `n` squared errors whose RMSE is `rmse`.
+    fn errors(n: usize, rmse: f64) -> Vec<f64> {
+        let w: Vec<f64> = (0..n).map(|t| 1.0 + 0.5 * (t as f64).sin()).collect();
+        let mean = w.iter().sum::<f64>() / n as f64;
+        w.iter().map(|x| rmse * rmse * x / mean).collect()
+    }
+
+    #[test]
+    fn a_shorter_training_replaces_the_longest_only_where_clearly_better() {
+        let rmse = |e: &[f64]| (e.iter().sum::<f64>() / e.len() as f64).sqrt();
+        let longest = errors(100, 1.0);
+        assert!((rmse(&longest) - 1.0).abs() < 1e-12);
+        let margin = 1.0 - CLEARLY_BETTER;
+        let clearly = errors(100, margin - 1e-9);
+        let barely = errors(100, margin + 1e-9);
+        assert_eq!(
+            shorter_if_clearly_better(&[Some(&longest), Some(&clearly)]),
+            Some(1)
+        );
+        assert_eq!(
+            shorter_if_clearly_better(&[Some(&longest), Some(&barely)]),
+            Some(0)
+        );
+        // among the clearly better ones, the lowest; failed and worse ones are passed over
+        let best = errors(100, 0.5);
+        let worse = errors(100, 1.5);
+        assert_eq!(
+            shorter_if_clearly_better(&[Some(&longest), Some(&clearly), None, Some(&best)]),
+            Some(3)
+        );
+        assert_eq!(
+            shorter_if_clearly_better(&[Some(&longest), Some(&best), Some(&clearly)]),
+            Some(1)
+        );
+        assert_eq!(
+            shorter_if_clearly_better(&[Some(&longest), Some(&worse), Some(&barely)]),
+            Some(0)
+        );
+        // the longest failed: no choice
+        assert_eq!(shorter_if_clearly_better(&[None, Some(&clearly)]), None);
+        assert_eq!(shorter_if_clearly_better(&[]), None);
     }
 }
 

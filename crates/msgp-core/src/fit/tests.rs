@@ -595,6 +595,7 @@ fn settings_serialise_with_the_methods_own_keys() {
     msgp_1_2.push("calibrate");
     msgp_1_2.push("blow_up_fallback");
     msgp_1_2.push("full_data_blow_up");
+    msgp_1_2.push("choose_final_budget");
     assert_eq!(keys(&FitSettings::new(Method::Msgp)), with(&msgp_1_2));
     for m in [Method::GpNarx, Method::PilcoNarx] {
         assert_eq!(
@@ -1179,6 +1180,99 @@ fn the_chosen_recipe_trains_again_on_all_the_data() {
     )
     .expect("L-BFGS fit");
     assert_eq!((r.full_data_iteration, r.full_data_failed), (None, None));
+}
+
+/// The final training is as long as its proxy (the same recipe on the head) says, among the
+/// halvings of its iterations down to 50 (here 100: its proxy simulates the validation tail
+/// with an RMSE 28 % below the whole length's); the model is then bit for bit the recipe's
+/// training alone on all the data for that long, and its proxy's iterate at that length
+/// judges the calibration. Off, the whole length.
+#[test]
+fn the_final_training_is_as_long_as_its_proxy_simulates_the_tail_best() {
+    const FINAL: usize = 200;
+    let traj = long_memory_plant(0.1);
+    let msgp = |choose: bool| MsgpSettings {
+        inducing: 12,
+        iterations: FINAL,
+        validation_fraction: 0.2,
+        full_data_iterations: Some(FINAL),
+        choose_final_budget: choose,
+        ..MsgpSettings::default()
+    };
+    let settings = |m: MsgpSettings| ly2_lu1(Threads::default(), m);
+    let alone = |recipe: Recipe, iterations: usize| {
+        let m = MsgpSettings {
+            iterations,
+            validation_fraction: 0.0,
+            full_data_iterations: None,
+            alternative: None,
+            ..msgp(false).with_recipe(recipe)
+        };
+        fit(std::slice::from_ref(&traj), &settings(m), &mut |_| {})
+            .expect("fit alone")
+            .0
+    };
+    assert_eq!(final_budgets(FINAL), [200, 100, 50]);
+    assert_eq!(final_budgets(400), [400, 200, 100, 50]);
+    assert_eq!(final_budgets(99), [99]);
+    assert_eq!(final_budgets(30), [30]);
+
+    let (model, r) = fit(
+        std::slice::from_ref(&traj),
+        &settings(msgp(true)),
+        &mut |_| {},
+    )
+    .expect("fit");
+    let lengths: Vec<usize> = r.final_budgets.iter().map(|b| b.0).collect();
+    assert_eq!(lengths, [200, 100, 50], "{r:?}");
+    let scores: Vec<f64> = r
+        .final_budgets
+        .iter()
+        .map(|b| b.1.expect("every proxy simulated the tail"))
+        .collect();
+    assert!(
+        scores.iter().all(|s| s.is_finite() && *s > 0.0),
+        "{scores:?}"
+    );
+    // the longest, or the lowest of those at least 10 % below it; here a shorter one
+    let chosen = r.final_budget.expect("a length was chosen");
+    eprintln!("final budgets {:?}, chosen {chosen}", r.final_budgets);
+    let expected = (1..scores.len())
+        .filter(|&k| scores[k] <= 0.9 * scores[0])
+        .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))
+        .map_or(lengths[0], |k| lengths[k]);
+    assert_eq!(chosen, expected, "{scores:?}");
+    assert_ne!(
+        chosen, FINAL,
+        "the test asks for a shorter length: {scores:?}"
+    );
+    let recipe = r.recipes[r.chosen_recipe].recipe;
+    let kept = r.full_data_iteration.expect("the final training ran");
+    assert!(kept <= chosen, "{kept} > {chosen}");
+    assert_eq!(model.params, alone(recipe, chosen).params);
+    match r.calibration.as_ref().map(|c| c.judge) {
+        Some(calibration::Judge::Proxy { iteration }) => assert!(iteration <= chosen),
+        other => panic!("the proxy judges the calibration: {other:?}"),
+    }
+    // the scores differ between lengths: the choice is not the default by construction
+    assert!(
+        scores.iter().any(|s| *s != scores[0]),
+        "the proxies simulate the tail alike: {scores:?}"
+    );
+
+    // off: the whole length, and no choice recorded
+    let (whole, r_off) = fit(
+        std::slice::from_ref(&traj),
+        &settings(msgp(false)),
+        &mut |_| {},
+    )
+    .expect("fit");
+    assert!(r_off.final_budgets.is_empty());
+    assert_eq!(r_off.chosen_recipe, r.chosen_recipe);
+    assert_eq!(whole.params, alone(recipe, FINAL).params);
+    if chosen != FINAL {
+        assert_ne!(whole.params, model.params);
+    }
 }
 
 /// `Model::filter_nll` in original units: for one output the joint density factors into the
