@@ -350,7 +350,8 @@ fn budget(report: &FitReport) -> String {
     format!(
         "; its length, {chosen} iterations, chosen by the proxy of each length (the same \
          training on the head) simulating the validation tail, a shorter one only where its \
-         RMSE is at least 10 % lower (normalised: {})",
+         RMSE is at least {:.0} % lower (normalised: {})",
+        100.0 * msgp_core::fit::CLEARLY_BETTER,
         scores.join(", ")
     )
 }

@@ -32,8 +32,8 @@ use super::divergence::check_divergence;
 use super::linear_kf::{KF_NOISE_FLOOR, fit_linear_kf};
 use super::one_step::{OneStepSettings, column_std, fit_one_step, one_step_pairs};
 use super::{
-    FIT_LBFGS, FitOptimizer, FitProgress, FitReport, FitSettings, MsgpSettings, MsgpStart,
-    NoiseStart, RecipeOutcome, TrainingEpisode, final_budgets,
+    CLEARLY_BETTER, FIT_LBFGS, FitOptimizer, FitProgress, FitReport, FitSettings, MsgpSettings,
+    MsgpStart, NoiseStart, RecipeOutcome, TrainingEpisode, final_budgets,
 };
 use crate::data::{Normalizer, Trajectory};
 use crate::error::{MsgpError, Result};
@@ -197,7 +197,7 @@ pub(super) fn fit_msgp(
             start,
             progress,
             report: &mut own,
-            checkpoints: checkpoints.to_vec(),
+            checkpoints,
             snapshots: Vec::new(),
         };
         let init = match init {
@@ -539,26 +539,23 @@ pub(super) fn fit_msgp(
                 report.numerical_stop = trained.report.numerical_stop;
             }
             if let Some((params, iteration)) = trained.outcome? {
-                // how long the final training is: the length whose proxy simulates the tail best
+                // how long the final training is, where its proxy says so: the whole length
+                // unless a shorter one's proxy simulates the tail clearly better
                 // (`MsgpSettings::choose_final_budget`)
-                let (params, iteration, budgets) = match proxy.as_mut() {
+                let choice = match proxy.as_mut() {
                     Some(p) if !trained.snapshots.is_empty() => {
                         let config = config_of(&recipes[c]);
-                        match choose_budget(&trained.snapshots, p, &config, &spec, &tails)? {
-                            Some((chosen, budgets)) => {
-                                let kept = trained.snapshots.iter().find(|s| s.0 == chosen);
-                                match kept {
-                                    Some((_, params, iteration)) => {
-                                        (params.clone(), *iteration, (Some(chosen), budgets))
-                                    }
-                                    None => (params, iteration, (None, Vec::new())),
-                                }
-                            }
-                            None => (params, iteration, (None, Vec::new())),
-                        }
+                        choose_budget(&trained.snapshots, p, &config, &spec, &tails)?
                     }
-                    _ => (params, iteration, (None, Vec::new())),
+                    _ => None,
                 };
+                let kept = choice.and_then(|(length, budgets)| {
+                    let (_, params, iteration) =
+                        trained.snapshots.iter().find(|s| s.0 == length)?;
+                    Some((params.clone(), *iteration, (Some(length), budgets)))
+                });
+                let (params, iteration, budgets) =
+                    kept.unwrap_or((params, iteration, (None, Vec::new())));
                 // a final model that diverges over the training inputs gives way to the racing
                 // heads not yet tried, in the tail's order; where each of them diverges too,
                 // the first diverging model stands
@@ -808,6 +805,10 @@ fn split_tails(episodes: &[Episode], fraction: f64, warmup: usize) -> (Vec<Episo
     (heads, tails)
 }
 
+/// A length of the final training and its proxy's RMSE on the validation tail (`None` where
+/// its simulation failed): [`FitReport::final_budgets`].
+type LengthScore = (usize, Option<f64>);
+
 /// The length of the final training ([`MsgpSettings::choose_final_budget`]) among those both
 /// it and its `proxy` reached, by [`shorter_if_clearly_better`] on the free simulations of the
 /// validation `tails` (normalised) by the proxy's iterates; the proxy's outcome becomes the
@@ -819,7 +820,7 @@ fn choose_budget(
     config: &GpConfig,
     spec: &NarxSpec,
     tails: &[Episode],
-) -> Result<Option<(usize, Vec<(usize, Option<f64>)>)>> {
+) -> Result<Option<(usize, Vec<LengthScore>)>> {
     let mut scored = Vec::new();
     for (budget, params, iteration) in proxy.snapshots.iter().rev() {
         if !snapshots.iter().any(|s| s.0 == *budget) {
@@ -845,10 +846,6 @@ fn choose_budget(
         .collect();
     Ok(Some((*budget, budgets)))
 }
-
-/// How much lower a shorter final training's tail RMSE must be than the longest's to replace
-/// it in [`shorter_if_clearly_better`]: by 10 %.
-pub const CLEARLY_BETTER: f64 = 0.1;
 
 /// Which of the candidates — each a sequence of squared errors of the same tail steps, the
 /// longest training first, `None` where its simulation failed — is chosen: the one of lowest
