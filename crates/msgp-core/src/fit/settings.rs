@@ -175,8 +175,8 @@ pub fn final_budgets(iterations: usize) -> Vec<usize> {
 /// How much lower a shorter final training's proxy must put the validation tail's RMSE than
 /// the whole length's proxy to replace it ([`MsgpSettings::choose_final_budget`]): by 10 %. Set
 /// after seeing Table 1's test figures: actuator's shorter lengths were 22–39 % lower, while
-/// the fits a shorter length made worse were 1–5 % lower (`docs/design.md`, "How long the final
-/// training is").
+/// all but one of the fits a shorter length made worse were 1–5 % lower (`docs/design.md`,
+/// "How long the final training is").
 pub const CLEARLY_BETTER: f64 = 0.1;
 
 /// The shortest final training [`MsgpSettings::choose_final_budget`] considers: 50 Adam steps.
