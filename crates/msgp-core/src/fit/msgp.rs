@@ -49,7 +49,7 @@ use crate::narx::NarxSpec;
 use crate::numeric::linalg::JitterLog;
 use crate::numeric::parallel::Threads;
 use crate::optim::{Adam, Flow, Objective, Solver, minimize};
-use crate::rollout::{Episode, Excitation, simulate_correlated};
+use crate::rollout::{Control, Episode, Excitation, simulate};
 use nalgebra::{DMatrix, DVector};
 
 /// The MSGP fit of normalised trajectories `norm` (the `episodes`' own, in order), from the
@@ -826,78 +826,74 @@ fn choose_budget(
         if !snapshots.iter().any(|s| s.0 == *budget) {
             continue;
         }
-        let errors = match tail_errors(params, config, spec, tails) {
-            Ok(e) => Some(e),
+        let rmse = match tail_rmse(params, config, spec, tails) {
+            Ok(r) => Some(r),
             Err(MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_)) => None,
             Err(e) => return Err(e),
         };
-        scored.push((*budget, errors, params, *iteration));
+        scored.push((*budget, rmse, params, *iteration));
     }
-    let candidates: Vec<Option<&[f64]>> = scored.iter().map(|s| s.1.as_deref()).collect();
-    let Some(k) = shorter_if_clearly_better(&candidates) else {
+    let rmses: Vec<Option<f64>> = scored.iter().map(|s| s.1).collect();
+    let Some(k) = shorter_if_clearly_better(&rmses) else {
         return Ok(None);
     };
     let (budget, _, params, iteration) = &scored[k];
     proxy.outcome = Ok(Some(((*params).clone(), *iteration)));
-    let rmse = |e: &[f64]| (e.iter().sum::<f64>() / e.len() as f64).sqrt();
-    let budgets = scored
-        .iter()
-        .map(|s| (s.0, s.1.as_deref().map(rmse)))
-        .collect();
+    let budgets = scored.iter().map(|s| (s.0, s.1)).collect();
     Ok(Some((*budget, budgets)))
 }
 
-/// Which of the candidates — each a sequence of squared errors of the same tail steps, the
-/// longest training first, `None` where its simulation failed — is chosen: the one of lowest
-/// RMSE among the first and those whose RMSE is at least [`CLEARLY_BETTER`] below the
-/// first's; the first where none is. The longest training is the protocol's default, chosen
-/// on the training data of every row; a short tail that chooses among several close
-/// candidates chooses its own noise, so a shorter one replaces it only by a clear margin
-/// (`docs/design.md`, "How long the final training is"). `None` where the first failed.
-fn shorter_if_clearly_better(candidates: &[Option<&[f64]>]) -> Option<usize> {
-    let rmse = |e: &[f64]| (e.iter().sum::<f64>() / e.len().max(1) as f64).sqrt();
-    let first = (*candidates.first()?)?;
-    let bar = (1.0 - CLEARLY_BETTER) * rmse(first);
-    let mut chosen = (0, rmse(first));
-    for (k, c) in candidates.iter().enumerate().skip(1) {
-        let Some(e) = c.filter(|e| !e.is_empty()) else {
-            continue;
-        };
-        let r = rmse(e);
-        if r <= bar && r < chosen.1 {
+/// Which of the candidates' tail RMSEs — the longest training first, `None` where its
+/// simulation failed — is chosen: the lowest among the first and those at least
+/// [`CLEARLY_BETTER`] below the first; the first where none is. The longest training is the
+/// protocol's default, chosen on the training data of every row; a short tail that chooses
+/// among several close candidates chooses its own noise, so a shorter one replaces it only by a
+/// clear margin (`docs/design.md`, "How long the final training is"). `None` where the first
+/// failed.
+fn shorter_if_clearly_better(rmses: &[Option<f64>]) -> Option<usize> {
+    let first = (*rmses.first()?)?;
+    let bar = (1.0 - CLEARLY_BETTER) * first;
+    let mut chosen = (0, first);
+    for (k, r) in rmses.iter().enumerate().skip(1) {
+        if let Some(r) = *r
+            && r <= bar
+            && r < chosen.1
+        {
             chosen = (k, r);
         }
     }
     Some(chosen.0)
 }
 
-/// The squared errors of the free simulation of the feed-forward `tails` (normalised units;
-/// per step and output, in order) under the model of `params`.
-fn tail_errors(
+/// The RMSE of the moment-matching free simulation of the feed-forward `tails` (normalised
+/// units, pooled over their steps and outputs) under the model of `params`: its means only,
+/// which the correlated variances of a reported simulation do not move.
+fn tail_rmse(
     params: &GpParams<f64>,
     config: &GpConfig,
     spec: &NarxSpec,
     tails: &[Episode],
-) -> Result<Vec<f64>> {
+) -> Result<f64> {
     let mut log = JitterLog::default();
     let gp = PreparedGp::new(params, config, &mut log)?;
-    let mut errors = Vec::new();
+    let (mut sum, mut count) = (0.0, 0usize);
     for tail in tails {
         let traj = &tail.traj;
-        let steps = simulate_correlated(&gp, spec, traj, traj.len(), &mut log)?;
+        let steps = simulate(&gp, spec, traj, &Control::FeedForward, traj.len(), &mut log)?;
         for (i, s) in steps.iter().enumerate() {
             for j in 0..spec.dy {
                 let r = traj.y[(spec.warmup() + i, j)] - s.mean[j];
-                errors.push(r * r);
+                sum += r * r;
+                count += 1;
             }
         }
     }
-    if errors.is_empty() || errors.iter().any(|e| !e.is_finite()) {
+    if count == 0 || !sum.is_finite() {
         return Err(MsgpError::NonFinite(
             "the validation tail's simulation".into(),
         ));
     }
-    Ok(errors)
+    Ok((sum / count as f64).sqrt())
 }
 
 /// The final training on all the data of one recipe, or its proxy on the head
@@ -1462,46 +1458,37 @@ impl Stage<'_, '_> {
 mod budget_tests {
     use super::{CLEARLY_BETTER, shorter_if_clearly_better};
 
-    /// `n` squared errors whose RMSE is `rmse`.
-    fn errors(n: usize, rmse: f64) -> Vec<f64> {
-        let w: Vec<f64> = (0..n).map(|t| 1.0 + 0.5 * (t as f64).sin()).collect();
-        let mean = w.iter().sum::<f64>() / n as f64;
-        w.iter().map(|x| rmse * rmse * x / mean).collect()
-    }
-
     #[test]
     fn a_shorter_training_replaces_the_longest_only_where_clearly_better() {
-        let rmse = |e: &[f64]| (e.iter().sum::<f64>() / e.len() as f64).sqrt();
-        let longest = errors(100, 1.0);
-        assert!((rmse(&longest) - 1.0).abs() < 1e-12);
+        let longest = 1.0;
         let margin = 1.0 - CLEARLY_BETTER;
-        let clearly = errors(100, margin - 1e-9);
-        let barely = errors(100, margin + 1e-9);
+        let clearly = margin - 1e-9;
+        let barely = margin + 1e-9;
         assert_eq!(
-            shorter_if_clearly_better(&[Some(&longest), Some(&clearly)]),
+            shorter_if_clearly_better(&[Some(longest), Some(clearly)]),
             Some(1)
         );
         assert_eq!(
-            shorter_if_clearly_better(&[Some(&longest), Some(&barely)]),
+            shorter_if_clearly_better(&[Some(longest), Some(barely)]),
             Some(0)
         );
         // among the clearly better ones, the lowest; failed and worse ones are passed over
-        let best = errors(100, 0.5);
-        let worse = errors(100, 1.5);
+        let best = 0.5;
+        let worse = 1.5;
         assert_eq!(
-            shorter_if_clearly_better(&[Some(&longest), Some(&clearly), None, Some(&best)]),
+            shorter_if_clearly_better(&[Some(longest), Some(clearly), None, Some(best)]),
             Some(3)
         );
         assert_eq!(
-            shorter_if_clearly_better(&[Some(&longest), Some(&best), Some(&clearly)]),
+            shorter_if_clearly_better(&[Some(longest), Some(best), Some(clearly)]),
             Some(1)
         );
         assert_eq!(
-            shorter_if_clearly_better(&[Some(&longest), Some(&worse), Some(&barely)]),
+            shorter_if_clearly_better(&[Some(longest), Some(worse), Some(barely)]),
             Some(0)
         );
         // the longest failed: no choice
-        assert_eq!(shorter_if_clearly_better(&[None, Some(&clearly)]), None);
+        assert_eq!(shorter_if_clearly_better(&[None, Some(clearly)]), None);
         assert_eq!(shorter_if_clearly_better(&[]), None);
     }
 }
