@@ -5,8 +5,9 @@
 //! [complexity] [noise] [lr=F] [lbfgs=true] [every=N] [patience=N] [valfrac=F] [floor=F]
 //! [inducing=N] [freeze_x=true] [free_x=true] [nstart=full] [onestep=N] [filter=true] [dump=true]
 //! [threads=N] [ly=N] [lu=N] [mean=linear] [init=adam|lbfgs] [alt=false] [sparse=exact|vfe]
-//! [from=N] [to=N] [final=N|none] [calibrate=false] (train on samples `from..to` of the
-//! training part only)
+//! [from=N] [to=N] [evaltail=true] [evalhead=true] [final=N|none] [calibrate=false] (train
+//! on samples `from..to` of the training part only; `evaltail`/`evalhead` evaluate on the
+//! training part after `to`/before `from` instead of the test part)
 //!`
 //!
 //! Positional: `system` `sys1`…`sys5` or a real series (`actuator`, `ballbeam`, `drives`,
@@ -71,6 +72,7 @@ const SWITCHES: &[&str] = &[
     "from",
     "to",
     "evaltail",
+    "evalhead",
     "final",
     "calibrate",
 ];
@@ -94,6 +96,8 @@ struct Options {
     to: Option<usize>,
     /// Evaluate on the training part after `to` (from the window before it) instead of the test part.
     evaltail: bool,
+    /// Evaluate on the training part before `from` instead of the test part.
+    evalhead: bool,
 }
 
 /// The arguments: `FitSettings` defaults, the positional arguments, then the switches.
@@ -237,6 +241,7 @@ fn options() -> Result<Options, String> {
         from: sw.get("from")?,
         to: sw.get("to")?,
         evaltail: sw.get("evaltail")? == Some(true),
+        evalhead: sw.get("evalhead")? == Some(true),
     })
 }
 
@@ -250,6 +255,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let (true, Some(to)) = (o.evaltail, o.to) {
         let l = o.ly.unwrap_or(bench.ly).max(o.lu.unwrap_or(bench.lu));
         bench.test = bench.train.slice(to - l, bench.train.len());
+    }
+    if let (true, Some(from)) = (o.evalhead, o.from) {
+        bench.test = bench.train.slice(0, from);
     }
     if o.from.is_some() || o.to.is_some() {
         let n = bench.train.len();
