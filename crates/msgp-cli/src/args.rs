@@ -610,6 +610,11 @@ pub enum ReproduceCommand {
 pub struct GeneralisationArgs {
     #[command(flatten)]
     pub common: BenchmarkArgs,
+    /// Also draw every fit's simulations: one PNG per benchmark and seed in DIR
+    /// (`<benchmark>-seed<k>.png`), a row per test with MSGP and GP-NARX side by side, each the
+    /// predicted mean ± 2σ against the true (synthetic) or measured (real) output.
+    #[arg(long, value_name = "DIR")]
+    pub plots: Option<PathBuf>,
 }
 
 /// The options every reproduction over the ten benchmarks shares.

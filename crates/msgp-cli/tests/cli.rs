@@ -1436,4 +1436,51 @@ fn reproductions_run_over_seeds_and_unseen_excitations() {
         md.contains("msgp:generalisation:begin") && md.contains("chirp"),
         "{md}"
     );
+    // `--plots` draws the same simulations: the figures are unchanged, and one PNG of the
+    // benchmark's four tests (rows) by two methods (columns) is written into a new folder
+    let p = ok_json(
+        &dir,
+        &[
+            "reproduce",
+            "generalisation",
+            "--only",
+            "synthetic5",
+            "--plots",
+            "plots/new",
+            "--out",
+            "g.md",
+            "--json",
+            "--quiet",
+        ],
+    );
+    assert_eq!(p["rows"], g["rows"]);
+    let png = dir.path("plots/new/synthetic5-seed0.png");
+    assert_eq!(
+        p["plots"],
+        serde_json::json!(["plots/new/synthetic5-seed0.png"]),
+        "{p}"
+    );
+    let bytes = std::fs::read(&png).expect("the plot");
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    let be = |i: usize| u32::from_be_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
+    // (IHDR: width, height)
+    assert_eq!((be(16), be(20)), (2 * 800, 4 * 340));
+    let md = std::fs::read_to_string(dir.path("g.md")).expect("markdown");
+    assert!(md.contains("plots/new/<benchmark>-seed<k>.png"), "{md}");
+    // the plot's folder cannot be made: a clear error, no table
+    std::fs::write(dir.path("file"), "x").expect("a file");
+    fails(
+        &dir,
+        &[
+            "reproduce",
+            "generalisation",
+            "--only",
+            "synthetic5",
+            "--plots",
+            "file/sub",
+            "--out",
+            "g.md",
+        ],
+        &["plots' folder", "file/sub"],
+    );
 }

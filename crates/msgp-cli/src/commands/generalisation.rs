@@ -7,20 +7,23 @@
 //! outputs' mean, with 2σ coverage.
 
 use std::fmt::Write as _;
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
+use msgp_core::data::dataset::Part;
 use msgp_core::data::real::RealSeries;
 use msgp_core::data::{Benchmark, NoiseScale, SyntheticSystem, Trajectory};
 use msgp_core::error::MsgpError;
 use msgp_core::fit::{FitProgress, FitSettings, fit};
-use msgp_core::model::{Method, Metrics, Model};
+use msgp_core::model::{Method, Metrics, Model, Simulated, score};
 use msgp_core::numeric::parallel::Threads;
 use serde_json::json;
 
 use crate::args::GeneralisationArgs;
 use crate::commands::side_by_side;
 use crate::render::output::{out, out_json};
+use crate::render::plot::plot_grid;
 use crate::render::progress::FitBar;
 use msgp_core::reproduce::results::{machine, today};
 
@@ -119,6 +122,10 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
         }
     }
     args.common.check_seeds()?;
+    if let Some(dir) = &args.plots {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the plots' folder {}", dir.display()))?;
+    }
     sources.retain(|s| args.common.only.is_empty() || args.common.only.contains(&s.key()));
     let dir = args.common.data_dir();
     let units: Vec<(&Source, u64)> = sources
@@ -156,27 +163,51 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
         let models = fit_all(&bench, seed, &label, quiet, threads)?;
         let level = bench.train.y.column(0).mean();
         let mut cases = Vec::new();
+        // the plot's rows: each test both methods simulated
+        let mut drawn: Vec<Vec<(String, Simulated)>> = Vec::new();
         for (name, traj, alternate) in tests {
             let mut metrics = Vec::new();
+            let mut row = Vec::new();
             for (m, method) in models.iter().zip(METHODS) {
                 // a simulation that fails numerically scores +∞ (a runaway model), and the
                 // table goes on
-                let scored = match m.evaluate(&traj) {
+                let scored = match m.simulate(&traj) {
+                    Ok(sim) => score(&sim, &traj).map(|metrics| Some((sim, metrics))),
                     Err(MsgpError::NonFinite(_) | MsgpError::NotPositiveDefinite { .. }) => {
-                        Ok(Metrics {
-                            rmse: f64::INFINITY,
-                            nll: f64::INFINITY,
-                            coverage_2sigma: 0.0,
-                            steps: traj.len().saturating_sub(m.spec.warmup()),
-                        })
+                        Ok(None)
                     }
-                    other => other,
-                };
-                metrics.push(
-                    scored.with_context(|| {
-                        format!("simulating {} on {key}, {name}", method.name())
-                    })?,
-                );
+                    Err(e) => Err(e),
+                }
+                .with_context(|| format!("simulating {} on {key}, {name}", method.name()))?;
+                match scored {
+                    Some((sim, scores)) => {
+                        metrics.push(scores);
+                        let part = Part {
+                            source: PathBuf::from(&name),
+                            episode: None,
+                            times: (0..traj.len()).map(|t| t as f64).collect(),
+                            traj: traj.clone(),
+                        };
+                        let title = format!("{label}, {name}: {}", method.name());
+                        row.push((
+                            title,
+                            Simulated {
+                                part,
+                                sim,
+                                metrics: scores,
+                            },
+                        ));
+                    }
+                    None => metrics.push(Metrics {
+                        rmse: f64::INFINITY,
+                        nll: f64::INFINITY,
+                        coverage_2sigma: 0.0,
+                        steps: traj.len().saturating_sub(m.spec.warmup()),
+                    }),
+                }
+            }
+            if row.len() == METHODS.len() {
+                drawn.push(row);
             }
             cases.push(Case {
                 key: key.clone(),
@@ -186,6 +217,18 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
                 metrics,
                 alternate,
             });
+        }
+        if let Some(dir) = &args.plots {
+            let path = dir.join(format!("{key}-seed{seed}.png"));
+            let rows: Vec<Vec<(String, &Simulated)>> = drawn
+                .iter()
+                .map(|r| r.iter().map(|(t, s)| (t.clone(), s)).collect())
+                .collect();
+            let data = match source {
+                Source::Synthetic(_) => "true output",
+                Source::Real(_) => "measured",
+            };
+            plot_grid(&path, &rows, data)?;
         }
         if jobs > 1 && !args.common.quiet {
             eprintln!(
@@ -199,6 +242,19 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
     let seconds = started.elapsed().as_secs_f64();
     let markdown = render(args, &cases, seconds);
     msgp_core::reproduce::results::update_section(&args.common.out, "generalisation", &markdown)?;
+    // the plots written, one per benchmark and seed (in the order of the rows)
+    let mut plots: Vec<String> = Vec::new();
+    if let Some(dir) = &args.plots {
+        for c in &cases {
+            let path = dir
+                .join(format!("{}-seed{}.png", c.key, c.seed))
+                .display()
+                .to_string();
+            if !plots.contains(&path) {
+                plots.push(path);
+            }
+        }
+    }
     if args.common.json {
         let rows: Vec<_> = cases
             .iter()
@@ -223,13 +279,19 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
             "out": args.common.out.display().to_string(),
             "seconds": seconds,
             "seeds": args.common.seeds,
+            "plots": plots,
             "rows": rows,
         }));
     }
     out(&format!(
-        "{}\nwritten to {} in {seconds:.0} s",
+        "{}\nwritten to {} in {seconds:.0} s{}",
         summary(&cases).join("\n"),
-        args.common.out.display()
+        args.common.out.display(),
+        args.plots.as_ref().map_or(String::new(), |d| format!(
+            "; {} plots in {}",
+            plots.len(),
+            d.display()
+        ))
     ))
 }
 
@@ -304,6 +366,22 @@ fn render(args: &GeneralisationArgs, cases: &[Case], seconds: f64) -> String {
         machine(),
         today()
     );
+    if let Some(dir) = &args.plots {
+        let first = cases
+            .first()
+            .map(|c| format!("{}-seed{}.png", c.key, c.seed));
+        let _ = writeln!(
+            s,
+            "- Plots: one per benchmark and seed, `{}/<benchmark>-seed<k>.png`: a row per test, \
+             MSGP and GP-NARX side by side, the predicted mean ± 2σ against the true (synthetic) \
+             or measured (real) output{}\n",
+            dir.display(),
+            first.map_or(String::new(), |f| format!(
+                " (e.g. [{f}]({}/{f}))",
+                dir.display()
+            ))
+        );
+    }
     for line in summary(cases) {
         let _ = writeln!(s, "{line}");
     }

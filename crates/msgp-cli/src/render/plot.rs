@@ -17,11 +17,12 @@ const MAX_PANELS: usize = 6;
 const WIDTH: u32 = 1200;
 const PANEL_HEIGHT: u32 = 340;
 
-/// One panel: a trajectory's output `j`.
+/// One panel: a trajectory's output `j`, its data drawn under the legend `data`.
 struct Panel<'a> {
     title: String,
     sim: &'a Simulated,
     j: usize,
+    data: &'a str,
 }
 
 /// Writes the plot of `sims` (output names `outputs`) to `path`; `title` heads every panel.
@@ -43,6 +44,7 @@ pub fn plot(
                 title: t,
                 sim: s,
                 j,
+                data: "measured",
             });
         }
     }
@@ -51,13 +53,57 @@ pub fn plot(
         return Err(anyhow!("nothing to plot"));
     }
     let height = PANEL_HEIGHT * panels.len() as u32;
-    draw(path, height, &panels).with_context(|| format!("cannot write the plot {}", path.display()))
+    draw(path, (WIDTH, height), (panels.len(), 1), &panels)
+        .with_context(|| format!("cannot write the plot {}", path.display()))
 }
 
-fn draw(path: &Path, height: u32, panels: &[Panel<'_>]) -> anyhow::Result<()> {
-    let root = BitMapBackend::new(path, (WIDTH, height)).into_drawing_area();
+/// Width of one column of [`plot_grid`].
+const COLUMN_WIDTH: u32 = 800;
+
+/// Writes a grid of single-output simulations to `path`: `rows[r][c]` is the panel of row `r`,
+/// column `c`, a title and the simulation of its first output (every row as long as the
+/// first; at most [`MAX_PANELS`] rows), its data under the legend `data` ("measured", "true
+/// output"). Returns the image's (width, height).
+pub fn plot_grid(
+    path: &Path,
+    rows: &[Vec<(String, &Simulated)>],
+    data: &str,
+) -> anyhow::Result<(u32, u32)> {
+    font()?;
+    let rows = &rows[..rows.len().min(MAX_PANELS)];
+    let columns = rows.first().map_or(0, Vec::len);
+    if columns == 0 || rows.iter().any(|r| r.len() != columns) {
+        return Err(anyhow!("nothing to plot, or rows of different lengths"));
+    }
+    let panels: Vec<Panel<'_>> = rows
+        .iter()
+        .flatten()
+        .map(|(title, sim)| Panel {
+            title: title.clone(),
+            sim,
+            j: 0,
+            data,
+        })
+        .collect();
+    let size = (
+        COLUMN_WIDTH * columns as u32,
+        PANEL_HEIGHT * rows.len() as u32,
+    );
+    draw(path, size, (rows.len(), columns), &panels)
+        .with_context(|| format!("cannot write the plot {}", path.display()))?;
+    Ok(size)
+}
+
+/// Draws `panels` row by row on a `grid` of (rows, columns) in an image of `size`.
+fn draw(
+    path: &Path,
+    size: (u32, u32),
+    grid: (usize, usize),
+    panels: &[Panel<'_>],
+) -> anyhow::Result<()> {
+    let root = BitMapBackend::new(path, size).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
-    let areas = root.split_evenly((panels.len(), 1));
+    let areas = root.split_evenly(grid);
     for (area, panel) in areas.iter().zip(panels) {
         draw_panel(area, panel)?;
     }
@@ -127,7 +173,7 @@ fn draw_panel(
             BLACK.stroke_width(1),
         ))
         .map_err(e)?
-        .label("measured")
+        .label(panel.data)
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLACK));
     chart
         .draw_series(LineSeries::new(
