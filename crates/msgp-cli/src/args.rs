@@ -675,6 +675,11 @@ pub struct Table1Args {
     /// Likelihoods of the MSGP columns, comma-separated [default: both].
     #[arg(long, value_enum, value_name = "L,...", value_delimiter = ',')]
     pub likelihoods: Vec<LikelihoodArg>,
+    /// Also draw the test part's simulations: one PNG per benchmark and seed in DIR
+    /// (`<benchmark>-seed<k>.png`), a row per column of the table, each the predicted mean ±
+    /// 2σ (moment matching) against the true (synthetic) or measured (real) test output.
+    #[arg(long, value_name = "DIR")]
+    pub plots: Option<PathBuf>,
 }
 
 /// Options of `msgp reproduce figure4`.

@@ -93,6 +93,15 @@ fn fails(dir: &Scratch, args: &[&str], needles: &[&str]) -> String {
     err
 }
 
+/// The (width, height) of the PNG at `path`, from its header (a failure where it is not one).
+fn png_size(path: &std::path::Path) -> (u32, u32) {
+    let bytes = std::fs::read(path).expect("the plot");
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{}", path.display());
+    let be = |i: usize| u32::from_be_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
+    // (the IHDR chunk comes first: its width, then its height)
+    (be(16), be(20))
+}
+
 /// A deterministic nonlinear SISO system with a little pseudo-random noise, as `t,u,y`.
 fn system_csv(n: usize, episode: Option<usize>) -> String {
     let mut s = String::from(if episode.is_some() {
@@ -1350,30 +1359,41 @@ fn reproductions_run_over_seeds_and_unseen_excitations() {
         assert!(r["rmse"].as_f64().expect("rmse").is_finite(), "{r}");
     }
     // fits side by side (`--jobs`) give the same figures as one at a time
+    // (`--plots` with two jobs: the figures are the same with and without it)
     let run = |jobs: &str| {
-        let v = ok_json(
-            &dir,
-            &[
-                "reproduce",
-                "table1",
-                "--only",
-                "synthetic5",
-                "--seeds",
-                "0,1",
-                "--methods",
-                "msgp",
-                "--likelihoods",
-                "free-run",
-                "--iters",
-                "30",
-                "--jobs",
-                jobs,
-                "--out",
-                "j.md",
-                "--json",
-                "--quiet",
-            ],
-        );
+        let mut args = vec![
+            "reproduce",
+            "table1",
+            "--only",
+            "synthetic5",
+            "--seeds",
+            "0,1",
+            "--methods",
+            "msgp",
+            "--likelihoods",
+            "free-run",
+            "--iters",
+            "30",
+            "--jobs",
+            jobs,
+            "--out",
+            "j.md",
+            "--json",
+            "--quiet",
+        ];
+        if jobs == "2" {
+            args.extend(["--plots", "table-plots"]);
+        }
+        let v = ok_json(&dir, &args);
+        let plots = if jobs == "2" {
+            serde_json::json!([
+                "table-plots/synthetic5-seed0.png",
+                "table-plots/synthetic5-seed1.png"
+            ])
+        } else {
+            serde_json::json!([])
+        };
+        assert_eq!(v["plots"], plots, "{v}");
         v["rows"]
             .as_array()
             .expect("rows")
@@ -1391,6 +1411,13 @@ fn reproductions_run_over_seeds_and_unseen_excitations() {
     let (one, two) = (run("1"), run("2"));
     assert_eq!(one.len(), 4);
     assert_eq!(one, two);
+    // one panel per plot: the one column, MSGP
+    for seed in ["0", "1"] {
+        let png = dir.path(&format!("table-plots/synthetic5-seed{seed}.png"));
+        assert_eq!(png_size(&png), (1200, 340));
+    }
+    let md = std::fs::read_to_string(dir.path("j.md")).expect("markdown");
+    assert!(md.contains("table-plots/<benchmark>-seed<k>.png"), "{md}");
     let md = std::fs::read_to_string(dir.path("t.md")).expect("markdown");
     assert!(md.contains(" ± "), "{md}");
     assert!(md.contains("GP-NARX (ours, mean)"), "{md}");
@@ -1454,17 +1481,13 @@ fn reproductions_run_over_seeds_and_unseen_excitations() {
         ],
     );
     assert_eq!(p["rows"], g["rows"]);
-    let png = dir.path("plots/new/synthetic5-seed0.png");
     assert_eq!(
         p["plots"],
         serde_json::json!(["plots/new/synthetic5-seed0.png"]),
         "{p}"
     );
-    let bytes = std::fs::read(&png).expect("the plot");
-    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
-    let be = |i: usize| u32::from_be_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
-    // (IHDR: width, height)
-    assert_eq!((be(16), be(20)), (2 * 800, 4 * 340));
+    let png = dir.path("plots/new/synthetic5-seed0.png");
+    assert_eq!(png_size(&png), (2 * 800, 4 * 340));
     let md = std::fs::read_to_string(dir.path("g.md")).expect("markdown");
     assert!(md.contains("plots/new/<benchmark>-seed<k>.png"), "{md}");
     // the plot's folder cannot be made: a clear error, no table

@@ -85,10 +85,13 @@ pub fn plot_grid(
             data,
         })
         .collect();
-    let size = (
-        COLUMN_WIDTH * columns as u32,
-        PANEL_HEIGHT * rows.len() as u32,
-    );
+    // (one column as wide as `plot`'s panels)
+    let width = if columns == 1 {
+        WIDTH
+    } else {
+        COLUMN_WIDTH * columns as u32
+    };
+    let size = (width, PANEL_HEIGHT * rows.len() as u32);
     draw(path, size, (rows.len(), columns), &panels)
         .with_context(|| format!("cannot write the plot {}", path.display()))?;
     Ok(size)

@@ -17,11 +17,11 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::data::real::RealSeries;
-use crate::data::{Benchmark, NoiseScale, SyntheticSystem};
+use crate::data::{Benchmark, NoiseScale, SyntheticSystem, Trajectory};
 use crate::error::{MsgpError, Result};
 use crate::fit::{FitOptimizer, FitProgress, FitSettings, MsgpSettings, OutputRange, fit};
 use crate::loss::Likelihood;
-use crate::model::{Method, Metrics, Rollout, score};
+use crate::model::{Method, Metrics, Rollout, Simulation, score};
 use crate::numeric::parallel::Threads;
 pub use crate::reproduce::results::Provenance;
 
@@ -459,6 +459,17 @@ pub fn fit_unit(
     threads: Threads,
     progress: &mut dyn FnMut(&FitProgress),
 ) -> Result<Cell> {
+    Ok(fit_unit_simulated(plan, unit, threads, progress)?.0)
+}
+
+/// [`fit_unit`], with the test part and its moment-matching simulation, which the cell's
+/// first metrics score (`None` where that simulation failed numerically), for a plot.
+pub fn fit_unit_simulated(
+    plan: &Plan,
+    unit: &Unit,
+    threads: Threads,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<(Cell, Trajectory, Option<Simulation>)> {
     let task = task(&unit.benchmark)?;
     let bench = benchmark(&task, unit.seed, &plan.data_dir)?;
     let method = unit.column.method();
@@ -491,14 +502,16 @@ pub fn fit_unit(
         }),
         e => Err(e),
     };
-    let (mm, mut diverged) = match model.simulate_as(&bench.test, Rollout::REPORTED[MM]) {
+    let (mm, mut diverged, simulated) = match model.simulate_as(&bench.test, Rollout::REPORTED[MM])
+    {
         Ok(sim) => (
             score(&sim, &bench.test)?,
             OutputRange::of(&[&bench.test], model.spec.dy).divergence(&sim, "the test part"),
+            Some(sim),
         ),
         Err(e) => {
             let why = format!("the test part's simulation fails: {e}");
-            (failed(e)?, Some(why))
+            (failed(e)?, Some(why), None)
         }
     };
     let mean = model
@@ -507,7 +520,7 @@ pub fn fit_unit(
     if report.diverged.is_some() {
         diverged = report.diverged.clone();
     }
-    Ok(Cell {
+    let cell = Cell {
         metrics: [mm, mean],
         train_seconds: report.train_seconds,
         iterations_run: report.iterations_run,
@@ -520,7 +533,8 @@ pub fn fit_unit(
         fallback: report.fallback().map(|r| r.fallback_label().to_string()),
         set_aside: report.set_aside().map(|r| r.fallback_label().to_string()),
         diverged,
-    })
+    };
+    Ok((cell, bench.test, simulated))
 }
 
 /// The rows of the table from every unit's cell (any order; each unit exactly once).
