@@ -612,7 +612,8 @@ pub struct GeneralisationArgs {
     pub common: BenchmarkArgs,
     /// Also draw every fit's simulations: one PNG per benchmark and seed in DIR
     /// (`<benchmark>-seed<k>.png`), a row per test with MSGP and GP-NARX side by side, each the
-    /// predicted mean ± 2σ against the true (synthetic) or measured (real) output.
+    /// predicted mean ± 2σ against the true (synthetic) or measured (real) output (a test that
+    /// either model fails to simulate is left out).
     #[arg(long, value_name = "DIR")]
     pub plots: Option<PathBuf>,
 }

@@ -1434,19 +1434,20 @@ fn reproductions_run_over_seeds_and_unseen_excitations() {
         ],
         &["synthetic9"],
     );
-    let g = ok_json(
-        &dir,
-        &[
+    // `reproduce generalisation` on system 5 with `extra` arguments
+    let generalisation = |extra: &[&'static str]| {
+        let mut args = vec![
             "reproduce",
             "generalisation",
             "--only",
             "synthetic5",
             "--out",
             "g.md",
-            "--json",
-            "--quiet",
-        ],
-    );
+        ];
+        args.extend(extra);
+        args
+    };
+    let g = ok_json(&dir, &generalisation(&["--json", "--quiet"]));
     let rows = g["rows"].as_array().expect("rows");
     // (Table 2 test + 3 excitations) × 2 methods
     assert_eq!(rows.len(), 8, "{g}");
@@ -1467,18 +1468,7 @@ fn reproductions_run_over_seeds_and_unseen_excitations() {
     // benchmark's four tests (rows) by two methods (columns) is written into a new folder
     let p = ok_json(
         &dir,
-        &[
-            "reproduce",
-            "generalisation",
-            "--only",
-            "synthetic5",
-            "--plots",
-            "plots/new",
-            "--out",
-            "g.md",
-            "--json",
-            "--quiet",
-        ],
+        &generalisation(&["--plots", "plots/new", "--json", "--quiet"]),
     );
     assert_eq!(p["rows"], g["rows"]);
     assert_eq!(
@@ -1490,19 +1480,24 @@ fn reproductions_run_over_seeds_and_unseen_excitations() {
     assert_eq!(png_size(&png), (2 * 800, 4 * 340));
     let md = std::fs::read_to_string(dir.path("g.md")).expect("markdown");
     assert!(md.contains("plots/new/<benchmark>-seed<k>.png"), "{md}");
-    // the plot's folder cannot be made: a clear error, no table
+    // a plots' folder that cannot be made: a clear error before any fit, for both reproductions
     std::fs::write(dir.path("file"), "x").expect("a file");
+    fails(
+        &dir,
+        &generalisation(&["--plots", "file/sub"]),
+        &["plots' folder", "file/sub"],
+    );
     fails(
         &dir,
         &[
             "reproduce",
-            "generalisation",
+            "table1",
             "--only",
             "synthetic5",
             "--plots",
             "file/sub",
             "--out",
-            "g.md",
+            "t.md",
         ],
         &["plots' folder", "file/sub"],
     );

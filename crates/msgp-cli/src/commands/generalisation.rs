@@ -7,11 +7,9 @@
 //! outputs' mean, with 2σ coverage.
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use msgp_core::data::dataset::Part;
 use msgp_core::data::real::RealSeries;
 use msgp_core::data::{Benchmark, NoiseScale, SyntheticSystem, Trajectory};
 use msgp_core::error::MsgpError;
@@ -23,7 +21,7 @@ use serde_json::json;
 use crate::args::GeneralisationArgs;
 use crate::commands::side_by_side;
 use crate::render::output::{out, out_json};
-use crate::render::plot::plot_grid;
+use crate::render::plot::{plot_grid, simulated};
 use crate::render::progress::FitBar;
 use msgp_core::reproduce::results::{machine, today};
 
@@ -163,7 +161,7 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
         let models = fit_all(&bench, seed, &label, quiet, threads)?;
         let level = bench.train.y.column(0).mean();
         let mut cases = Vec::new();
-        // the plot's rows: each test both methods simulated
+        // the plot's rows: each test that both methods simulated
         let mut drawn: Vec<Vec<(String, Simulated)>> = Vec::new();
         for (name, traj, alternate) in tests {
             let mut metrics = Vec::new();
@@ -182,21 +180,8 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
                 match scored {
                     Some((sim, scores)) => {
                         metrics.push(scores);
-                        let part = Part {
-                            source: PathBuf::from(&name),
-                            episode: None,
-                            times: (0..traj.len()).map(|t| t as f64).collect(),
-                            traj: traj.clone(),
-                        };
                         let title = format!("{label}, {name}: {}", method.name());
-                        row.push((
-                            title,
-                            Simulated {
-                                part,
-                                sim,
-                                metrics: scores,
-                            },
-                        ));
+                        row.push((title, simulated(&name, &traj, sim, scores)));
                     }
                     None => metrics.push(Metrics {
                         rmse: f64::INFINITY,
@@ -218,7 +203,9 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
                 alternate,
             });
         }
-        if let Some(dir) = &args.plots {
+        // (a benchmark whose every test failed to simulate has no plot)
+        let mut plot = None;
+        if let (Some(dir), false) = (&args.plots, drawn.is_empty()) {
             let path = dir.join(format!("{key}-seed{seed}.png"));
             let rows: Vec<Vec<(String, &Simulated)>> = drawn
                 .iter()
@@ -229,6 +216,7 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
                 Source::Real(_) => "measured",
             };
             plot_grid(&path, &rows, data)?;
+            plot = Some(path.display().to_string());
         }
         if jobs > 1 && !args.common.quiet {
             eprintln!(
@@ -236,25 +224,17 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
                 started.elapsed().as_secs_f64()
             );
         }
-        Ok(cases)
+        Ok((cases, plot))
     })?;
-    let cases: Vec<Case> = per_unit_cases.into_iter().flatten().collect();
-    let seconds = started.elapsed().as_secs_f64();
-    let markdown = render(args, &cases, seconds);
-    msgp_core::reproduce::results::update_section(&args.common.out, "generalisation", &markdown)?;
     // the plots written, one per benchmark and seed (in the order of the rows)
-    let mut plots: Vec<String> = Vec::new();
-    if let Some(dir) = &args.plots {
-        for c in &cases {
-            let path = dir
-                .join(format!("{}-seed{}.png", c.key, c.seed))
-                .display()
-                .to_string();
-            if !plots.contains(&path) {
-                plots.push(path);
-            }
-        }
-    }
+    let plots: Vec<String> = per_unit_cases
+        .iter()
+        .filter_map(|(_, p)| p.clone())
+        .collect();
+    let cases: Vec<Case> = per_unit_cases.into_iter().flat_map(|(c, _)| c).collect();
+    let seconds = started.elapsed().as_secs_f64();
+    let markdown = render(args, &cases, &plots, seconds);
+    msgp_core::reproduce::results::update_section(&args.common.out, "generalisation", &markdown)?;
     if args.common.json {
         let rows: Vec<_> = cases
             .iter()
@@ -328,7 +308,7 @@ fn summary(cases: &[Case]) -> Vec<String> {
     ]
 }
 
-fn render(args: &GeneralisationArgs, cases: &[Case], seconds: f64) -> String {
+fn render(args: &GeneralisationArgs, cases: &[Case], plots: &[String], seconds: f64) -> String {
     let command: Vec<String> = std::env::args()
         .enumerate()
         .map(|(i, a)| if i == 0 { "msgp".to_string() } else { a })
@@ -366,20 +346,13 @@ fn render(args: &GeneralisationArgs, cases: &[Case], seconds: f64) -> String {
         machine(),
         today()
     );
-    if let Some(dir) = &args.plots {
-        let first = cases
-            .first()
-            .map(|c| format!("{}-seed{}.png", c.key, c.seed));
+    if let (Some(dir), Some(first)) = (&args.plots, plots.first()) {
         let _ = writeln!(
             s,
             "- Plots: one per benchmark and seed, `{}/<benchmark>-seed<k>.png`: a row per test, \
              MSGP and GP-NARX side by side, the predicted mean ± 2σ against the true (synthetic) \
-             or measured (real) output{}\n",
+             or measured (real) output (e.g. [{first}]({first}))\n",
             dir.display(),
-            first.map_or(String::new(), |f| format!(
-                " (e.g. [{f}]({}/{f}))",
-                dir.display()
-            ))
         );
     }
     for line in summary(cases) {

@@ -2,13 +2,12 @@
 //! `--jobs` at a time on this machine (one job: a progress bar each; more: a line per finished
 //! fit), written as a section of the results file.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use anyhow::Context;
 use msgp_core::data::Trajectory;
-use msgp_core::data::dataset::Part;
 use msgp_core::fit::FitProgress;
 use msgp_core::model::Method;
 use msgp_core::model::{Simulated, Simulation};
@@ -23,7 +22,7 @@ use serde_json::json;
 use crate::args::Table1Args;
 use crate::commands::side_by_side;
 use crate::render::output::{out, out_json};
-use crate::render::plot::plot_grid;
+use crate::render::plot::{plot_grid, simulated};
 use crate::render::progress::FitBar;
 
 /// The command line as a user would type it again, as markdown.
@@ -50,6 +49,11 @@ pub fn run(args: &Table1Args) -> anyhow::Result<()> {
         args.optimizer.into(),
         &args.common.data_dir(),
     )?;
+    // (the plots' folder before the fits, which it would outlast)
+    if let Some(dir) = &args.plots {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the plots' folder {}", dir.display()))?;
+    }
     let units = plan.units();
     let total = units.len();
     let (jobs, per_fit) = side_by_side::share(args.common.jobs, Threads::from_env()?.get(), total)?;
@@ -150,8 +154,6 @@ type Fitted = (Unit, Cell, Option<(Trajectory, Simulation)>);
 /// row per column (in the table's order; a column whose simulation failed is left out), and
 /// returns the paths written.
 fn draw(dir: &Path, plan: &Plan, results: &[Fitted]) -> anyhow::Result<Vec<String>> {
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create the plots' folder {}", dir.display()))?;
     let mut written = Vec::new();
     let mut seen: Vec<(String, u64)> = Vec::new();
     for u in plan.units() {
@@ -168,19 +170,9 @@ fn draw(dir: &Path, plan: &Plan, results: &[Fitted]) -> anyhow::Result<Vec<Strin
             let Some((_, cell, Some((test, sim)))) = found else {
                 continue;
             };
-            let part = Part {
-                source: PathBuf::from("test part"),
-                episode: None,
-                times: (0..test.len()).map(|t| t as f64).collect(),
-                traj: test.clone(),
-            };
             panels.push((
                 format!("{} (seed {}): {}", u.benchmark, u.seed, column.label()),
-                Simulated {
-                    part,
-                    sim: sim.clone(),
-                    metrics: cell.metrics[0],
-                },
+                simulated("test part", test, sim.clone(), cell.metrics[0]),
             ));
         }
         if panels.is_empty() {

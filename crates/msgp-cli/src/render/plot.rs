@@ -1,16 +1,19 @@
 //! PNG plots of free simulations, like the paper's Figure 3: the measured output, the predicted
-//! mean and the ±2σ band, one panel per output and trajectory.
+//! mean and the ±2σ band, one panel per output and trajectory (`msgp fit`/`eval --plot`), or a
+//! grid of single-output panels ([`plot_grid`]: the reproductions' `--plots`).
 //!
 //! Drawn with plotters' bitmap backend, in the style of every msgp plot (`msgp_sim::plot`: the
 //! embedded DejaVu Sans, the legend).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, anyhow};
 use msgp_sim::plot::{font, legend};
 use plotters::prelude::*;
 
-use msgp_core::model::{Simulated, score_output};
+use msgp_core::data::Trajectory;
+use msgp_core::data::dataset::Part;
+use msgp_core::model::{Metrics, Simulated, Simulation, score_output};
 
 /// Panels beyond this many are left out (the first trajectories are drawn).
 const MAX_PANELS: usize = 6;
@@ -55,6 +58,21 @@ pub fn plot(
     let height = PANEL_HEIGHT * panels.len() as u32;
     draw(path, (WIDTH, height), (panels.len(), 1), &panels)
         .with_context(|| format!("cannot write the plot {}", path.display()))
+}
+
+/// `sim`, a simulation of `traj` scored by `metrics`, as a panel's content: the part named
+/// `name`, its times the row numbers.
+pub fn simulated(name: &str, traj: &Trajectory, sim: Simulation, metrics: Metrics) -> Simulated {
+    Simulated {
+        part: Part {
+            source: PathBuf::from(name),
+            episode: None,
+            times: (0..traj.len()).map(|t| t as f64).collect(),
+            traj: traj.clone(),
+        },
+        sim,
+        metrics,
+    }
 }
 
 /// Width of one column of [`plot_grid`].
