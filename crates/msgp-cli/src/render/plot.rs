@@ -81,12 +81,12 @@ const COLUMN_WIDTH: u32 = 800;
 /// Writes a grid of single-output simulations to `path`: `rows[r][c]` is the panel of row `r`,
 /// column `c`, a title and the simulation of its first output (every row as long as the
 /// first; at most [`MAX_PANELS`] rows), its data under the legend `data` ("measured", "true
-/// output"). Returns the image's (width, height).
+/// output").
 pub fn plot_grid(
     path: &Path,
     rows: &[Vec<(String, &Simulated)>],
     data: &str,
-) -> anyhow::Result<(u32, u32)> {
+) -> anyhow::Result<()> {
     font()?;
     let rows = &rows[..rows.len().min(MAX_PANELS)];
     let columns = rows.first().map_or(0, Vec::len);
@@ -111,8 +111,7 @@ pub fn plot_grid(
     };
     let size = (width, PANEL_HEIGHT * rows.len() as u32);
     draw(path, size, (rows.len(), columns), &panels)
-        .with_context(|| format!("cannot write the plot {}", path.display()))?;
-    Ok(size)
+        .with_context(|| format!("cannot write the plot {}", path.display()))
 }
 
 /// Draws `panels` row by row on a `grid` of (rows, columns) in an image of `size`.
