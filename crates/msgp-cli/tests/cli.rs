@@ -1334,9 +1334,9 @@ fn the_thread_count_is_checked_and_changes_no_number() {
 #[test]
 fn reproductions_run_over_seeds_and_unseen_excitations() {
     let dir = Scratch::new("reproduce");
-    let v = ok_json(
-        &dir,
-        &[
+    // `reproduce table1` on system 5, seeds 0 and 1, the free-run likelihood, with `extra`
+    let table1 = |extra: &[&'static str]| {
+        let mut args = vec![
             "reproduce",
             "table1",
             "--only",
@@ -1345,12 +1345,11 @@ fn reproductions_run_over_seeds_and_unseen_excitations() {
             "0,1",
             "--likelihoods",
             "free-run",
-            "--out",
-            "t.md",
-            "--json",
-            "--quiet",
-        ],
-    );
+        ];
+        args.extend(extra);
+        args
+    };
+    let v = ok_json(&dir, &table1(&["--out", "t.md", "--json", "--quiet"]));
     let rows = v["rows"].as_array().expect("rows");
     // 3 methods × 2 seeds × 2 rollouts
     assert_eq!(rows.len(), 12, "{v}");
@@ -1360,18 +1359,10 @@ fn reproductions_run_over_seeds_and_unseen_excitations() {
     }
     // fits side by side (`--jobs`) give the same figures as one at a time
     // (`--plots` with two jobs: the figures are the same with and without it)
-    let run = |jobs: &str| {
-        let mut args = vec![
-            "reproduce",
-            "table1",
-            "--only",
-            "synthetic5",
-            "--seeds",
-            "0,1",
+    let run = |jobs: &'static str| {
+        let mut args = table1(&[
             "--methods",
             "msgp",
-            "--likelihoods",
-            "free-run",
             "--iters",
             "30",
             "--jobs",
@@ -1380,7 +1371,7 @@ fn reproductions_run_over_seeds_and_unseen_excitations() {
             "j.md",
             "--json",
             "--quiet",
-        ];
+        ]);
         if jobs == "2" {
             args.extend(["--plots", "table-plots"]);
         }
@@ -1489,16 +1480,7 @@ fn reproductions_run_over_seeds_and_unseen_excitations() {
     );
     fails(
         &dir,
-        &[
-            "reproduce",
-            "table1",
-            "--only",
-            "synthetic5",
-            "--plots",
-            "file/sub",
-            "--out",
-            "t.md",
-        ],
+        &table1(&["--plots", "file/sub", "--out", "t.md"]),
         &["plots' folder", "file/sub"],
     );
 }

@@ -97,10 +97,10 @@ pub fn run(args: &Table1Args) -> anyhow::Result<()> {
         }
         Ok((unit, cell, drawn))
     })?;
-    let mut plots = Vec::new();
-    if let Some(dir) = &args.plots {
-        plots = draw(dir, &plan, &results)?;
-    }
+    let plots = match &args.plots {
+        Some(dir) => draw(dir, &plan, &results)?,
+        None => Vec::new(),
+    };
     let results = results.into_iter().map(|(u, c, _)| (u, c)).collect();
     let rows = assemble(&plan, results)?;
     let seconds = started.elapsed().as_secs_f64();
