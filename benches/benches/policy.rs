@@ -22,7 +22,9 @@ use msgp_core::numeric::dual;
 use msgp_core::numeric::parallel::Threads;
 use msgp_core::policy::{PidPolicy, PolicySpec};
 use msgp_core::policy_search::cost::SaturatingCost;
-use msgp_core::policy_search::{PidMask, PolicyProblem, PolicySearchSettings, optimise_pid_scaled};
+use msgp_core::policy_search::{
+    PidMask, PolicyProblem, PolicySearchSettings, SearchSpace, optimise_pid_scaled,
+};
 use msgp_sim::learn::{
     LearnEvent, LearnSettings, ModelChoice, episode_trajectory, fit_and_search, modelled_policy,
     segments,
@@ -71,9 +73,9 @@ fn training(
         let ep = run_episode(params, &mut controller, &config).expect("episode");
         out.push(TrainingEpisode {
             traj: episode_trajectory(&ep).expect("trajectory"),
-            policy: Some(PolicySpec::Pid(
+            policy: Some(PolicySpec::Direct(msgp_core::policy::Policy::Pid(
                 modelled_policy(&gains, params).expect("policy"),
-            )),
+            ))),
         });
     }
     out
@@ -103,7 +105,8 @@ fn value_and_adjoint_gradient(
         b.iter(|| black_box(problem.evaluate(initial).expect("evaluate")))
     });
     group.bench_function("gradient_adjoint", |b| {
-        b.iter(|| black_box(problem.gradient(mask, initial, x).expect("gradient")))
+        let space = SearchSpace::pid(initial, mask);
+        b.iter(|| black_box(problem.gradient(&space, x).expect("gradient")))
     });
 }
 

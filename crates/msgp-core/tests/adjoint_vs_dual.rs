@@ -17,7 +17,7 @@ use msgp_core::numeric::linalg::JitterLog;
 use msgp_core::numeric::parallel::Threads;
 use msgp_core::policy::PolicySpec;
 use msgp_core::rollout::{Episode, Excitation};
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DVector};
 
 fn compare(params: &GpParams<f64>, spec: &NarxSpec, episodes: &[Episode], complexity: Complexity) {
     compare_with(params, &config(), spec, episodes, complexity);
@@ -198,16 +198,77 @@ fn closed_loop_with_saturated_pid_policies() {
     let eps = vec![
         Episode {
             traj: traj.clone(),
-            excitation: Excitation::Feedback(Box::new(PolicySpec::Pid(pid.clone()))),
+            excitation: Excitation::Feedback(Box::new(PolicySpec::Direct(
+                msgp_core::policy::Policy::Pid(pid.clone()),
+            ))),
         },
         Episode {
             traj: traj.slice(3, 55),
-            excitation: Excitation::Feedback(Box::new(PolicySpec::NormalizedPid(Normalized {
-                inner: pid,
-                normalizer,
+            excitation: Excitation::Feedback(Box::new(PolicySpec::Normalized(Normalized {
+                inner: msgp_core::policy::Policy::Pid(pid),
+                normalizer: normalizer.clone(),
             }))),
         },
     ];
+    compare(&params, &spec, &eps, Complexity::PseudoDataNll);
+}
+
+/// The same for episodes run by the state feedback on a window (duals through its map in the
+/// sweep) and by the RBF network (its closed-form VJP), in the model's units and normalised.
+#[test]
+fn state_feedback_and_rbf_episodes_match_duals() {
+    use msgp_core::data::Normalizer;
+    use msgp_core::policy::{CommandBounds, Normalized, Policy, RbfPolicy, StateFeedback};
+    let mut r = rng(29);
+    let spec = NarxSpec {
+        ly: 2,
+        lu: 2,
+        dy: 2,
+        du: 1,
+    };
+    let params = random_gp(&mut r, 9, spec.input_dim(), 2);
+    let n = 45;
+    let y = DMatrix::from_fn(n, 2, |t, j| {
+        0.3 * ((t as f64) * 0.2 + j as f64).sin() + 0.05 * normal(&mut r)
+    });
+    let u = DMatrix::from_fn(n, 1, |t, _| 0.3 * ((t as f64) * 0.13).cos());
+    let traj = Trajectory::new(u, y).expect("traj");
+    let bounds = CommandBounds::new(vec![-1.0], vec![1.5]).expect("bounds");
+    let sf = StateFeedback::new(
+        DMatrix::from_row_slice(1, 6, &[0.8, -0.3, 0.2, 0.1, 0.3, -0.1]),
+        DVector::from_vec(vec![0.1]),
+        2,
+        (2, 2),
+        bounds.clone(),
+    )
+    .expect("state feedback");
+    let rbf = RbfPolicy::new(
+        DMatrix::from_fn(4, 2, |_, _| 0.4 * normal(&mut r)),
+        DMatrix::from_fn(4, 1, |_, _| normal(&mut r)),
+        DVector::from_vec(vec![-0.5, -0.2]),
+        bounds,
+    )
+    .expect("rbf");
+    let normalizer = Normalizer {
+        u_mean: vec![0.1],
+        u_std: vec![0.7],
+        y_mean: vec![0.02, -0.1],
+        y_std: vec![0.5, 1.5],
+    };
+    let mut eps = Vec::new();
+    for policy in [Policy::StateFeedback(sf), Policy::Rbf(rbf)] {
+        eps.push(Episode {
+            traj: traj.clone(),
+            excitation: Excitation::Feedback(Box::new(PolicySpec::Direct(policy.clone()))),
+        });
+        eps.push(Episode {
+            traj: traj.slice(3, n),
+            excitation: Excitation::Feedback(Box::new(PolicySpec::Normalized(Normalized {
+                inner: policy,
+                normalizer: normalizer.clone(),
+            }))),
+        });
+    }
     compare(&params, &spec, &eps, Complexity::PseudoDataNll);
 }
 

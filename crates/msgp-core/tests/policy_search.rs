@@ -78,7 +78,7 @@ fn finds_a_stabilising_gain_on_a_learned_unstable_plant() {
         ..PolicySearchSettings::default()
     };
     let result = optimise_pid(&problem, &initial, &mask, &s).expect("search");
-    let k = result.policy.kp[(0, 0)];
+    let k = result.policy.as_pid().expect("a PID policy").kp[(0, 0)];
     println!(
         "expected cost {before:.3} → {:.3}, gain {k:.3}",
         result.expected_cost
@@ -112,7 +112,7 @@ fn typical_gain_magnitudes_set_the_search_scale() {
     };
     let pole = |typical: f64| {
         let r = optimise_pid_scaled(&problem, &initial, &mask, &[typical], &s).expect("search");
-        1.1 + 0.5 * r.policy.kp[(0, 0)]
+        1.1 + 0.5 * r.policy.as_pid().expect("a PID policy").kp[(0, 0)]
     };
     let (small, large) = (pole(1.0), pole(10.0));
     println!("closed-loop pole: scale 1 → {small:.3}, scale 10 → {large:.3}");
@@ -154,8 +154,8 @@ fn threads_do_not_change_the_search_result() {
     }
     // the search did something: five starts from a zero gain find a stabilising one
     assert!(
-        (1.1 + 0.5 * one.policy.kp[(0, 0)]).abs() < 1.0,
+        (1.1 + 0.5 * one.policy.as_pid().expect("a PID policy").kp[(0, 0)]).abs() < 1.0,
         "{:?}",
-        one.policy.kp
+        one.policy.as_pid().expect("a PID policy").kp
     );
 }

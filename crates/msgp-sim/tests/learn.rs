@@ -522,3 +522,132 @@ fn the_prequential_choice_searches_on_the_model_that_predicted_unseen_episodes_b
         (None, None)
     );
 }
+
+/// A short run of `method`'s loop defaults: two 1 s random rollouts, two iterations, m = 10,
+/// 5 fit iterations, 3 Adam steps from one start after 4 candidates.
+fn short_defaults(method: msgp_core::model::Method) -> LearnSettings {
+    let f = LearnSettings::for_method(method);
+    LearnSettings {
+        iterations: 2,
+        random_rollouts: 2,
+        episode_seconds: 1.0,
+        fit: f.fit.clone().with_inducing(10).with_solver_iterations(5),
+        search: PolicySearchSettings {
+            iterations: 3,
+            restarts: 0,
+            candidates: 4,
+            ..f.search
+        },
+        ..f
+    }
+}
+
+/// Figures of short runs of every model's loop (predicted and measured cost, the gains on the
+/// pole), stored from the loop before it moved onto the generic policy search: what the loop
+/// computes stays the same through refactors. Relative 1e-9: a change of formula, order of
+/// work or seed moves them by far more.
+#[test]
+fn short_runs_keep_their_stored_figures() {
+    use msgp_core::model::Method;
+    let params = PendulumParams::default();
+    let cases = [
+        ("msgp filter", small_filtered(2), STORED_FILTER),
+        ("msgp free-run", small(2), STORED_FREE),
+        ("gp-narx", short_defaults(Method::GpNarx), STORED_GP_NARX),
+        (
+            "linear-kf",
+            short_defaults(Method::LinearKf),
+            STORED_LINEAR_KF,
+        ),
+    ];
+    let runs: Vec<(&str, Vec<[f64; 4]>, &[[f64; 4]])> = cases
+        .into_iter()
+        .map(|(name, settings, stored)| {
+            let out = learn_policy(&params, &settings, &mut |_| {}).expect("learn");
+            let got = out
+                .iterations
+                .iter()
+                .map(|r| {
+                    [
+                        r.predicted_cost,
+                        r.actual_cost,
+                        r.gains.kp_theta,
+                        r.gains.kd_theta,
+                    ]
+                })
+                .collect();
+            (name, got, stored)
+        })
+        .collect();
+    for (name, got, _) in &runs {
+        println!("{name}: {got:?}");
+    }
+    for (name, got, stored) in runs {
+        assert_eq!(got.len(), stored.len(), "{name}");
+        for (g, s) in got.iter().zip(stored) {
+            for (a, b) in g.iter().zip(s) {
+                assert!(
+                    (a - b).abs() <= 1e-9 * b.abs().max(1e-3),
+                    "{name}: {got:?} vs stored {stored:?}"
+                );
+            }
+        }
+    }
+}
+
+const STORED_FILTER: &[[f64; 4]] = &[
+    [
+        1.1501792381972327,
+        0.17397774983011016,
+        19.000000001285585,
+        2.408319511326732,
+    ],
+    [
+        1.1398214529740176,
+        3.3415179689312575,
+        19.14483992235543,
+        2.4842776335882526,
+    ],
+];
+const STORED_FREE: &[[f64; 4]] = &[
+    [
+        24.415860742845275,
+        0.25599488106968504,
+        8.498504337036191,
+        1.6998686280901294,
+    ],
+    [
+        3.733531296442371,
+        6.30953463014866,
+        6.999876345345779,
+        1.9997839861184596,
+    ],
+];
+const STORED_GP_NARX: &[[f64; 4]] = &[
+    [
+        4.308267399045464,
+        0.1446840985983482,
+        19.08104212463047,
+        2.803338346165367,
+    ],
+    [
+        0.9452367695159009,
+        2.2747665948962967,
+        20.76209532178013,
+        5.051519384617118,
+    ],
+];
+const STORED_LINEAR_KF: &[[f64; 4]] = &[
+    [
+        0.7839673615826025,
+        0.15799279670033495,
+        18.005484278779875,
+        2.6063366666211296,
+    ],
+    [
+        1.2402078056083856,
+        3.647698372669343,
+        21.524207314688383,
+        2.277982966864927,
+    ],
+];

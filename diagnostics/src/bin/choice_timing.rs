@@ -49,7 +49,9 @@ fn data(
         let ep = run_episode(params, &mut controller, &config(seed))?;
         out.push(TrainingEpisode {
             traj: episode_trajectory(&ep)?,
-            policy: Some(PolicySpec::Pid(modelled_policy(&gains, params)?)),
+            policy: Some(PolicySpec::Direct(msgp_core::policy::Policy::Pid(
+                modelled_policy(&gains, params)?,
+            ))),
         });
     }
     Ok(out)

@@ -61,7 +61,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let mut gains = PidPdGains::hand_tuned();
     gains.saturation = Saturation::Sine;
-    let policy = PolicySpec::Pid(modelled_policy(&gains, &params)?);
+    let policy = PolicySpec::Direct(msgp_core::policy::Policy::Pid(modelled_policy(
+        &gains, &params,
+    )?));
     let fit = FitSettings {
         seed: settings.seed,
         threads,

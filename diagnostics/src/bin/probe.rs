@@ -150,7 +150,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         for traj in parts {
             training.push(TrainingEpisode {
                 traj,
-                policy: Some(PolicySpec::Pid(modelled_policy(g, &params)?)),
+                policy: Some(PolicySpec::Direct(msgp_core::policy::Policy::Pid(
+                    modelled_policy(g, &params)?,
+                ))),
             });
         }
     }

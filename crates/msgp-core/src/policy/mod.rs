@@ -95,29 +95,60 @@ impl<T: Scalar> FeedbackPolicy<T> for LinearPolicy<T> {
     }
 }
 
-mod normalized;
-mod pid;
+/// A policy behind a reference or a box is a policy (the lifted [`Policy`]s inside
+/// [`Normalized`]).
+macro_rules! forward_policy {
+    ($($ty:ty),*) => {$(
+        impl<T: Scalar, P: FeedbackPolicy<T> + ?Sized> FeedbackPolicy<T> for $ty {
+            fn input_dim(&self) -> usize {
+                (**self).input_dim()
+            }
+            fn state_dim(&self) -> usize {
+                (**self).state_dim()
+            }
+            fn initial_state(&self, y: &DMatrix<f64>, u: &DMatrix<f64>, t: usize) -> DVector<f64> {
+                (**self).initial_state(y, u, t)
+            }
+            fn moments(&self, mean: &DVector<T>, cov: &DMatrix<T>) -> Result<PolicyMoments<T>> {
+                (**self).moments(mean, cov)
+            }
+        }
+    )*};
+}
+forward_policy!(&P, Box<P>);
 
+mod bounds;
+mod normalized;
+mod parametric;
+mod pid;
+mod rbf;
+mod state_feedback;
+
+pub use bounds::CommandBounds;
 pub use normalized::Normalized;
+pub use parametric::Policy;
+pub(crate) use parametric::ThetaVjp;
 pub use pid::PidPolicy;
+pub use rbf::RbfPolicy;
+pub use state_feedback::StateFeedback;
 
 /// The policy that produced a feedback trajectory, as data (f64 parameters), so the loss can
 /// rebuild it on any scalar type: f64 for values, duals for gradients and for the adjoint
 /// sweep's policy Jacobians.
 #[derive(Clone, Debug, PartialEq)]
 pub enum PolicySpec {
-    /// `u = K y + b`.
+    /// `u = K y + b` in the model's units.
     Linear(LinearPolicy<f64>),
-    /// Saturated PID.
-    Pid(PidPolicy<f64>),
-    /// A saturated PID in original units inside a normalised model.
-    NormalizedPid(Normalized<PidPolicy<f64>>),
+    /// A controller in the model's units.
+    Direct(Policy),
+    /// A controller in original units inside a normalised model.
+    Normalized(Normalized<Policy>),
 }
 
 impl PolicySpec {
     /// The same policy (given in original units) for a rollout in the normalised units of
     /// `normalizer`: a linear policy is converted exactly (`K_n = diag(1/s_u) K diag(s_y)`,
-    /// `b_n = (K m_y + b − m_u)/s_u`), a PID policy is wrapped in [`Normalized`].
+    /// `b_n = (K m_y + b − m_u)/s_u`), a controller is wrapped in [`Normalized`].
     pub fn normalized(&self, normalizer: &crate::data::Normalizer) -> Result<PolicySpec> {
         let n = normalizer;
         Ok(match self {
@@ -137,25 +168,29 @@ impl PolicySpec {
                 });
                 PolicySpec::Linear(LinearPolicy::new(gain, offset)?)
             }
-            PolicySpec::Pid(p) => PolicySpec::NormalizedPid(Normalized {
+            PolicySpec::Direct(p) => PolicySpec::Normalized(Normalized {
                 inner: p.clone(),
                 normalizer: n.clone(),
             }),
-            PolicySpec::NormalizedPid(w) => PolicySpec::NormalizedPid(Normalized {
+            PolicySpec::Normalized(w) => PolicySpec::Normalized(Normalized {
                 inner: w.inner.clone(),
                 normalizer: n.clone(),
             }),
         })
     }
 
-    /// Whether [`PolicySpec::moments_vjp`] has a closed form for this policy (the PID ones; a
+    /// Whether [`PolicySpec::moments_vjp`] has a closed form (the PID and RBF controllers; a
     /// linear policy's map is cheap enough for duals).
     pub(crate) fn has_closed_form_vjp(&self) -> bool {
-        matches!(self, PolicySpec::Pid(_) | PolicySpec::NormalizedPid(_))
+        match self {
+            PolicySpec::Linear(_) => false,
+            PolicySpec::Direct(p) => p.has_closed_form_vjp(),
+            PolicySpec::Normalized(w) => w.inner.has_closed_form_vjp(),
+        }
     }
 
-    /// Vector–Jacobian product of the policy's moment map in closed form
-    /// ([`PidPolicy::moments_vjp`]); an error for a policy without one
+    /// Vector–Jacobian product of the policy's moment map in closed form (the input moments'
+    /// adjoints and the parameters'); an error for a policy without one
     /// ([`PolicySpec::has_closed_form_vjp`]).
     pub(crate) fn moments_vjp(
         &self,
@@ -164,31 +199,26 @@ impl PolicySpec {
         mean_bar: &DVector<f64>,
         cov_bar: &DMatrix<f64>,
         c_bar: &DMatrix<f64>,
-    ) -> Result<pid::PidVjp> {
+    ) -> Result<ThetaVjp> {
+        let none =
+            || MsgpError::Shape("this policy has no closed-form vector–Jacobian product".into());
         match self {
-            PolicySpec::Pid(p) => p.moments_vjp(mean, cov, mean_bar, cov_bar, c_bar),
-            PolicySpec::NormalizedPid(p) => p.moments_vjp(mean, cov, mean_bar, cov_bar, c_bar),
-            PolicySpec::Linear(_) => Err(MsgpError::Shape(
-                "a linear policy has no closed-form vector–Jacobian product".into(),
-            )),
+            PolicySpec::Direct(p) => p
+                .moments_vjp(mean, cov, mean_bar, cov_bar, c_bar)
+                .unwrap_or_else(|| Err(none())),
+            PolicySpec::Normalized(p) => p.moments_vjp(mean, cov, mean_bar, cov_bar, c_bar),
+            PolicySpec::Linear(_) => Err(none()),
         }
     }
 
     /// The policy on scalar type `T`.
-    pub fn lift<T: Scalar>(&self) -> Box<dyn FeedbackPolicy<T>> {
+    pub fn lift<T: crate::moments::MomentMatch>(&self) -> Box<dyn FeedbackPolicy<T>> {
         let c = crate::numeric::scalar::c::<T>;
-        let pid = |p: &PidPolicy<f64>| PidPolicy {
-            kp: p.kp.map(c),
-            ki: p.ki.map(c),
-            kd: p.kd.map(c),
-            period: p.period,
-            u_max: p.u_max.clone(),
-        };
         match self {
             PolicySpec::Linear(p) => Box::new(p.map(c)),
-            PolicySpec::Pid(p) => Box::new(pid(p)),
-            PolicySpec::NormalizedPid(n) => Box::new(Normalized {
-                inner: pid(&n.inner),
+            PolicySpec::Direct(p) => p.lift::<T>(),
+            PolicySpec::Normalized(n) => Box::new(Normalized {
+                inner: n.inner.lift::<T>(),
                 normalizer: n.normalizer.clone(),
             }),
         }

@@ -7,10 +7,9 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::pid::PidVjp;
-use super::{FeedbackPolicy, PidPolicy, PolicyMoments};
+use super::{FeedbackPolicy, Policy, PolicyMoments, ThetaVjp};
 use crate::data::Normalizer;
-use crate::error::Result;
+use crate::error::{MsgpError, Result};
 use crate::numeric::scalar::{Scalar, c};
 
 /// Wraps a policy in original units for a rollout in normalised units.
@@ -67,10 +66,10 @@ impl<P> Normalized<P> {
     }
 }
 
-impl Normalized<PidPolicy<f64>> {
-    /// Vector–Jacobian product of [`FeedbackPolicy::moments`] (see
-    /// [`PidPolicy::moments_vjp`]): the affine changes of units are diagonal, so their adjoints
-    /// scale the inner policy's.
+impl Normalized<Policy> {
+    /// Vector–Jacobian product of [`FeedbackPolicy::moments`] in closed form
+    /// ([`Policy`]'s, with `θ`'s adjoint): the affine changes of units are diagonal, so
+    /// their adjoints scale the inner policy's. An error for a controller without one.
     pub(crate) fn moments_vjp(
         &self,
         mean: &DVector<f64>,
@@ -78,23 +77,31 @@ impl Normalized<PidPolicy<f64>> {
         mean_bar: &DVector<f64>,
         cov_bar: &DMatrix<f64>,
         c_bar: &DMatrix<f64>,
-    ) -> Result<PidVjp> {
+    ) -> Result<ThetaVjp> {
         let nq = mean.len();
-        let (du, no) = (self.inner.kp.nrows(), mean_bar.len());
+        let (du, no) = (self.inner.command_dim(), mean_bar.len());
         let a = self.input_scale(nq);
         let b = self.output_scale(du, no);
         let (qm, qc) = self.input_to_original(mean, cov);
-        let (qm_bar, qc_bar, gains) = self.inner.moments_vjp(
-            &qm,
-            &qc,
-            &DVector::from_fn(no, |k, _| mean_bar[k] * b[k]),
-            &DMatrix::from_fn(no, no, |i, j| cov_bar[(i, j)] * b[i] * b[j]),
-            &DMatrix::from_fn(c_bar.nrows(), no, |i, j| a[i] * c_bar[(i, j)] * b[j]),
-        )?;
+        let (qm_bar, qc_bar, theta) = self
+            .inner
+            .moments_vjp(
+                &qm,
+                &qc,
+                &DVector::from_fn(no, |k, _| mean_bar[k] * b[k]),
+                &DMatrix::from_fn(no, no, |i, j| cov_bar[(i, j)] * b[i] * b[j]),
+                &DMatrix::from_fn(c_bar.nrows(), no, |i, j| a[i] * c_bar[(i, j)] * b[j]),
+            )
+            .unwrap_or_else(|| {
+                Err(MsgpError::Shape(format!(
+                    "the {} policy has no closed-form vector–Jacobian product",
+                    self.inner.kind()
+                )))
+            })?;
         Ok((
             DVector::from_fn(nq, |k, _| qm_bar[k] * a[k]),
             DMatrix::from_fn(nq, nq, |i, j| qc_bar[(i, j)] * a[i] * a[j]),
-            gains,
+            theta,
         ))
     }
 }
@@ -152,131 +159,142 @@ mod tests {
 
     use super::*;
     use crate::numeric::dual::{Dual, gradient, weighted_sum};
+    use crate::policy::{CommandBounds, PidPolicy, RbfPolicy};
 
-    /// The closed-form VJP of a normalised PID policy's moment map equals the gradient of
+    /// A random normaliser for `du` commands and `dy` outputs.
+    fn normalizer(r: &mut dyn FnMut(f64) -> f64, du: usize, dy: usize) -> Normalizer {
+        Normalizer {
+            u_mean: (0..du).map(|_| r(0.3)).collect(),
+            u_std: (0..du).map(|_| 1.0 + r(0.5).abs()).collect(),
+            y_mean: (0..dy).map(|_| r(0.1)).collect(),
+            y_std: (0..dy).map(|_| 0.2 + r(0.1).abs()).collect(),
+        }
+    }
+
+    /// The closed-form VJP of a normalised controller's moment map equals the gradient of
     /// `⟨ō_mean, mean⟩ + ⟨ō_cov, cov⟩ + ⟨C̄, C⟩` by duals through the whole map, with respect
-    /// to the input moments and every gain, at random points with the saturation active.
+    /// to the input moments and every parameter, block by block (each to 1e-10 of its block's
+    /// largest entry), at a point where the saturation is active.
+    fn check_vjp(policy: &Normalized<Policy>, size: &[f64], r: &mut dyn FnMut(f64) -> f64) {
+        let nq = size.len();
+        let mean = DVector::from_fn(nq, |i, _| r(size[i]));
+        let f = DMatrix::from_fn(nq, nq, |i, _| r(0.5 * size[i]));
+        let cov = &f * f.transpose()
+            + DMatrix::from_fn(nq, nq, |i, j| {
+                if i == j {
+                    0.01 * size[i] * size[i]
+                } else {
+                    0.0
+                }
+            });
+        let lifted = Normalized {
+            inner: policy.inner.lift::<f64>(),
+            normalizer: policy.normalizer.clone(),
+        };
+        let pm = lifted.moments(&mean, &cov).expect("moments");
+        let (u_var, u_lin) = (pm.cov[(0, 0)], pm.c.column(0).amax());
+        assert!(u_var > 1e-3 && u_lin > 1e-3, "Var u {u_var}, |C_u| {u_lin}");
+        let no = pm.mean.len();
+        let mean_bar = DVector::from_fn(no, |_, _| r(1.0));
+        let cov_bar = DMatrix::from_fn(no, no, |_, _| r(1.0));
+        let c_bar = DMatrix::from_fn(nq, no, |_, _| r(1.0));
+        let (qm_bar, qc_bar, theta_bar) = policy
+            .moments_vjp(&mean, &cov, &mean_bar, &cov_bar, &c_bar)
+            .expect("vjp");
+        let mut x: Vec<f64> = mean.iter().chain(cov.iter()).copied().collect();
+        x.extend(policy.inner.theta());
+        let active: Vec<usize> = (0..x.len()).collect();
+        let k = nq + nq * nq;
+        let (_, g) = gradient(&x, &active, 1, |xd: &[Dual]| {
+            let p = Normalized {
+                inner: policy.inner.lift_theta::<Dual>(&xd[k..])?,
+                normalizer: policy.normalizer.clone(),
+            };
+            let pm = p.moments(
+                &DVector::from_column_slice(&xd[..nq]),
+                &DMatrix::from_column_slice(nq, nq, &xd[nq..k]),
+            )?;
+            Ok(weighted_sum(&[
+                (pm.mean.as_slice(), mean_bar.as_slice()),
+                (pm.cov.as_slice(), cov_bar.as_slice()),
+                (pm.c.as_slice(), c_bar.as_slice()),
+            ]))
+        })
+        .expect("duals");
+        // the covariance is symmetric: only the adjoint's symmetric part is defined (the duals
+        // through a Cholesky factor see one triangle, the backward pass both)
+        let sym = |v: &[f64]| {
+            let a = DMatrix::from_column_slice(nq, nq, v);
+            (&a + a.transpose()) * 0.5
+        };
+        let mut g = g;
+        let g_cov = sym(&g[nq..k]);
+        g[nq..k].copy_from_slice(g_cov.as_slice());
+        let closed: Vec<f64> = qm_bar
+            .iter()
+            .chain(sym(qc_bar.as_slice()).iter())
+            .chain(theta_bar.iter())
+            .copied()
+            .collect();
+        assert_eq!(closed.len(), g.len());
+        for (name, range) in [("mean", 0..nq), ("cov", nq..k), ("theta", k..g.len())] {
+            let scale = g[range.clone()].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            assert!(scale > 0.0, "{name} has no gradient");
+            for i in range {
+                assert!(
+                    (closed[i] - g[i]).abs() <= 1e-10 * scale,
+                    "{} {name} entry {i}: closed form {} vs duals {} (scale {scale})",
+                    policy.inner.kind(),
+                    closed[i],
+                    g[i]
+                );
+            }
+        }
+    }
+
     #[test]
     fn the_pid_vjp_matches_duals_through_the_whole_map() {
         let mut rng = StdRng::seed_from_u64(7);
+        let mut r = |s: f64| {
+            let z: f64 = StandardNormal.sample(&mut rng);
+            s * z
+        };
         let (du, dy) = (1, 2);
-        let (nq, no) = (3 * dy, du + 2 * dy);
-        for case in 0..5 {
-            let mut r = |s: f64| {
-                let z: f64 = StandardNormal.sample(&mut rng);
-                s * z
-            };
-            let gains =
-                |r: &mut dyn FnMut(f64) -> f64, s: f64| DMatrix::from_fn(du, dy, |_, _| r(s));
+        for _ in 0..5 {
+            let mut gains = |s: f64| DMatrix::from_fn(du, dy, |_, _| r(s));
+            let (kp, ki, kd) = (gains(5.0), gains(1.0), gains(0.3));
+            let pid = PidPolicy::new(kp, ki, kd, 0.02, vec![5.0]).expect("pid");
             let policy = Normalized {
-                inner: PidPolicy::new(
-                    gains(&mut r, 5.0),
-                    gains(&mut r, 1.0),
-                    gains(&mut r, 0.3),
-                    0.02,
-                    vec![5.0],
-                )
-                .expect("pid"),
-                normalizer: Normalizer {
-                    u_mean: vec![r(0.3)],
-                    u_std: vec![1.0 + r(0.5).abs()],
-                    y_mean: vec![r(0.1), r(0.1)],
-                    y_std: vec![0.05 + r(0.02).abs(), 0.2 + r(0.1).abs()],
-                },
+                inner: Policy::Pid(pid),
+                normalizer: normalizer(&mut r, du, dy),
             };
             // q = [y (normalised); y_prev, integral (original units, the outputs' sizes)]
-            let size = [1.0, 1.0, 0.05, 0.2, 0.05, 0.2];
-            let mean = DVector::from_fn(nq, |i, _| r(size[i]));
-            let f = DMatrix::from_fn(nq, nq, |i, _| r(0.5 * size[i]));
-            let cov = &f * f.transpose()
-                + DMatrix::from_fn(nq, nq, |i, j| {
-                    if i == j {
-                        0.01 * size[i] * size[i]
-                    } else {
-                        0.0
-                    }
-                });
-            // the saturation is neither negligible nor saturated away
-            let pm = policy.moments(&mean, &cov).expect("moments");
-            let (u_var, u_lin) = (pm.cov[(0, 0)], pm.c.column(0).amax());
-            assert!(
-                u_var > 1e-3 && u_lin > 1e-3,
-                "case {case}: Var u {u_var}, |C_u| {u_lin}"
-            );
-            let mean_bar = DVector::from_fn(no, |_, _| r(1.0));
-            let cov_bar = DMatrix::from_fn(no, no, |_, _| r(1.0));
-            let c_bar = DMatrix::from_fn(nq, no, |_, _| r(1.0));
-            let (qm_bar, qc_bar, adj) = policy
-                .moments_vjp(&mean, &cov, &mean_bar, &cov_bar, &c_bar)
-                .expect("vjp");
+            check_vjp(&policy, &[1.0, 1.0, 0.2, 0.3, 0.2, 0.3], &mut r);
+        }
+    }
 
-            // the reference: duals over (mean, cov, K_p, K_i, K_d) through `moments`
-            let inner = &policy.inner;
-            let mut x: Vec<f64> = mean.iter().chain(cov.iter()).copied().collect();
-            x.extend(
-                inner
-                    .kp
-                    .iter()
-                    .chain(inner.ki.iter())
-                    .chain(inner.kd.iter()),
-            );
-            let active: Vec<usize> = (0..x.len()).collect();
-            let (_, g) = gradient(&x, &active, 1, |xd: &[Dual]| {
-                let k = nq + nq * nq;
-                let gain =
-                    |o: usize| DMatrix::from_column_slice(du, dy, &xd[k + o..k + o + du * dy]);
-                let p = Normalized {
-                    inner: PidPolicy::new(
-                        gain(0),
-                        gain(du * dy),
-                        gain(2 * du * dy),
-                        0.02,
-                        vec![5.0],
-                    )?,
-                    normalizer: policy.normalizer.clone(),
-                };
-                let pm = p.moments(
-                    &DVector::from_column_slice(&xd[..nq]),
-                    &DMatrix::from_column_slice(nq, nq, &xd[nq..k]),
-                )?;
-                Ok(weighted_sum(&[
-                    (pm.mean.as_slice(), mean_bar.as_slice()),
-                    (pm.cov.as_slice(), cov_bar.as_slice()),
-                    (pm.c.as_slice(), c_bar.as_slice()),
-                ]))
-            })
-            .expect("duals");
-            let closed: Vec<f64> = qm_bar
-                .iter()
-                .chain(qc_bar.iter())
-                .chain(adj.kp.iter())
-                .chain(adj.ki.iter())
-                .chain(adj.kd.iter())
-                .copied()
-                .collect();
-            assert_eq!(closed.len(), g.len());
-            // block by block (the input moments' adjoints are orders of magnitude larger than
-            // the gains'), each to 1e-10 of its block's largest entry
-            let k = nq + nq * nq;
-            let blocks = [
-                ("mean", 0..nq),
-                ("cov", nq..k),
-                ("kp", k..k + 2),
-                ("ki", k + 2..k + 4),
-                ("kd", k + 4..k + 6),
-            ];
-            for (name, range) in blocks {
-                let scale = g[range.clone()].iter().fold(0.0f64, |m, v| m.max(v.abs()));
-                assert!(scale > 0.0, "case {case}: {name} has no gradient");
-                for i in range {
-                    assert!(
-                        (closed[i] - g[i]).abs() <= 1e-10 * scale,
-                        "case {case}, {name} entry {i}: closed form {} vs duals {} (scale {scale})",
-                        closed[i],
-                        g[i]
-                    );
-                }
-            }
+    #[test]
+    fn the_rbf_vjp_matches_duals_through_the_whole_map() {
+        let mut rng = StdRng::seed_from_u64(11);
+        let mut r = |s: f64| {
+            let z: f64 = StandardNormal.sample(&mut rng);
+            s * z
+        };
+        let (n, du, dy) = (6, 2, 3);
+        for _ in 0..3 {
+            let bounds = CommandBounds::new(vec![-1.5, 0.0], vec![2.0, 4.0]).expect("bounds");
+            let rbf = RbfPolicy::new(
+                DMatrix::from_fn(n, dy, |_, _| r(0.5)),
+                DMatrix::from_fn(n, du, |_, _| r(2.0)),
+                DVector::from_fn(dy, |_, _| r(0.3) - 0.5),
+                bounds,
+            )
+            .expect("rbf");
+            let policy = Normalized {
+                inner: Policy::Rbf(rbf),
+                normalizer: normalizer(&mut r, du, dy),
+            };
+            check_vjp(&policy, &[1.0, 1.0, 1.0], &mut r);
         }
     }
 }

@@ -13,6 +13,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::bounds::saturation_vjp;
 use super::{FeedbackPolicy, PolicyMoments};
 use crate::error::{MsgpError, Result};
 use crate::moments::saturation::saturate_moments;
@@ -215,28 +216,6 @@ impl PidPolicy<f64> {
         };
         Ok((mean_adj, cov_adj, gains))
     }
-}
-
-/// The saturation's vector–Jacobian product: the adjoints of its input moments `(m, s)` for
-/// the adjoints of its outputs (mean, covariance and `C`), by forward-mode duals over the
-/// `d_u + d_u²` inputs.
-fn saturation_vjp(
-    m: &DVector<f64>,
-    s: &DMatrix<f64>,
-    u_max: &[f64],
-    mean_bar: &DVector<f64>,
-    cov_bar: &DMatrix<f64>,
-    c_bar: &DMatrix<f64>,
-) -> Result<(DVector<f64>, DMatrix<f64>)> {
-    use crate::numeric::dual::{moments_gradient, weighted_sum};
-    moments_gradient(m, s, |md, sd| {
-        let sat = saturate_moments(md, sd, u_max);
-        Ok(weighted_sum(&[
-            (sat.mean.as_slice(), mean_bar.as_slice()),
-            (sat.cov.as_slice(), cov_bar.as_slice()),
-            (sat.c.as_slice(), c_bar.as_slice()),
-        ]))
-    })
 }
 
 impl<T: Scalar> FeedbackPolicy<T> for PidPolicy<T> {

@@ -18,8 +18,12 @@ pub mod cost;
 pub mod gradient;
 pub mod objective;
 pub mod search;
+pub mod space;
 
 pub use cost::SaturatingCost;
 pub use gradient::{DualPolicyMap, PolicyVjp, closed_loop_cost_gradient};
 pub use objective::{PidMask, PolicyProblem, RolloutCost, closed_loop_cost, policy_gradient_duals};
-pub use search::{PolicySearchResult, PolicySearchSettings, optimise_pid, optimise_pid_scaled};
+pub use search::{
+    PolicySearchResult, PolicySearchSettings, optimise, optimise_pid, optimise_pid_scaled,
+};
+pub use space::SearchSpace;

@@ -9,7 +9,8 @@ use nalgebra::{DMatrix, DVector};
 
 use super::cost::{CostMoments, SaturatingCost};
 use super::gradient::closed_loop_cost_gradient;
-use crate::error::{MsgpError, Result};
+use super::space::SearchSpace;
+use crate::error::Result;
 use crate::gp::PreparedGp;
 use crate::model::Model;
 use crate::moments::MomentMatch;
@@ -19,6 +20,7 @@ use crate::numeric::linalg::JitterLog;
 use crate::numeric::scalar::{Scalar, c};
 use crate::optim::Flow;
 use crate::policy::{FeedbackPolicy, Normalized, PidPolicy};
+use crate::rollout::adjoint::PolicyVjp;
 use crate::rollout::{Control, StartState, rollout_from};
 
 /// Expected cost of a closed-loop rollout.
@@ -227,32 +229,26 @@ impl PolicyProblem<'_> {
         }
     }
 
-    /// Expected total cost of `mask.unpack(initial, g)` and its gradient with respect to the
-    /// packed free gains `g`, by the adjoint sweep of the closed-loop rollout (a few rollouts'
-    /// work whatever the number of gains; [`policy_gradient_duals`] is the reference).
-    pub fn gradient(
-        &self,
-        mask: &PidMask,
-        initial: &PidPolicy<f64>,
-        g: &[f64],
-    ) -> Result<(f64, Vec<f64>)> {
-        if g.len() != mask.len() {
-            return Err(MsgpError::Shape(format!(
-                "{} gains given, the mask frees {}",
-                g.len(),
-                mask.len()
-            )));
-        }
+    /// Expected total cost of the policy of `space` with free parameters `x` and its gradient
+    /// with respect to `x`, by the adjoint sweep of the closed-loop rollout (a few rollouts'
+    /// work whatever the number of parameters; [`policy_gradient_duals`] is the reference).
+    /// The policy's map is differentiated in closed form where its family has one, else by
+    /// duals.
+    pub fn gradient(&self, space: &SearchSpace, x: &[f64]) -> Result<(f64, Vec<f64>)> {
         let mut log = JitterLog::default();
         let gp = PreparedGp::new(&self.model.params, &self.model.config, &mut log)?;
         let normalizer = &self.model.normalizer;
         let policy = Normalized {
-            inner: mask.unpack::<f64>(initial, g),
+            inner: space.controller(x)?,
+            normalizer: normalizer.clone(),
+        };
+        let lifted = Normalized {
+            inner: policy.inner.lift::<f64>(),
             normalizer: normalizer.clone(),
         };
         let moments = |th: &[Dual], qm: &DVector<Dual>, qc: &DMatrix<Dual>| {
             Normalized {
-                inner: mask.unpack::<Dual>(initial, th),
+                inner: space.policy::<Dual>(th)?,
                 normalizer: normalizer.clone(),
             }
             .moments(qm, qc)
@@ -263,20 +259,20 @@ impl PolicyProblem<'_> {
                    mean_bar: &DVector<f64>,
                    cov_bar: &DMatrix<f64>,
                    c_bar: &DMatrix<f64>| {
-            let (qm_bar, qc_bar, gains) = policy.moments_vjp(qm, qc, mean_bar, cov_bar, c_bar)?;
-            let theta_bar = mask.pack_matrices(&gains.kp, &gains.ki, &gains.kd);
-            Ok((qm_bar, qc_bar, theta_bar))
+            let (qm_bar, qc_bar, theta) = policy.moments_vjp(qm, qc, mean_bar, cov_bar, c_bar)?;
+            Ok((qm_bar, qc_bar, space.pack(&theta)))
         };
-        let start = self.start::<f64>(policy.state_dim());
+        let closed_form = policy.inner.has_closed_form_vjp();
+        let start = self.start::<f64>(lifted.state_dim());
         let t0 = self.model.spec.warmup();
         closed_loop_cost_gradient(
             &gp,
             &self.model.spec,
             &start,
-            &policy,
+            &lifted,
             &moments,
-            Some(&vjp),
-            g,
+            closed_form.then_some(&vjp as &PolicyVjp<'_>),
+            x,
             t0,
             t0 + self.horizon,
             &self.normalised_cost(),
@@ -285,7 +281,10 @@ impl PolicyProblem<'_> {
     }
 
     /// Expected total cost of `policy` and the per-step (mean, variance) of the cost.
-    pub fn evaluate<T: MomentMatch>(&self, policy: &PidPolicy<T>) -> Result<(T, Vec<(T, T)>)> {
+    pub fn evaluate<T: MomentMatch>(
+        &self,
+        policy: &dyn FeedbackPolicy<T>,
+    ) -> Result<(T, Vec<(T, T)>)> {
         let (rc, _) = self.cost_of(policy, None)?;
         Ok((rc.total, rc.steps.iter().map(|s| (s.mean, s.var)).collect()))
     }
@@ -293,21 +292,25 @@ impl PolicyProblem<'_> {
     /// Expected total cost of `policy` if it is at most `bound`, `None` once the rollout's
     /// running cost exceeds it (the rest of the rollout is then not computed: screening many
     /// candidates for the few cheapest needs only the ones below the running k-th best).
-    pub fn evaluate_bounded(&self, policy: &PidPolicy<f64>, bound: f64) -> Result<Option<f64>> {
+    pub fn evaluate_bounded(
+        &self,
+        policy: &dyn FeedbackPolicy<f64>,
+        bound: f64,
+    ) -> Result<Option<f64>> {
         let (rc, exceeded) = self.cost_of(policy, Some(bound))?;
         Ok((!exceeded).then_some(rc.total))
     }
 
     fn cost_of<T: MomentMatch>(
         &self,
-        policy: &PidPolicy<T>,
+        policy: &dyn FeedbackPolicy<T>,
         bound: Option<f64>,
     ) -> Result<(RolloutCost<T>, bool)> {
         let params = self.model.params.map(c::<T>);
         let mut log = JitterLog::default();
         let gp = PreparedGp::new(&params, &self.model.config, &mut log)?;
         let wrapped = Normalized {
-            inner: policy.clone(),
+            inner: policy,
             normalizer: self.model.normalizer.clone(),
         };
         let start = self.start::<T>(wrapped.state_dim());
@@ -325,38 +328,37 @@ impl PolicyProblem<'_> {
     }
 }
 
-/// Value and gradient of the expected cost at the packed gains `g` (entries outside `active`
-/// are 0), by the adjoint sweep of the closed-loop rollout
+/// Value and gradient of the expected cost at the free parameters `x` (entries outside
+/// `active` are 0), by the adjoint sweep of the closed-loop rollout
 /// ([`crate::policy_search::closed_loop_cost_gradient`]).
 pub(crate) fn policy_gradient(
     problem: &PolicyProblem<'_>,
-    mask: &PidMask,
-    initial: &PidPolicy<f64>,
-    g: &[f64],
+    space: &SearchSpace,
+    x: &[f64],
     active: &[usize],
 ) -> Result<(f64, Vec<f64>)> {
-    let (value, full) = problem.gradient(mask, initial, g)?;
-    let mut grad = vec![0.0; g.len()];
+    let (value, full) = problem.gradient(space, x)?;
+    let mut grad = vec![0.0; x.len()];
     for &i in active {
         grad[i] = full[i];
     }
     Ok((value, grad))
 }
 
-/// `policy_gradient` (the search's adjoint gradient) by duals with as many lanes as free gains (up to [`LANES`]; more gains
-/// take several chunks of `LANES`): the reference the adjoint is tested against.
+/// `policy_gradient` (the search's adjoint gradient) by duals with as many lanes as free
+/// parameters (up to [`LANES`]; more take several chunks of `LANES`): the reference the
+/// adjoint is tested against.
 pub fn policy_gradient_duals(
     problem: &PolicyProblem<'_>,
-    mask: &PidMask,
-    initial: &PidPolicy<f64>,
-    g: &[f64],
+    space: &SearchSpace,
+    x: &[f64],
     active: &[usize],
 ) -> Result<(f64, Vec<f64>)> {
     // one closure per lane count: the dual type is part of its signature
     macro_rules! lanes {
         ($n:expr) => {
-            gradient_lanes::<{ $n }, _>(g, active, 1, |gd| {
-                Ok(problem.evaluate(&mask.unpack(initial, gd))?.0)
+            gradient_lanes::<{ $n }, _>(x, active, 1, |xd| {
+                Ok(problem.evaluate(space.policy(xd)?.as_ref())?.0)
             })
         };
     }

@@ -6,10 +6,11 @@ use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
 use super::objective::{PidMask, PolicyProblem, policy_gradient};
+use super::space::SearchSpace;
 use crate::error::{MsgpError, Result};
 use crate::numeric::parallel::{Threads, map_indexed};
 use crate::optim::{Adam, AdamState};
-use crate::policy::PidPolicy;
+use crate::policy::{PidPolicy, Policy};
 
 /// Settings of the policy optimisation.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -67,8 +68,8 @@ impl Default for PolicySearchSettings {
 /// Result of a policy optimisation.
 #[derive(Clone, Debug)]
 pub struct PolicySearchResult {
-    /// The best gains found.
-    pub policy: PidPolicy<f64>,
+    /// The best policy found.
+    pub policy: Policy,
     /// Their expected total cost.
     pub expected_cost: f64,
     /// Per-step (mean, variance) of the cost under the best gains.
@@ -99,19 +100,28 @@ pub fn optimise_pid_scaled(
     typical: &[f64],
     settings: &PolicySearchSettings,
 ) -> Result<PolicySearchResult> {
+    optimise(problem, &SearchSpace::pid(initial, mask), typical, settings)
+}
+
+/// Minimises the expected cost over the free parameters of `space`, from its base's values and
+/// from seeded perturbations and screened candidates ([`PolicySearchSettings`]); each free
+/// parameter's scale is `max(|θ₀|, typical)` (`typical` packed like [`SearchSpace::pack`]).
+/// The candidates and starts run on [`PolicySearchSettings::threads`] threads; the result does
+/// not depend on their number.
+pub fn optimise(
+    problem: &PolicyProblem<'_>,
+    space: &SearchSpace,
+    typical: &[f64],
+    settings: &PolicySearchSettings,
+) -> Result<PolicySearchResult> {
     let threads = settings.threads.get();
-    if mask.is_empty() {
-        return Err(MsgpError::InvalidSetting {
-            name: "policy search",
-            reason: "no free gains".into(),
-        });
-    }
-    if typical.len() != mask.len() || typical.iter().any(|t| !(t.is_finite() && *t > 0.0)) {
+    space.validate()?;
+    if typical.len() != space.len() || typical.iter().any(|t| !(t.is_finite() && *t > 0.0)) {
         return Err(MsgpError::InvalidSetting {
             name: "policy search scales",
             reason: format!(
-                "need {} positive finite typical gain magnitudes, got {typical:?}",
-                mask.len()
+                "need {} positive finite typical parameter magnitudes, got {typical:?}",
+                space.len()
             ),
         });
     }
@@ -121,7 +131,7 @@ pub fn optimise_pid_scaled(
             reason: format!("must be finite and ≥ 0, got {}", settings.trust_region),
         });
     }
-    let x0 = mask.pack(initial);
+    let x0 = space.start();
     let scale: Vec<f64> = x0
         .iter()
         .zip(typical)
@@ -166,8 +176,7 @@ pub fn optimise_pid_scaled(
             .collect();
         starts.extend(cheapest_candidates(
             problem,
-            initial,
-            mask,
+            space,
             &drawn,
             settings.candidate_starts,
             threads,
@@ -187,7 +196,7 @@ pub fn optimise_pid_scaled(
         let on = vec![true; z.len()];
         for _ in 0..settings.iterations {
             let g: Vec<f64> = z.iter().zip(&scale).map(|(z, s)| z * s).collect();
-            let evaluated = policy_gradient(problem, mask, initial, &g, &active);
+            let evaluated = policy_gradient(problem, space, &g, &active);
             let (value, grad) = match evaluated {
                 // gains whose rollout fails numerically end this start; the best so far stays
                 Err(MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_)) => break,
@@ -205,7 +214,9 @@ pub fn optimise_pid_scaled(
             }
         }
         let g: Vec<f64> = z.iter().zip(&scale).map(|(z, s)| z * s).collect();
-        if let Ok((value, _)) = problem.evaluate(&mask.unpack::<f64>(initial, &g))
+        if let Ok((value, _)) = space
+            .policy::<f64>(&g)
+            .and_then(|p| problem.evaluate(p.as_ref()))
             && value.is_finite()
             && best.as_ref().is_none_or(|b| value < b.0)
         {
@@ -224,8 +235,8 @@ pub fn optimise_pid_scaled(
     }
     let (value, g) =
         best.ok_or_else(|| MsgpError::NonFinite("every policy-search start diverged".into()))?;
-    let policy = mask.unpack::<f64>(initial, &g);
-    let (_, steps) = problem.evaluate(&policy)?;
+    let policy = space.controller(&g)?;
+    let (_, steps) = problem.evaluate(space.policy::<f64>(&g)?.as_ref())?;
     Ok(PolicySearchResult {
         policy,
         expected_cost: value,
@@ -243,8 +254,7 @@ pub fn optimise_pid_scaled(
 /// is simply not a start.
 fn cheapest_candidates(
     problem: &PolicyProblem<'_>,
-    initial: &PidPolicy<f64>,
-    mask: &PidMask,
+    space: &SearchSpace,
     drawn: &[Vec<f64>],
     keep: usize,
     threads: usize,
@@ -265,8 +275,10 @@ fn cheapest_candidates(
             } else {
                 f64::INFINITY
             };
-            let policy = mask.unpack::<f64>(initial, &drawn[k]);
-            let Ok(Some(value)) = problem.evaluate_bounded(&policy, bound) else {
+            let Ok(Some(value)) = space
+                .policy::<f64>(&drawn[k])
+                .and_then(|p| problem.evaluate_bounded(p.as_ref(), bound))
+            else {
                 continue;
             };
             if !value.is_finite() {
@@ -300,6 +312,7 @@ mod tests {
     };
     use crate::gp::MeanFunction;
     use crate::model::Model;
+    use crate::policy::{CommandBounds, RbfPolicy, StateFeedback};
     use crate::policy_search::{SaturatingCost, policy_gradient_duals};
     use nalgebra::{DMatrix, DVector};
 
@@ -367,7 +380,16 @@ mod tests {
     #[test]
     fn the_adjoint_search_gradient_matches_duals_and_finite_differences() {
         for mean in [MeanFunction::Zero, MeanFunction::Linear] {
-            search_gradient_matches_duals_and_finite_differences(mean);
+            search_gradient_matches_duals_and_finite_differences(mean, &free_pid());
+        }
+    }
+
+    /// The same for the state feedback (duals through its map) and the RBF network (its map's
+    /// closed-form VJP through the moment matching's backward pass).
+    #[test]
+    fn the_state_feedback_and_rbf_gradients_match_duals_and_finite_differences() {
+        for space in [free_state_feedback(), free_rbf()] {
+            search_gradient_matches_duals_and_finite_differences(MeanFunction::Linear, &space);
         }
     }
 
@@ -410,7 +432,8 @@ mod tests {
         for keep in [1, 3] {
             let expected: Vec<Vec<f64>> = order[..keep].iter().map(|k| drawn[*k].clone()).collect();
             for threads in [1, 3] {
-                let got = cheapest_candidates(&problem, &initial, &mask, &drawn, keep, threads);
+                let space = SearchSpace::pid(&initial, &mask);
+                let got = cheapest_candidates(&problem, &space, &drawn, keep, threads);
                 assert_eq!(got, expected, "keep {keep}, {threads} threads");
             }
         }
@@ -447,20 +470,21 @@ mod tests {
             horizon: 5,
         };
         let (initial, mask) = zero_pd_gains();
+        let space = SearchSpace::pid(&initial, &mask);
         let err = problem
-            .gradient(&mask, &initial, &[0.1, 0.2, 0.3])
+            .gradient(&space, &[0.1, 0.2, 0.3])
             .expect_err("three gains for a mask that frees four");
         assert!(
-            err.to_string().contains("3 gains given, the mask frees 4"),
+            err.to_string()
+                .contains("3 parameters given, the search frees 4"),
             "{err}"
         );
-        assert!(problem.gradient(&mask, &initial, &[0.1; 4]).is_ok());
+        assert!(problem.gradient(&space, &[0.1; 4]).is_ok());
     }
 
-    fn search_gradient_matches_duals_and_finite_differences(mean: MeanFunction) {
-        // outputs that follow the input, so the gains matter
-        let model = two_output_model_with(|t, _| 0.3 * (t as f64 * 0.31 - 0.4).sin(), mean);
-        let problem = off_rest_problem(&model, 30);
+    /// A PID policy with every gain free, gains small enough for the saturation to stay
+    /// smooth.
+    fn free_pid() -> SearchSpace {
         let initial = PidPolicy::new(
             DMatrix::from_row_slice(1, 2, &[-0.3, 0.2]),
             DMatrix::from_row_slice(1, 2, &[0.05, -0.02]),
@@ -469,27 +493,58 @@ mod tests {
             vec![2.0],
         )
         .expect("policy");
-        let mask = PidMask {
-            kp: DMatrix::from_element(1, 2, true),
-            ki: DMatrix::from_element(1, 2, true),
-            kd: DMatrix::from_element(1, 2, true),
-        };
-        let g = mask.pack(&initial);
+        SearchSpace::all(Policy::Pid(initial))
+    }
+
+    /// A state feedback on two observations and one past command, asymmetric bounds.
+    fn free_state_feedback() -> SearchSpace {
+        let bounds = CommandBounds::new(vec![-1.5], vec![2.5]).expect("bounds");
+        let sf = StateFeedback::new(
+            DMatrix::from_row_slice(1, 5, &[-0.4, 0.3, 0.1, -0.05, 0.2]),
+            DVector::from_vec(vec![0.1]),
+            2,
+            (2, 1),
+            bounds,
+        )
+        .expect("state feedback");
+        SearchSpace::all(Policy::StateFeedback(sf))
+    }
+
+    /// An RBF network of four centres on the two observations.
+    fn free_rbf() -> SearchSpace {
+        let bounds = CommandBounds::new(vec![-2.0], vec![2.0]).expect("bounds");
+        let rbf = RbfPolicy::new(
+            DMatrix::from_row_slice(4, 2, &[0.3, -0.2, -0.1, 0.4, 0.0, 0.1, 0.5, 0.5]),
+            DMatrix::from_row_slice(4, 1, &[0.8, -0.6, 0.4, -0.3]),
+            DVector::from_vec(vec![-0.7, -0.4]),
+            bounds,
+        )
+        .expect("rbf");
+        SearchSpace::all(Policy::Rbf(rbf))
+    }
+
+    fn search_gradient_matches_duals_and_finite_differences(
+        mean: MeanFunction,
+        space: &SearchSpace,
+    ) {
+        // outputs that follow the input, so the parameters matter
+        let model = two_output_model_with(|t, _| 0.3 * (t as f64 * 0.31 - 0.4).sin(), mean);
+        let problem = off_rest_problem(&model, 30);
+        let g = space.start();
         let active: Vec<usize> = (0..g.len()).collect();
         // the search's gradient: the adjoint sweep
-        let (value, grad) = policy_gradient(&problem, &mask, &initial, &g, &active).expect("grad");
-        // the references: duals with one lane per gain, and with eight
-        let (value6, grad6) =
-            policy_gradient_duals(&problem, &mask, &initial, &g, &active).expect("grad6");
+        let (value, grad) = policy_gradient(&problem, space, &g, &active).expect("grad");
+        // the references: duals with one lane per parameter (up to eight), and with eight
+        let (value6, grad6) = policy_gradient_duals(&problem, space, &g, &active).expect("grad6");
         let (value8, grad8) = crate::numeric::dual::gradient(&g, &active, 1, |gd| {
-            Ok(problem.evaluate(&mask.unpack(&initial, gd))?.0)
+            Ok(problem.evaluate(space.policy(gd)?.as_ref())?.0)
         })
         .expect("grad8");
         assert_eq!(value6.to_bits(), value8.to_bits());
         assert_eq!(grad6, grad8);
         let f = |x: &[f64]| {
             problem
-                .evaluate(&mask.unpack::<f64>(&initial, x))
+                .evaluate(space.policy::<f64>(x).expect("policy").as_ref())
                 .expect("f")
                 .0
         };
@@ -506,7 +561,8 @@ mod tests {
             // different orders of the same arithmetic: equal to rounding
             assert!(
                 (grad[i] - grad8[i]).abs() <= 1e-10 * scale,
-                "{i}: adjoint {grad:?} vs duals {grad8:?}"
+                "{} {i}: adjoint {grad:?} vs duals {grad8:?}",
+                space.base.kind()
             );
             let h = 1e-5;
             let (mut gp, mut gm) = (g.clone(), g.clone());
@@ -515,7 +571,8 @@ mod tests {
             let fd = (f(&gp) - f(&gm)) / (2.0 * h);
             assert!(
                 (grad[i] - fd).abs() <= 1e-6 * scale,
-                "{i}: dual {} vs fd {fd}",
+                "{} {i}: dual {} vs fd {fd}",
+                space.base.kind(),
                 grad[i]
             );
         }

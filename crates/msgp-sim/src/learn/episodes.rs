@@ -6,7 +6,7 @@ use nalgebra::DMatrix;
 use msgp_core::data::Trajectory;
 use msgp_core::fit::TrainingEpisode;
 use msgp_core::loss::Likelihood;
-use msgp_core::policy::PolicySpec;
+use msgp_core::policy::{Policy, PolicySpec};
 use msgp_core::policy_search::cost::SaturatingCost;
 
 use crate::controller::{Controller, PidPdGains, PidPdPolicy};
@@ -94,7 +94,7 @@ pub(super) fn feedback_episode(
         seconds,
     )?;
     let parts = msgp_segments(episode_trajectory(&ep)?, settings.fb_segment, settings)?;
-    let policy = PolicySpec::Pid(modelled_policy(gains, params)?);
+    let policy = PolicySpec::Direct(Policy::Pid(modelled_policy(gains, params)?));
     let entries = parts
         .into_iter()
         .map(|traj| TrainingEpisode {

@@ -225,7 +225,7 @@ pub fn learn_policy_observed(
                         steps
                     }
                     _ => {
-                        gains = gains_from(&result.policy);
+                        gains = gains_from(&result.policy)?;
                         result.steps
                     }
                 };

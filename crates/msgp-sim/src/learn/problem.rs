@@ -3,7 +3,7 @@
 
 use nalgebra::DMatrix;
 
-use msgp_core::policy::PidPolicy;
+use msgp_core::policy::{PidPolicy, Policy};
 use msgp_core::policy_search::PolicyProblem;
 use msgp_core::policy_search::cost::SaturatingCost;
 
@@ -44,15 +44,23 @@ pub fn pendulum_problem<'a>(
     }
 }
 
-pub(super) fn gains_from(p: &PidPolicy<f64>) -> PidPdGains {
-    PidPdGains {
+/// The pendulum's gains of a searched policy (the loop searches PID policies only).
+pub(super) fn gains_from(c: &Policy) -> Result<PidPdGains, SimError> {
+    let Policy::Pid(p) = c else {
+        return Err(SimError::invalid(
+            "policy",
+            0.0,
+            "the pendulum loop searches PID + PD gains only",
+        ));
+    };
+    Ok(PidPdGains {
         kp_theta: p.kp[(0, 0)],
         kp_x: p.kp[(0, 1)],
         ki_x: p.ki[(0, 1)],
         kd_theta: p.kd[(0, 0)],
         kd_x: p.kd[(0, 1)],
         saturation: Saturation::Sine,
-    }
+    })
 }
 
 /// Cost of the measured outputs of an episode over the modelled window; steps after an early
