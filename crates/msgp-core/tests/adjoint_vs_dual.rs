@@ -163,11 +163,19 @@ fn closed_and_open_loop_two_outputs() {
     );
 }
 
-#[test]
-fn closed_loop_with_saturated_pid_policies() {
-    use msgp_core::data::Normalizer;
-    use msgp_core::policy::{Normalized, PidPolicy};
-    let mut r = rng(23);
+/// Two outputs, one input, `l_y = l_u = 2`: a random GP of 9 pseudo-inputs and an `n`-sample
+/// trajectory of noisy sines drawn from `seed`, and the normaliser of the closed-loop
+/// episodes' policies.
+fn closed_loop_setting(
+    seed: u64,
+    n: usize,
+) -> (
+    NarxSpec,
+    GpParams<f64>,
+    Trajectory,
+    msgp_core::data::Normalizer,
+) {
+    let mut r = rng(seed);
     let spec = NarxSpec {
         ly: 2,
         lu: 2,
@@ -175,12 +183,24 @@ fn closed_loop_with_saturated_pid_policies() {
         du: 1,
     };
     let params = random_gp(&mut r, 9, spec.input_dim(), 2);
-    let n = 55;
     let y = DMatrix::from_fn(n, 2, |t, j| {
         0.3 * ((t as f64) * 0.2 + j as f64).sin() + 0.05 * normal(&mut r)
     });
     let u = DMatrix::from_fn(n, 1, |t, _| 0.3 * ((t as f64) * 0.13).cos());
     let traj = Trajectory::new(u, y).expect("traj");
+    let normalizer = msgp_core::data::Normalizer {
+        u_mean: vec![0.1],
+        u_std: vec![0.7],
+        y_mean: vec![0.02, -0.1],
+        y_std: vec![0.5, 1.5],
+    };
+    (spec, params, traj, normalizer)
+}
+
+#[test]
+fn closed_loop_with_saturated_pid_policies() {
+    use msgp_core::policy::{Normalized, PidPolicy};
+    let (spec, params, traj, normalizer) = closed_loop_setting(23, 55);
     let pid = PidPolicy::new(
         DMatrix::from_row_slice(1, 2, &[1.5, 0.4]),
         DMatrix::from_row_slice(1, 2, &[0.0, 0.2]),
@@ -189,12 +209,6 @@ fn closed_loop_with_saturated_pid_policies() {
         vec![1.2],
     )
     .expect("pid");
-    let normalizer = Normalizer {
-        u_mean: vec![0.1],
-        u_std: vec![0.7],
-        y_mean: vec![0.02, -0.1],
-        y_std: vec![0.5, 1.5],
-    };
     let eps = vec![
         Episode {
             traj: traj.clone(),
@@ -217,22 +231,10 @@ fn closed_loop_with_saturated_pid_policies() {
 /// sweep) and by the RBF network (its closed-form VJP), in the model's units and normalised.
 #[test]
 fn state_feedback_and_rbf_episodes_match_duals() {
-    use msgp_core::data::Normalizer;
     use msgp_core::policy::{CommandBounds, Normalized, Policy, RbfPolicy, StateFeedback};
-    let mut r = rng(29);
-    let spec = NarxSpec {
-        ly: 2,
-        lu: 2,
-        dy: 2,
-        du: 1,
-    };
-    let params = random_gp(&mut r, 9, spec.input_dim(), 2);
-    let n = 45;
-    let y = DMatrix::from_fn(n, 2, |t, j| {
-        0.3 * ((t as f64) * 0.2 + j as f64).sin() + 0.05 * normal(&mut r)
-    });
-    let u = DMatrix::from_fn(n, 1, |t, _| 0.3 * ((t as f64) * 0.13).cos());
-    let traj = Trajectory::new(u, y).expect("traj");
+    let (spec, params, traj, normalizer) = closed_loop_setting(29, 45);
+    let mut r = rng(30);
+    let n = traj.len();
     let bounds = CommandBounds::new(vec![-1.0], vec![1.5]).expect("bounds");
     let sf = StateFeedback::new(
         DMatrix::from_row_slice(1, 6, &[0.8, -0.3, 0.2, 0.1, 0.3, -0.1]),
@@ -249,12 +251,6 @@ fn state_feedback_and_rbf_episodes_match_duals() {
         bounds,
     )
     .expect("rbf");
-    let normalizer = Normalizer {
-        u_mean: vec![0.1],
-        u_std: vec![0.7],
-        y_mean: vec![0.02, -0.1],
-        y_std: vec![0.5, 1.5],
-    };
     let mut eps = Vec::new();
     for policy in [Policy::StateFeedback(sf), Policy::Rbf(rbf)] {
         eps.push(Episode {

@@ -150,7 +150,7 @@ fn state_feedback_moments_match_monte_carlo() {
     let m = DVector::from_vec(vec![0.3, -0.2, 0.25, -0.1, 0.5, 0.4]);
     let s = random_cov(&mut r, 6, 0.2);
     let act = |q: &[f64]| {
-        let (u, p) = policy.act(&q[..2], &q[2..]);
+        let (u, p) = policy.act(&q[..2], &q[2..]).expect("act");
         u.into_iter().chain(p).collect::<Vec<f64>>()
     };
     check_against_mc(&policy, &act, &m, &s, 48);
@@ -176,7 +176,7 @@ fn rbf_network_moments_match_monte_carlo() {
     let policy = rbf(wide, &mut r);
     let m = DVector::from_vec(vec![0.2, -0.1, 0.3]);
     let s = random_cov(&mut r, 3, 0.4);
-    let act = |q: &[f64]| policy.act(q);
+    let act = |q: &[f64]| policy.act(q).expect("act");
     check_against_mc(&policy, &act, &m, &s, 50);
 }
 

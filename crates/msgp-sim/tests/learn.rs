@@ -36,10 +36,14 @@ fn small(iterations: usize) -> LearnSettings {
     }
 }
 
-/// `iterations` of the filtered MSGP loop's defaults, small: two 1 s random rollouts, m = 10,
-/// 5 fit iterations, 3 Adam steps from one start after 4 candidates.
+/// `iterations` of the filtered MSGP loop's defaults, small ([`shortened`]).
 fn small_filtered(iterations: usize) -> LearnSettings {
-    let f = LearnSettings::filtered_msgp();
+    shortened(LearnSettings::filtered_msgp(), iterations)
+}
+
+/// `iterations` of the loop `f`, small: two 1 s random rollouts, m = 10, 5 fit iterations,
+/// 3 Adam steps from one start after 4 candidates.
+fn shortened(f: LearnSettings, iterations: usize) -> LearnSettings {
     LearnSettings {
         iterations,
         random_rollouts: 2,
@@ -523,25 +527,6 @@ fn the_prequential_choice_searches_on_the_model_that_predicted_unseen_episodes_b
     );
 }
 
-/// A short run of `method`'s loop defaults: two 1 s random rollouts, two iterations, m = 10,
-/// 5 fit iterations, 3 Adam steps from one start after 4 candidates.
-fn short_defaults(method: msgp_core::model::Method) -> LearnSettings {
-    let f = LearnSettings::for_method(method);
-    LearnSettings {
-        iterations: 2,
-        random_rollouts: 2,
-        episode_seconds: 1.0,
-        fit: f.fit.clone().with_inducing(10).with_solver_iterations(5),
-        search: PolicySearchSettings {
-            iterations: 3,
-            restarts: 0,
-            candidates: 4,
-            ..f.search
-        },
-        ..f
-    }
-}
-
 /// Figures of short runs of every model's loop (predicted and measured cost, the gains on the
 /// pole), stored from the loop before it moved onto the generic policy search: what the loop
 /// computes stays the same through refactors. Relative 1e-9: a change of formula, order of
@@ -553,14 +538,18 @@ fn short_runs_keep_their_stored_figures() {
     let cases = [
         ("msgp filter", small_filtered(2), STORED_FILTER),
         ("msgp free-run", small(2), STORED_FREE),
-        ("gp-narx", short_defaults(Method::GpNarx), STORED_GP_NARX),
+        (
+            "gp-narx",
+            shortened(LearnSettings::for_method(Method::GpNarx), 2),
+            STORED_GP_NARX,
+        ),
         (
             "linear-kf",
-            short_defaults(Method::LinearKf),
+            shortened(LearnSettings::for_method(Method::LinearKf), 2),
             STORED_LINEAR_KF,
         ),
     ];
-    let runs: Vec<(&str, Vec<[f64; 4]>, &[[f64; 4]])> = cases
+    let runs: Vec<(&str, Vec<Figures>, &[Figures])> = cases
         .into_iter()
         .map(|(name, settings, stored)| {
             let out = learn_policy(&params, &settings, &mut |_| {}).expect("learn");
@@ -594,6 +583,9 @@ fn short_runs_keep_their_stored_figures() {
         }
     }
 }
+
+/// An iteration's predicted and measured cost, `kp_θ` and `kd_θ`.
+type Figures = [f64; 4];
 
 const STORED_FILTER: &[[f64; 4]] = &[
     [

@@ -12,16 +12,40 @@ use crate::error::{MsgpError, Result};
 use crate::moments::saturation::saturate_moments;
 use crate::numeric::scalar::{Scalar, c};
 
-/// The range `[low, high]` of each command.
+/// The range `[low, high]` of each command: finite, `low < high`, as many of each (checked
+/// when made, read back through [`CommandBounds::low`] and [`CommandBounds::high`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "RawBounds")]
 pub struct CommandBounds {
-    /// Lower bound per command.
-    pub low: Vec<f64>,
-    /// Upper bound per command.
-    pub high: Vec<f64>,
+    pub(crate) low: Vec<f64>,
+    pub(crate) high: Vec<f64>,
+}
+
+/// Bounds as read, before [`CommandBounds::new`] checks them.
+#[derive(Deserialize)]
+struct RawBounds {
+    low: Vec<f64>,
+    high: Vec<f64>,
+}
+
+impl TryFrom<RawBounds> for CommandBounds {
+    type Error = MsgpError;
+    fn try_from(raw: RawBounds) -> Result<Self> {
+        Self::new(raw.low, raw.high)
+    }
 }
 
 impl CommandBounds {
+    /// Lower bound per command.
+    pub fn low(&self) -> &[f64] {
+        &self.low
+    }
+
+    /// Upper bound per command.
+    pub fn high(&self) -> &[f64] {
+        &self.high
+    }
+
     /// Checks that both bounds are finite, as many, and `low < high` for every command.
     pub fn new(low: Vec<f64>, high: Vec<f64>) -> Result<Self> {
         if low.len() != high.len() || low.is_empty() {

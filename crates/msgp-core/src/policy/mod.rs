@@ -39,8 +39,24 @@ pub trait FeedbackPolicy<T: Scalar>: Send + Sync {
         let _ = (y, u, t);
         DVector::zeros(0)
     }
+    /// What each entry of its state holds before a rollout that starts at rest (the policy
+    /// search's start): an earlier observation, an earlier command, or zero.
+    fn rest_state(&self) -> Vec<RestEntry> {
+        vec![RestEntry::Zero; self.state_dim()]
+    }
     /// Moments of `o = [u_t; p_t]` for `q = [y_t; p_{t−1}] ~ N(mean, cov)`.
     fn moments(&self, mean: &DVector<T>, cov: &DMatrix<T>) -> Result<PolicyMoments<T>>;
+}
+
+/// An entry of a policy's state at rest ([`FeedbackPolicy::rest_state`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RestEntry {
+    /// An earlier observation of output `j`: the latent rest value plus observation noise.
+    Observation(usize),
+    /// An earlier command `j`: the command at rest.
+    Command(usize),
+    /// Zero (an integral, …).
+    Zero,
 }
 
 /// `u = K y + b`; moments are exact.
@@ -109,6 +125,9 @@ macro_rules! forward_policy {
             fn initial_state(&self, y: &DMatrix<f64>, u: &DMatrix<f64>, t: usize) -> DVector<f64> {
                 (**self).initial_state(y, u, t)
             }
+            fn rest_state(&self) -> Vec<RestEntry> {
+                (**self).rest_state()
+            }
             fn moments(&self, mean: &DVector<T>, cov: &DMatrix<T>) -> Result<PolicyMoments<T>> {
                 (**self).moments(mean, cov)
             }
@@ -139,16 +158,16 @@ pub use state_feedback::StateFeedback;
 pub enum PolicySpec {
     /// `u = K y + b` in the model's units.
     Linear(LinearPolicy<f64>),
-    /// A controller in the model's units.
+    /// A policy in the model's units.
     Direct(Policy),
-    /// A controller in original units inside a normalised model.
+    /// A policy in original units inside a normalised model.
     Normalized(Normalized<Policy>),
 }
 
 impl PolicySpec {
     /// The same policy (given in original units) for a rollout in the normalised units of
     /// `normalizer`: a linear policy is converted exactly (`K_n = diag(1/s_u) K diag(s_y)`,
-    /// `b_n = (K m_y + b − m_u)/s_u`), a controller is wrapped in [`Normalized`].
+    /// `b_n = (K m_y + b − m_u)/s_u`), a policy is wrapped in [`Normalized`].
     pub fn normalized(&self, normalizer: &crate::data::Normalizer) -> Result<PolicySpec> {
         let n = normalizer;
         Ok(match self {
@@ -179,7 +198,7 @@ impl PolicySpec {
         })
     }
 
-    /// Whether [`PolicySpec::moments_vjp`] has a closed form (the PID and RBF controllers; a
+    /// Whether [`PolicySpec::moments_vjp`] has a closed form (the PID and the RBF network; a
     /// linear policy's map is cheap enough for duals).
     pub(crate) fn has_closed_form_vjp(&self) -> bool {
         match self {

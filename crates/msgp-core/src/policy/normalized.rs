@@ -7,7 +7,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::{FeedbackPolicy, Policy, PolicyMoments, ThetaVjp};
+use super::{FeedbackPolicy, Policy, PolicyMoments, RestEntry, ThetaVjp};
 use crate::data::Normalizer;
 use crate::error::{MsgpError, Result};
 use crate::numeric::scalar::{Scalar, c};
@@ -69,7 +69,7 @@ impl<P> Normalized<P> {
 impl Normalized<Policy> {
     /// Vector–Jacobian product of [`FeedbackPolicy::moments`] in closed form
     /// ([`Policy`]'s, with `θ`'s adjoint): the affine changes of units are diagonal, so
-    /// their adjoints scale the inner policy's. An error for a controller without one.
+    /// their adjoints scale the inner policy's. An error for a policy without one.
     pub(crate) fn moments_vjp(
         &self,
         mean: &DVector<f64>,
@@ -124,6 +124,11 @@ impl<T: Scalar, P: FeedbackPolicy<T>> FeedbackPolicy<T> for Normalized<P> {
         self.inner.initial_state(&yo, &uo, t)
     }
 
+    /// The inner policy's: its state stays in original units.
+    fn rest_state(&self) -> Vec<RestEntry> {
+        self.inner.rest_state()
+    }
+
     fn moments(&self, mean: &DVector<T>, cov: &DMatrix<T>) -> Result<PolicyMoments<T>> {
         let n = &self.normalizer;
         let du = self.input_dim();
@@ -171,11 +176,18 @@ mod tests {
         }
     }
 
-    /// The closed-form VJP of a normalised controller's moment map equals the gradient of
+    /// The closed-form VJP of a normalised policy's moment map equals the gradient of
     /// `⟨ō_mean, mean⟩ + ⟨ō_cov, cov⟩ + ⟨C̄, C⟩` by duals through the whole map, with respect
-    /// to the input moments and every parameter, block by block (each to 1e-10 of its block's
-    /// largest entry), at a point where the saturation is active.
-    fn check_vjp(policy: &Normalized<Policy>, size: &[f64], r: &mut dyn FnMut(f64) -> f64) {
+    /// to the input moments and every parameter, block by block (`blocks`: the parameter
+    /// groups' lengths; each entry to 1e-10 of its block's largest), at a point where the
+    /// saturation is active. `symmetric`: compare the covariance adjoint's symmetric part only.
+    fn check_vjp(
+        policy: &Normalized<Policy>,
+        size: &[f64],
+        r: &mut dyn FnMut(f64) -> f64,
+        blocks: &[(&str, usize)],
+        symmetric: bool,
+    ) {
         let nq = size.len();
         let mean = DVector::from_fn(nq, |i, _| r(size[i]));
         let f = DMatrix::from_fn(nq, nq, |i, _| r(0.5 * size[i]));
@@ -228,16 +240,27 @@ mod tests {
             (&a + a.transpose()) * 0.5
         };
         let mut g = g;
-        let g_cov = sym(&g[nq..k]);
-        g[nq..k].copy_from_slice(g_cov.as_slice());
+        let mut qc_bar = qc_bar;
+        if symmetric {
+            let g_cov = sym(&g[nq..k]);
+            g[nq..k].copy_from_slice(g_cov.as_slice());
+            qc_bar = sym(qc_bar.as_slice());
+        }
         let closed: Vec<f64> = qm_bar
             .iter()
-            .chain(sym(qc_bar.as_slice()).iter())
+            .chain(qc_bar.iter())
             .chain(theta_bar.iter())
             .copied()
             .collect();
         assert_eq!(closed.len(), g.len());
-        for (name, range) in [("mean", 0..nq), ("cov", nq..k), ("theta", k..g.len())] {
+        let mut ranges = vec![("mean", 0..nq), ("cov", nq..k)];
+        let mut at = k;
+        for (name, len) in blocks {
+            ranges.push((name, at..at + len));
+            at += len;
+        }
+        assert_eq!(at, g.len(), "the blocks cover θ");
+        for (name, range) in ranges {
             let scale = g[range.clone()].iter().fold(0.0f64, |m, v| m.max(v.abs()));
             assert!(scale > 0.0, "{name} has no gradient");
             for i in range {
@@ -264,12 +287,20 @@ mod tests {
             let mut gains = |s: f64| DMatrix::from_fn(du, dy, |_, _| r(s));
             let (kp, ki, kd) = (gains(5.0), gains(1.0), gains(0.3));
             let pid = PidPolicy::new(kp, ki, kd, 0.02, vec![5.0]).expect("pid");
+            let normalizer = Normalizer {
+                u_mean: vec![r(0.3)],
+                u_std: vec![1.0 + r(0.5).abs()],
+                y_mean: vec![r(0.1), r(0.1)],
+                y_std: vec![0.05 + r(0.02).abs(), 0.2 + r(0.1).abs()],
+            };
             let policy = Normalized {
                 inner: Policy::Pid(pid),
-                normalizer: normalizer(&mut r, du, dy),
+                normalizer,
             };
             // q = [y (normalised); y_prev, integral (original units, the outputs' sizes)]
-            check_vjp(&policy, &[1.0, 1.0, 0.2, 0.3, 0.2, 0.3], &mut r);
+            let size = [1.0, 1.0, 0.05, 0.2, 0.05, 0.2];
+            let blocks = [("kp", du * dy), ("ki", du * dy), ("kd", du * dy)];
+            check_vjp(&policy, &size, &mut r, &blocks, false);
         }
     }
 
@@ -294,7 +325,8 @@ mod tests {
                 inner: Policy::Rbf(rbf),
                 normalizer: normalizer(&mut r, du, dy),
             };
-            check_vjp(&policy, &[1.0, 1.0, 1.0], &mut r);
+            let blocks = [("centres", n * dy), ("weights", n * du), ("widths", dy)];
+            check_vjp(&policy, &[1.0, 1.0, 1.0], &mut r, &blocks, true);
         }
     }
 }

@@ -111,6 +111,7 @@ impl Policy {
     /// The command range.
     pub fn bounds(&self) -> CommandBounds {
         match self {
+            // the PID's own limits (positive when made by `PidPolicy::new`)
             Policy::Pid(p) => CommandBounds {
                 low: p.u_max.iter().map(|u| -u).collect(),
                 high: p.u_max.clone(),
@@ -130,12 +131,24 @@ impl Policy {
     }
 
     /// One step at a point: the command and the new state from the observation `y` and the
-    /// previous state.
-    pub fn act(&self, y: &[f64], state: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    /// previous state; an error when their sizes do not fit the policy.
+    pub fn act(&self, y: &[f64], state: &[f64]) -> Result<(Vec<f64>, Vec<f64>)> {
         match self {
-            Policy::Pid(p) => p.act(y, state),
+            Policy::Pid(p) => {
+                let dy = p.kp.ncols();
+                if y.len() != dy || state.len() != 2 * dy {
+                    return Err(MsgpError::Shape(format!(
+                        "PID policy expects an observation of size {dy} and a state of size {}, \
+                         got {} and {}",
+                        2 * dy,
+                        y.len(),
+                        state.len()
+                    )));
+                }
+                Ok(p.act(y, state))
+            }
             Policy::StateFeedback(p) => p.act(y, state),
-            Policy::Rbf(p) => (p.act(y), Vec::new()),
+            Policy::Rbf(p) => Ok((p.act(y)?, Vec::new())),
         }
     }
 
@@ -241,11 +254,18 @@ mod tests {
             };
             let nq = dy + lifted.state_dim();
             let q: Vec<f64> = (0..nq).map(|k| 0.7 * k as f64 - 0.4).collect();
-            let (u, state) = p.act(&q[..dy], &q[dy..]);
+            let (u, state) = p.act(&q[..dy], &q[dy..]).expect("act");
+            let longer: Vec<f64> = q[..dy].iter().chain(&[0.5]).copied().collect();
+            assert!(
+                p.act(&longer, &q[dy..]).is_err(),
+                "{}: a wrong size",
+                p.kind()
+            );
             let pm = lifted
                 .moments(&DVector::from_vec(q.clone()), &DMatrix::zeros(nq, nq))
                 .expect("moments");
             let point: Vec<f64> = u.iter().chain(&state).copied().collect();
+            assert_eq!(point.len(), pm.mean.len(), "{}", p.kind());
             for (a, b) in point.iter().zip(pm.mean.iter()) {
                 assert!(
                     (a - b).abs() < 1e-12,

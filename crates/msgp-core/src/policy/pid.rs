@@ -14,7 +14,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::bounds::saturation_vjp;
-use super::{FeedbackPolicy, PolicyMoments};
+use super::{FeedbackPolicy, PolicyMoments, RestEntry};
 use crate::error::{MsgpError, Result};
 use crate::moments::saturation::saturate_moments;
 use crate::numeric::scalar::{Scalar, c};
@@ -239,6 +239,15 @@ impl<T: Scalar> FeedbackPolicy<T> for PidPolicy<T> {
             p[dy + j] = (0..t).map(|k| y[(k, j)]).sum::<f64>() * self.period;
         }
         p
+    }
+
+    /// The previous observation, then a zero integral.
+    fn rest_state(&self) -> Vec<RestEntry> {
+        let dy = self.kp.ncols();
+        (0..dy)
+            .map(RestEntry::Observation)
+            .chain(std::iter::repeat_n(RestEntry::Zero, dy))
+            .collect()
     }
 
     fn moments(&self, mean: &DVector<T>, cov: &DMatrix<T>) -> Result<PolicyMoments<T>> {

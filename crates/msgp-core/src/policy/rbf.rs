@@ -97,7 +97,8 @@ impl<T: Scalar> RbfPolicy<T> {
         })
     }
 
-    /// The network before the saturation at a point.
+    /// The network before the saturation at a point (entries of `y` beyond the centres' size
+    /// are ignored).
     pub fn network(&self, y: &[T]) -> Vec<T> {
         let inv_l2: Vec<T> = self.inv_l2();
         let half = c::<T>(0.5);
@@ -106,9 +107,9 @@ impl<T: Scalar> RbfPolicy<T> {
                 let mut u = T::zero();
                 for i in 0..self.centres.nrows() {
                     let mut s = T::zero();
-                    for (d, yd) in y.iter().enumerate() {
-                        let r = *yd - self.centres[(i, d)];
-                        s += r * r * inv_l2[d];
+                    for ((yd, cd), w) in y.iter().zip(self.centres.row(i).iter()).zip(&inv_l2) {
+                        let r = *yd - *cd;
+                        s += r * r * *w;
                     }
                     u += self.weights[(i, a)] * (-(s * half)).exp();
                 }
@@ -162,9 +163,16 @@ impl<T: KernelScalar> RbfPolicy<T> {
 }
 
 impl RbfPolicy<f64> {
-    /// The command at observation `y`.
-    pub fn act(&self, y: &[f64]) -> Vec<f64> {
-        self.bounds.saturate(&self.network(y))
+    /// The command at observation `y`; an error for an observation of the wrong size.
+    pub fn act(&self, y: &[f64]) -> Result<Vec<f64>> {
+        let dy = self.centres.ncols();
+        if y.len() != dy {
+            return Err(MsgpError::Shape(format!(
+                "RBF policy expects an observation of size {dy}, got {}",
+                y.len()
+            )));
+        }
+        Ok(self.bounds.saturate(&self.network(y)))
     }
 
     /// Vector–Jacobian product of [`FeedbackPolicy::moments`] at `q ~ N(mean, cov)`: for the
@@ -221,11 +229,15 @@ impl RbfPolicy<f64> {
 }
 
 /// The network's covariance from the GP moment matching's: without the unit signal variance
-/// the GP adds on each output's diagonal.
+/// the GP adds on each output's diagonal (a variance that rounding takes below zero, for a
+/// near-deterministic input, is zero).
 fn deterministic<T: Scalar>(cov: &DMatrix<T>) -> DMatrix<T> {
     let mut s = cov.clone();
     for a in 0..s.nrows() {
         s[(a, a)] -= T::one();
+        if s[(a, a)].re() < 0.0 {
+            s[(a, a)] = T::zero();
+        }
     }
     s
 }
@@ -237,7 +249,7 @@ impl<T: MomentMatch> FeedbackPolicy<T> for RbfPolicy<T> {
 
     fn moments(&self, mean: &DVector<T>, cov: &DMatrix<T>) -> Result<PolicyMoments<T>> {
         let dy = self.centres.ncols();
-        if mean.len() != dy {
+        if mean.len() != dy || cov.shape() != (dy, dy) {
             return Err(MsgpError::Shape(format!(
                 "RBF policy expects an observation of size {dy}, got {}",
                 mean.len()

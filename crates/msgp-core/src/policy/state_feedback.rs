@@ -12,7 +12,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::bounds::CommandBounds;
-use super::{FeedbackPolicy, PolicyMoments};
+use super::{FeedbackPolicy, PolicyMoments, RestEntry};
 use crate::error::{MsgpError, Result};
 use crate::numeric::scalar::Scalar;
 
@@ -63,7 +63,10 @@ impl<T: Scalar> StateFeedback<T> {
 
     /// Observation size `d_y`.
     pub fn dy(&self) -> usize {
-        (self.gain.ncols() - self.input_lags * self.du()) / self.output_lags
+        self.gain
+            .ncols()
+            .saturating_sub(self.input_lags * self.du())
+            / self.output_lags.max(1)
     }
 
     fn du(&self) -> usize {
@@ -125,9 +128,20 @@ impl<T: Scalar> StateFeedback<T> {
 }
 
 impl StateFeedback<f64> {
-    /// One step at a point: `(u_t, p_t)` from `y_t` and `p_{t−1}`.
-    pub fn act(&self, y: &[f64], state: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    /// One step at a point: `(u_t, p_t)` from `y_t` and `p_{t−1}`; an error when their sizes
+    /// do not fit the window.
+    pub fn act(&self, y: &[f64], state: &[f64]) -> Result<(Vec<f64>, Vec<f64>)> {
         let q: Vec<f64> = y.iter().chain(state).copied().collect();
+        if y.len() != self.dy() || q.len() != self.gain.ncols() {
+            return Err(MsgpError::Shape(format!(
+                "state feedback expects an observation of size {} and a state of size {}, got \
+                 {} and {}",
+                self.dy(),
+                self.gain.ncols() - self.dy(),
+                y.len(),
+                state.len()
+            )));
+        }
         let ut: Vec<f64> = (0..self.du())
             .map(|i| self.offset[i] + (0..q.len()).map(|k| self.gain[(i, k)] * q[k]).sum::<f64>())
             .collect();
@@ -139,7 +153,7 @@ impl StateFeedback<f64> {
             .chain(r_in_q.iter().map(|&k| q[k]))
             .collect();
         let state = src[self.du()..].iter().map(|&k| ur[k]).collect();
-        (u, state)
+        Ok((u, state))
     }
 }
 
@@ -165,6 +179,14 @@ impl<T: Scalar> FeedbackPolicy<T> for StateFeedback<T> {
             p.extend((0..du).map(|j| u[(row(k), j)]));
         }
         DVector::from_vec(p)
+    }
+
+    /// The earlier observations, then the earlier commands.
+    fn rest_state(&self) -> Vec<RestEntry> {
+        let (du, dy) = (self.du(), self.dy());
+        let observations = (1..self.output_lags).flat_map(|_| (0..dy).map(RestEntry::Observation));
+        let commands = (0..self.input_lags).flat_map(|_| (0..du).map(RestEntry::Command));
+        observations.chain(commands).collect()
     }
 
     fn moments(&self, mean: &DVector<T>, cov: &DMatrix<T>) -> Result<PolicyMoments<T>> {
@@ -209,5 +231,45 @@ impl<T: Scalar> FeedbackPolicy<T> for StateFeedback<T> {
             cov: DMatrix::from_fn(no, no, |i, j| s[(src[i], src[j])]),
             c: DMatrix::from_fn(nq, no, |k, i| cm[(k, src[i])]),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Running the policy along a trajectory, its state after step `t` is the window's rest as
+    /// `initial_state` reads it from the same samples at `t + 1`: the two agree on the layout.
+    #[test]
+    fn the_state_after_acting_is_the_window_initial_state_reads() {
+        let bounds = CommandBounds::new(vec![-2.0, -1.0], vec![2.0, 3.0]).expect("bounds");
+        let (dy, lags) = (2, (3, 2));
+        let nq = lags.0 * dy + lags.1 * 2;
+        let policy = StateFeedback::new(
+            DMatrix::from_fn(2, nq, |i, k| 0.05 * (k as f64 - 3.0) + 0.1 * i as f64),
+            DVector::from_vec(vec![0.1, 0.4]),
+            dy,
+            lags,
+            bounds,
+        )
+        .expect("policy");
+        let n = 8;
+        let y = DMatrix::from_fn(n, dy, |t, j| (0.4 * t as f64 + j as f64).sin());
+        let mut u = DMatrix::zeros(n, 2);
+        let mut state: Vec<f64> = policy.initial_state(&y, &u, 0).iter().copied().collect();
+        for t in 0..n - 1 {
+            let yt: Vec<f64> = y.row(t).iter().copied().collect();
+            let (ut, next) = policy.act(&yt, &state).expect("act");
+            u.set_row(t, &nalgebra::RowDVector::from_vec(ut));
+            let read: Vec<f64> = policy
+                .initial_state(&y, &u, t + 1)
+                .iter()
+                .copied()
+                .collect();
+            if t + 1 >= lags.0.max(lags.1) {
+                assert_eq!(next, read, "step {t}");
+            }
+            state = next;
+        }
     }
 }

@@ -22,8 +22,8 @@ pub mod space;
 
 pub use cost::SaturatingCost;
 pub use gradient::{DualPolicyMap, PolicyVjp, closed_loop_cost_gradient};
-pub use objective::{PidMask, PolicyProblem, RolloutCost, closed_loop_cost, policy_gradient_duals};
+pub use objective::{PolicyProblem, RolloutCost, closed_loop_cost, policy_gradient_duals};
 pub use search::{
     PolicySearchResult, PolicySearchSettings, optimise, optimise_pid, optimise_pid_scaled,
 };
-pub use space::SearchSpace;
+pub use space::{PidMask, SearchSpace};

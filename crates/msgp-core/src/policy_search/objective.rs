@@ -2,7 +2,7 @@
 //! rollout, summed over the horizon (closed form per step), with per-step variances for
 //! reporting ([`closed_loop_cost`]); the problem a learned model, a start and a cost pose
 //! ([`PolicyProblem`], original units, normalised exactly inside), and which PID gains move
-//! ([`PidMask`]). Generic over [`Scalar`], so forward-mode duals over the handful of gains are
+//! ([`super::PidMask`]). Generic over [`Scalar`], so forward-mode duals over the handful of gains are
 //! the reference of the adjoint gradient ([`super::gradient`]).
 
 use nalgebra::{DMatrix, DVector};
@@ -19,7 +19,7 @@ use crate::numeric::dual::{Dual, LANES, gradient_lanes};
 use crate::numeric::linalg::JitterLog;
 use crate::numeric::scalar::{Scalar, c};
 use crate::optim::Flow;
-use crate::policy::{FeedbackPolicy, Normalized, PidPolicy};
+use crate::policy::{FeedbackPolicy, Normalized, RestEntry};
 use crate::rollout::adjoint::PolicyVjp;
 use crate::rollout::{Control, StartState, rollout_from};
 
@@ -92,72 +92,6 @@ fn closed_loop_cost_bounded<T: MomentMatch>(
 /// Relative slack of [`PolicyProblem::evaluate_bounded`]'s bound.
 const BOUND_SLACK: f64 = 1e-9;
 
-/// Which PID gains are optimised: `true` entries of the three d_u × d_y masks are free.
-#[derive(Clone, Debug, PartialEq)]
-pub struct PidMask {
-    /// Free entries of `K_p`.
-    pub kp: DMatrix<bool>,
-    /// Free entries of `K_i`.
-    pub ki: DMatrix<bool>,
-    /// Free entries of `K_d`.
-    pub kd: DMatrix<bool>,
-}
-
-impl PidMask {
-    /// Number of free gains.
-    pub fn len(&self) -> usize {
-        [&self.kp, &self.ki, &self.kd]
-            .iter()
-            .map(|m| m.iter().filter(|b| **b).count())
-            .sum()
-    }
-
-    /// True when nothing is free.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
-    /// The free gains of `p` as a vector (K_p, then K_i, then K_d; column-major).
-    pub fn pack(&self, p: &PidPolicy<f64>) -> Vec<f64> {
-        self.pack_matrices(&p.kp, &p.ki, &p.kd)
-    }
-
-    /// The free entries of three d_u × d_y matrices (gains or their adjoints), in
-    /// [`PidMask::pack`]'s order.
-    fn pack_matrices(&self, kp: &DMatrix<f64>, ki: &DMatrix<f64>, kd: &DMatrix<f64>) -> Vec<f64> {
-        let mut v = Vec::new();
-        for (m, g) in [(&self.kp, kp), (&self.ki, ki), (&self.kd, kd)] {
-            v.extend(m.iter().zip(g.iter()).filter(|(b, _)| **b).map(|(_, x)| *x));
-        }
-        v
-    }
-
-    /// `base` with its free gains replaced by `x`.
-    pub fn unpack<T: Scalar>(&self, base: &PidPolicy<f64>, x: &[T]) -> PidPolicy<T> {
-        let mut k = 0;
-        let mut fill = |m: &DMatrix<bool>, g: &DMatrix<f64>| {
-            DMatrix::from_fn(g.nrows(), g.ncols(), |i, j| {
-                if m[(i, j)] {
-                    k += 1;
-                    x[k - 1]
-                } else {
-                    c::<T>(g[(i, j)])
-                }
-            })
-        };
-        let kp = fill(&self.kp, &base.kp);
-        let ki = fill(&self.ki, &base.ki);
-        let kd = fill(&self.kd, &base.kd);
-        PidPolicy {
-            kp,
-            ki,
-            kd,
-            period: base.period,
-            u_max: base.u_max.clone(),
-        }
-    }
-}
-
 /// The problem: model, start, cost and horizon, all in original units.
 #[derive(Debug)]
 pub struct PolicyProblem<'a> {
@@ -177,15 +111,19 @@ pub struct PolicyProblem<'a> {
 
 impl PolicyProblem<'_> {
     /// Start state in normalised units: every output lag at `y0` (latent, variance `y0_var`,
-    /// fully correlated across lags: the system is at rest), inputs at `u0`, and the policy
-    /// state `[y_{−1}; I = 0]` with `y_{−1}` the observation of the latent start (original
-    /// units, observation noise included, correlated with the window).
-    pub(crate) fn start<T: Scalar>(&self, policy_state: usize) -> StartState<T> {
+    /// fully correlated across lags: the system is at rest), inputs at `u0`, and the policy's
+    /// state as its [`FeedbackPolicy::rest_state`] says (original units): an earlier observation
+    /// is the latent start plus observation noise, correlated with every output lag of the
+    /// window and with the other earlier observations of its output (a derivative term then
+    /// sees measurement noise, not the whole spread of the start state); an earlier command is
+    /// `u0`.
+    pub(crate) fn start<T: Scalar>(&self, rest: &[RestEntry]) -> StartState<T> {
         let spec = self.model.spec;
         let n = &self.model.normalizer;
         let d = spec.input_dim();
-        let mut mean = DVector::<T>::zeros(d + policy_state);
-        let mut cov = DMatrix::<T>::zeros(d + policy_state, d + policy_state);
+        let ds = rest.len();
+        let mut mean = DVector::<T>::zeros(d + ds);
+        let mut cov = DMatrix::<T>::zeros(d + ds, d + ds);
         for k in 0..spec.ly {
             for j in 0..spec.dy {
                 mean[spec.y_index(k, j)] = c((self.y0_mean[j] - n.y_mean[j]) / n.y_std[j]);
@@ -200,18 +138,29 @@ impl PolicyProblem<'_> {
                 mean[spec.u_index(k, j)] = c((self.u0[j] - n.u_mean[j]) / n.u_std[j]);
             }
         }
-        // the policy's previous observation: the latent start plus observation noise, correlated
-        // with every output lag of the window (a derivative term then sees measurement noise,
-        // not the whole spread of the start state)
-        for j in 0..spec.dy.min(policy_state) {
-            let std = n.y_std[j];
-            let sy2 = self.model.params.log_obs_noise[j].exp() + self.model.config.noise_floor;
-            mean[d + j] = c(self.y0_mean[j]);
-            cov[(d + j, d + j)] = c(self.y0_var[j] + sy2 * std * std);
-            for k in 0..spec.ly {
-                let i = spec.y_index(k, j);
-                cov[(d + j, i)] = c(self.y0_var[j] / std);
-                cov[(i, d + j)] = c(self.y0_var[j] / std);
+        for (a, entry) in rest.iter().enumerate() {
+            let p = d + a;
+            match *entry {
+                RestEntry::Observation(j) if j < spec.dy => {
+                    let std = n.y_std[j];
+                    let sy2 =
+                        self.model.params.log_obs_noise[j].exp() + self.model.config.noise_floor;
+                    mean[p] = c(self.y0_mean[j]);
+                    cov[(p, p)] = c(self.y0_var[j] + sy2 * std * std);
+                    for k in 0..spec.ly {
+                        let i = spec.y_index(k, j);
+                        cov[(p, i)] = c(self.y0_var[j] / std);
+                        cov[(i, p)] = c(self.y0_var[j] / std);
+                    }
+                    for (b, other) in rest[..a].iter().enumerate() {
+                        if *other == RestEntry::Observation(j) {
+                            cov[(p, d + b)] = c(self.y0_var[j]);
+                            cov[(d + b, p)] = c(self.y0_var[j]);
+                        }
+                    }
+                }
+                RestEntry::Command(j) if j < spec.du => mean[p] = c(self.u0[j]),
+                _ => {}
             }
         }
         StartState { mean, cov }
@@ -263,7 +212,7 @@ impl PolicyProblem<'_> {
             Ok((qm_bar, qc_bar, space.pack(&theta)))
         };
         let closed_form = policy.inner.has_closed_form_vjp();
-        let start = self.start::<f64>(lifted.state_dim());
+        let start = self.start::<f64>(&lifted.rest_state());
         let t0 = self.model.spec.warmup();
         closed_loop_cost_gradient(
             &gp,
@@ -313,7 +262,7 @@ impl PolicyProblem<'_> {
             inner: policy,
             normalizer: self.model.normalizer.clone(),
         };
-        let start = self.start::<T>(wrapped.state_dim());
+        let start = self.start::<T>(&wrapped.rest_state());
         let t0 = self.model.spec.warmup();
         closed_loop_cost_bounded(
             &gp,

@@ -5,8 +5,8 @@ use rand::{SeedableRng, rngs::StdRng};
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
-use super::objective::{PidMask, PolicyProblem, policy_gradient};
-use super::space::SearchSpace;
+use super::objective::{PolicyProblem, policy_gradient};
+use super::space::{PidMask, SearchSpace};
 use crate::error::{MsgpError, Result};
 use crate::numeric::parallel::{Threads, map_indexed};
 use crate::optim::{Adam, AdamState};
@@ -312,7 +312,9 @@ mod tests {
     };
     use crate::gp::MeanFunction;
     use crate::model::Model;
-    use crate::policy::{CommandBounds, RbfPolicy, StateFeedback};
+    use crate::policy::{
+        CommandBounds, FeedbackPolicy, Normalized, Policy, RbfPolicy, RestEntry, StateFeedback,
+    };
     use crate::policy_search::{SaturatingCost, policy_gradient_duals};
     use nalgebra::{DMatrix, DVector};
 
@@ -578,6 +580,46 @@ mod tests {
         }
     }
 
+    /// A window policy's state at rest: two earlier observations of each output (the latent
+    /// start plus independent observation noise: correlated by `y0_var`) and the earlier
+    /// command at `u0`.
+    #[test]
+    fn a_window_policys_start_holds_earlier_observations_and_commands() {
+        let model = two_output_model(|t, j| 0.01 * ((t * 7 + j) as f64).sin());
+        let problem = PolicyProblem {
+            u0: vec![0.7],
+            ..off_rest_problem(&model, 5)
+        };
+        let space = free_state_feedback();
+        let Policy::StateFeedback(sf) = &space.base else {
+            panic!("a state feedback")
+        };
+        let policy = Normalized {
+            inner: sf.clone(),
+            normalizer: model.normalizer.clone(),
+        };
+        let rest = policy.rest_state();
+        assert_eq!(
+            rest,
+            vec![
+                RestEntry::Observation(0),
+                RestEntry::Observation(1),
+                RestEntry::Command(0)
+            ]
+        );
+        let start = problem.start::<f64>(&rest);
+        let d = model.spec.input_dim();
+        assert_eq!(start.mean[d], problem.y0_mean[0]);
+        assert_eq!(start.mean[d + 1], problem.y0_mean[1]);
+        assert_eq!(start.mean[d + 2], 0.7);
+        assert_eq!(start.cov[(d + 2, d + 2)], 0.0);
+        assert_eq!(start.cov[(d, d + 1)], 0.0);
+        // the window's own lags at rest hold u0 too
+        let n = &model.normalizer;
+        let u = start.mean[model.spec.u_index(0, 0)] * n.u_std[0] + n.u_mean[0];
+        assert!((u - 0.7).abs() < 1e-12);
+    }
+
     #[test]
     fn the_policy_start_sees_observation_noise_not_the_start_spread() {
         // two outputs, so the window has several output lags per output
@@ -591,7 +633,13 @@ mod tests {
             cost: SaturatingCost::with_widths(DVector::zeros(2), &[0.5, 0.5]).expect("cost"),
             horizon: 5,
         };
-        let start = problem.start::<f64>(4);
+        let rest = [
+            RestEntry::Observation(0),
+            RestEntry::Observation(1),
+            RestEntry::Zero,
+            RestEntry::Zero,
+        ];
+        let start = problem.start::<f64>(&rest);
         let (spec, norm) = (model.spec, &model.normalizer);
         let d = spec.input_dim();
         for j in 0..2 {
