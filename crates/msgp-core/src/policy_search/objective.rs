@@ -1,9 +1,9 @@
 //! The policy-search objective: the expected saturating cost of a closed-loop moment-matching
 //! rollout, summed over the horizon (closed form per step), with per-step variances for
 //! reporting ([`closed_loop_cost`]); the problem a learned model, a start and a cost pose
-//! ([`PolicyProblem`], original units, normalised exactly inside), and which PID gains move
-//! ([`super::PidMask`]). Generic over [`Scalar`], so forward-mode duals over the handful of gains are
-//! the reference of the adjoint gradient ([`super::gradient`]).
+//! ([`PolicyProblem`], original units, normalised exactly inside), and its gradient over the
+//! free parameters of a [`SearchSpace`]. Generic over [`Scalar`], so forward-mode duals over
+//! the parameters are the reference of the adjoint gradient ([`super::gradient`]).
 
 use nalgebra::{DMatrix, DVector};
 
