@@ -17,17 +17,18 @@ use std::time::Duration;
 use criterion::measurement::WallTime;
 use criterion::{BenchmarkGroup, Criterion, SamplingMode, criterion_group, criterion_main};
 use msgp_core::fit::{TrainingEpisode, fit_episodes};
+use msgp_core::learner::{self, fit_and_search};
 use msgp_core::model::Method;
 use msgp_core::numeric::dual;
 use msgp_core::numeric::parallel::Threads;
-use msgp_core::policy::{PidPolicy, PolicySpec};
+use msgp_core::policy::{PidPolicy, Policy, PolicySpec};
 use msgp_core::policy_search::cost::SaturatingCost;
 use msgp_core::policy_search::{
     PidMask, PolicyProblem, PolicySearchSettings, SearchSpace, optimise_pid_scaled,
 };
 use msgp_sim::learn::{
-    LearnEvent, LearnSettings, ModelChoice, episode_trajectory, fit_and_search, modelled_policy,
-    segments,
+    LearnSettings, ModelChoice, episode_trajectory, learner_settings, modelled_policy,
+    pendulum_task, segments,
 };
 use msgp_sim::{
     EpisodeConfig, PendulumParams, PidPdGains, PidPdPolicy, PlantTier, RandomExcitation,
@@ -241,7 +242,7 @@ fn bench_policy(c: &mut Criterion) {
 /// One iteration of the default loop (`msgp learn-policy --sim pendulum`: the filtered MSGP,
 /// m = 30, warm-started fit, the linear competitor's warm fit and the prequential choice, 10 s
 /// policy horizon, 12 Adam steps per search start), as the loop
-/// runs it ([`msgp_sim::learn::fit_and_search`]), at the state of its fifth iteration on each plant tier:
+/// runs it ([`msgp_core::learner::fit_and_search`] with the pendulum's task), at the state of its fifth iteration on each plant tier:
 /// four random-excitation episodes and four feedback episodes of the hand-tuned gains (3 s
 /// each, whole, seeded), the previous model fitted (outside the timing) on all but the last
 /// episode. The target: fit + search ≤ 5 s alone on the 2-core machine.
@@ -253,16 +254,19 @@ fn bench_loop_iteration(c: &mut Criterion) {
         let data = training(&params, &settings, 4, None);
         let mut gains = PidPdGains::hand_tuned();
         gains.saturation = Saturation::Sine;
-        let quiet = &mut |_: LearnEvent<'_>| ControlFlow::Continue(());
+        let policy = Policy::Pid(modelled_policy(&gains, &params).expect("valid"));
+        let task = pendulum_task(&params, &settings).expect("valid");
+        let learner = learner_settings(&params, &settings).expect("valid");
+        let quiet = &mut |_: learner::LearnEvent<'_>| ControlFlow::Continue(());
         // the previous iteration, whose models then predict the last episode (the
         // prequential choice's score)
-        let mut choice = ModelChoice::new(&settings).expect("an MSGP loop");
+        let mut choice = ModelChoice::new(&learner).expect("an MSGP loop");
         let step = fit_and_search(
-            &params,
-            &settings,
-            &data[..7],
+            &task,
+            &learner,
+            (&[], &data[..7]),
             None,
-            &gains,
+            &policy,
             4,
             Some(&mut choice),
             quiet,
@@ -275,15 +279,15 @@ fn bench_loop_iteration(c: &mut Criterion) {
         let previous = step.model;
         group.bench_function(format!("fit_and_search_{}_8_episodes", tier.name()), |b| {
             b.iter(|| {
-                let quiet = &mut |_: LearnEvent<'_>| ControlFlow::Continue(());
+                let quiet = &mut |_: learner::LearnEvent<'_>| ControlFlow::Continue(());
                 let mut choice = choice.clone();
                 black_box(
                     fit_and_search(
-                        &params,
-                        &settings,
-                        &data,
+                        &task,
+                        &learner,
+                        (&[], &data),
                         Some(&previous),
-                        &gains,
+                        &policy,
                         5,
                         Some(&mut choice),
                         quiet,

@@ -17,7 +17,7 @@ use msgp_core::loss::Likelihood;
 use msgp_core::model::{Method, Rollout};
 use msgp_sim::Saturation;
 use msgp_sim::figure4::Figure4Model;
-use msgp_sim::learn::{Budget, Experiment, LearnSettings};
+use msgp_sim::learn::{Budget, LearnSettings};
 
 /// Gaussian-process dynamics models optimised for long-term predictions (MSGP).
 #[derive(Debug, Parser)]
@@ -471,12 +471,11 @@ pub struct BudgetArgs {
     /// linear-kf model of the data, m = 30, 100 L-BFGS iterations, warm starts,
     /// 12 Adam steps per search start, 10 s policy horizon, and each search on the GP model
     /// only while it predicts the episodes it had not seen better than the linear-kf model of
-    /// the same data (`--experimental prequential=false`: always); free-run: the paper's loss
+    /// the same data; free-run: the paper's loss
     /// with the MSGP defaults].
     #[arg(long, value_enum)]
     pub likelihood: Option<LikelihoodArg>,
-    /// Random episodes before the first policy (random excitation, or random policies: see
-    /// `--experimental random-policies=K`).
+    /// Random-excitation episodes before the first policy.
     #[arg(long, default_value_t = Budget::default().random_rollouts)]
     pub random_rollouts: usize,
     /// Length of every interaction episode [s].
@@ -517,24 +516,6 @@ pub struct BudgetArgs {
     #[arg(long, value_name = "W_THETA,W_X", value_delimiter = ',',
           default_values_t = Budget::default().cost_widths)]
     pub cost_widths: Vec<f64>,
-    /// An experiment switch of the loop, KEY=VALUE (repeatable): settings that the experiments
-    /// of docs/design.md varied, not options the loop needs. Keys: start-smoothing=N (MSGP:
-    /// start each training rollout from a quadratic fitted to its first N samples; 0: the
-    /// measured window), fb-segment=N (MSGP: feedback episodes enter the loss as overlapping
-    /// segments of N samples; 0: whole), free-position=true (do not declare the end effector a
-    /// double integrator of the command), excitation-max-hz=HZ (highest frequency of the random
-    /// excitation, 10), random-policies=K (K of the random rollouts run random PID + PD gains,
-    /// each also stability-tested), trust-region=R (no gain moves further than R typical
-    /// magnitudes per search, 1; 0: off), fit-optimizer=adam|lbfgs (solver of each MSGP fit),
-    /// hold-margin=K (the search's gains replace the running ones only when predicted to pay
-    /// by K standard deviations of their predicted cost; 0: always), prequential=true|false
-    /// (MSGP, on by default with the filter likelihood: each iteration also fits the linear
-    /// model of the data and the search runs on the GP model only while the GP predicts the
-    /// episodes it had not seen better), one-step-solver=adam|lbfgs and
-    /// one-step-objective=exact|vfe (GP-NARX's fit and the free-run MSGP's start: the one-step
-    /// solver, and the exact GP's marginal likelihood or the variational bound).
-    #[arg(long = "experimental", value_name = "KEY=VALUE", value_parser = Experiment::parse)]
-    pub experimental: Vec<Experiment>,
 }
 
 impl BudgetArgs {
@@ -552,7 +533,6 @@ impl BudgetArgs {
             mean: self.mean.into(),
             policy_horizon: self.policy_horizon,
             cost_widths: self.cost_widths.clone(),
-            experimental: self.experimental.clone(),
         }
     }
 }

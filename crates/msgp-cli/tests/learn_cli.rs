@@ -86,11 +86,7 @@ fn learn_policy_writes_policy_table_episodes_plot_and_json() {
         assert!(it["stable"].is_boolean());
     }
     assert!(v.get("first_stable_iteration").is_some());
-    assert_eq!(
-        v["random_policies"],
-        serde_json::json!([]),
-        "excitation only"
-    );
+    assert!(v.get("random_policies").is_none(), "the switch is gone");
     assert!(v.get("interaction_seconds_to_stable").is_some());
     let best = v["best_iteration"].as_u64().expect("best_iteration") as usize;
     assert!((1..=2).contains(&best), "{best}");
@@ -146,41 +142,6 @@ fn learn_policy_writes_policy_table_episodes_plot_and_json() {
     assert_eq!(
         without_timings(&v["iterations"]),
         without_timings(&v2["iterations"])
-    );
-    let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// `--experimental random-policies=1`: the first random episode runs drawn gains, labelled as such, and the
-/// summary records them with their stability verdict.
-#[test]
-fn random_policy_rollouts_are_recorded() {
-    let dir = scratch("random-policies");
-    let v = learn_json(
-        &dir,
-        "out",
-        &["--iterations", "1", "--experimental", "random-policies=1"],
-    );
-    let rp = v["random_policies"].as_array().expect("random_policies");
-    assert_eq!(rp.len(), 1);
-    assert!(rp[0]["stable"].is_boolean());
-    assert!(
-        rp[0]["gains"]["kp_theta"]
-            .as_f64()
-            .is_some_and(|g| (0.0..=20.0).contains(&g))
-    );
-    let mut names: Vec<String> = std::fs::read_dir(dir.join("out/episodes"))
-        .expect("episodes")
-        .filter_map(Result::ok)
-        .map(|e| e.file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    assert_eq!(
-        names,
-        [
-            "00-random-policy.mcap",
-            "01-random.mcap",
-            "02-policy-it1.mcap"
-        ]
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -342,14 +303,8 @@ fn figure4_reuses_a_run_only_when_every_setting_matches() {
     };
     assert!(!reused(&base), "nothing to reuse yet");
     assert!(reused(&base), "the same settings reuse the finished run");
-    // the same budget, seed and model, but the end effector not declared an integrator
-    assert!(!reused(
-        &[&base[..], &["--experimental", "free-position=true"]].concat()
-    ));
-    // … or another solver, or warm starts
-    assert!(!reused(
-        &[&base[..], &["--experimental", "fit-optimizer=lbfgs"]].concat()
-    ));
+    // the same budget, seed and model, but another prior mean
+    assert!(!reused(&[&base[..], &["--mean", "zero"]].concat()));
     // … or another plant
     assert!(!reused(&[&base[..], &["--plant", "apollo"]].concat()));
     assert!(!reused(&[&base[..], &["--warm-start", "5"]].concat()));
@@ -404,16 +359,6 @@ fn bad_learning_options_fail_with_a_message() {
             "invalid --cost-widths: needs two positive widths",
         ),
         (
-            vec![
-                "learn-policy",
-                "--sim",
-                "pendulum",
-                "--experimental",
-                "trust-region=-1",
-            ],
-            "invalid --experimental trust-region: must be finite",
-        ),
-        (
             vec!["learn-policy", "--sim", "pendulum", "--policy-horizon", "0"],
             "--policy-horizon",
         ),
@@ -423,35 +368,13 @@ fn bad_learning_options_fail_with_a_message() {
                 "--sim",
                 "pendulum",
                 "--experimental",
-                "wobble=1",
+                "trust-region=1",
             ],
-            "unknown experiment `wobble` (known: start-smoothing, fb-segment",
+            "--experimental",
         ),
         (
             vec!["learn-policy", "--sim", "pendulum", "--pole-length=-1"],
             "pole",
-        ),
-        (
-            vec![
-                "learn-policy",
-                "--sim",
-                "pendulum",
-                "--experimental",
-                "start-smoothing=2",
-            ],
-            "invalid --experimental start-smoothing",
-        ),
-        (
-            vec![
-                "learn-policy",
-                "--sim",
-                "pendulum",
-                "--random-rollouts",
-                "2",
-                "--experimental",
-                "random-policies=3",
-            ],
-            "invalid --experimental random-policies: (3) cannot exceed random-rollouts (2)",
         ),
     ] {
         let o = run(&dir, &args);

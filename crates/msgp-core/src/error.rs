@@ -70,8 +70,12 @@ pub enum MsgpError {
         /// Versions this build reads (e.g. "1.x").
         supported: String,
     },
-    /// The observer of a fit ([`crate::fit::fit_episodes_observed`]) asked it to stop.
-    #[error("the fit was stopped by its observer at iteration {iteration}")]
+    /// A plant ([`crate::plant::Plant`]) failed or returned what it had not declared.
+    #[error("plant: {0}")]
+    Plant(String),
+    /// The observer of a fit ([`crate::fit::fit_episodes_observed`]) or of the learning loop
+    /// ([`crate::learner::Learner::run`]) asked it to stop.
+    #[error("stopped by its observer at iteration {iteration}")]
     Stopped {
         /// The solver iteration it stopped at.
         iteration: usize,

@@ -16,7 +16,8 @@
 //!   the prepared (factorised) GP, integrating structure, k-means;
 //! - [`moments`]: exact moment matching under Gaussian inputs (generic, the f64 fast path behind
 //!   [`MomentMatch`](moments::MomentMatch), its VJP), the linear mean, the sine saturation;
-//! - [`policy`]: feedback policies with exact output moments (saturated PID, normalised units);
+//! - [`policy`]: the policy families (saturated PID, linear state feedback on a window, PILCO's
+//!   RBF network) with exact output moments, in original and normalised units;
 //! - [`rollout`]: open- and closed-loop rollouts of the window's joint Gaussian, and their
 //!   adjoint sweep;
 //! - [`loss`]: the trajectory likelihood (eq. 4) with its complexity term, and its gradient;
@@ -24,7 +25,11 @@
 //! - [`model`]: the fitted model, its free simulation and scores;
 //! - [`fit`]: MSGP, the one-step baselines and linear-kf, from trajectories to a model;
 //! - [`model_file`]: the versioned model file (a model and its training record);
-//! - [`policy_search`]: PILCO's inner loop: expected saturating cost, its gradient, the search.
+//! - [`policy_search`]: PILCO's inner loop: expected saturating cost, its gradient, the search;
+//! - [`plant`]: a system the learning loop runs episodes on (the trait the simulator, a
+//!   Gymnasium environment or a user's model implements);
+//! - [`learner`]: PILCO's outer loop on a plant: episodes, fits, searches, the prequential
+//!   choice, one iteration's step on logged episodes.
 
 #![warn(missing_docs)]
 
@@ -32,6 +37,7 @@ pub mod data;
 pub mod error;
 pub mod fit;
 pub mod gp;
+pub mod learner;
 pub mod loss;
 pub mod model;
 pub mod model_file;
@@ -39,6 +45,7 @@ pub mod moments;
 pub mod narx;
 pub mod numeric;
 pub mod optim;
+pub mod plant;
 pub mod policy;
 pub mod policy_search;
 pub mod reproduce;

@@ -123,7 +123,7 @@ fn core_kind(e: &CoreError) -> Kind {
         CoreError::File { .. } | CoreError::FileAt { .. } | CoreError::ModelVersion { .. } => {
             Kind::ModelFile
         }
-        CoreError::Stopped { .. } => Kind::Other,
+        CoreError::Stopped { .. } | CoreError::Plant(_) => Kind::Other,
     }
 }
 

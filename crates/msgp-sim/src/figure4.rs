@@ -328,19 +328,13 @@ fn render(
         format!("# PILCO on the simulated pendulum (the paper's Figure 4), {tier} plant\n\n");
     let _ = write!(
         s,
-        "Learning to balance the pole on the robot's end effector (`msgp-sim`, `--plant {tier}`: σθ {} rad, σx {} m, {}-step delay, {} s lag, {} Hz control) from scratch: {} rollouts, then per iteration fit the model on all data, optimise the PID + PD gains on it, run them for one {} s episode. After every iteration the simulator's stability test (5 starts × 3 noise draws, 10 s each; not interaction, not training data) judges the gains, and {} evaluation episodes of the episode's length from random initial angles (neither interaction nor training data either) measure their expected cost, what the model's predicted cost predicts: one episode's cost is a single draw spread as widely as its mean (its random initial angle, squared), so a perfect prediction is within 2× of it only about a third of the time. Interaction seconds count every episode so far, random rollouts included. Models: {}; seeds {}; {} iterations per run.\n\n",
+        "Learning to balance the pole on the robot's end effector (`msgp-sim`, `--plant {tier}`: σθ {} rad, σx {} m, {}-step delay, {} s lag, {} Hz control) from scratch: {} random-excitation rollouts, then per iteration fit the model on all data, optimise the PID + PD gains on it, run them for one {} s episode. After every iteration the simulator's stability test (5 starts × 3 noise draws, 10 s each; not interaction, not training data) judges the gains, and {} evaluation episodes of the episode's length from random initial angles (neither interaction nor training data either) measure their expected cost, what the model's predicted cost predicts: one episode's cost is a single draw spread as widely as its mean (its random initial angle, squared), so a perfect prediction is within 2× of it only about a third of the time. Interaction seconds count every episode so far, random rollouts included. Models: {}; seeds {}; {} iterations per run.\n\n",
         params.sigma_theta,
         params.sigma_x,
         params.command_delay_steps,
         params.lag_time_constant,
         params.control_rate_hz,
-        match learned.random_policies {
-            0 => format!("{} random-excitation", d.random_rollouts),
-            k => format!(
-                "{} random-excitation and {k} random-policy (gains drawn uniformly in [0, 2 × typical])",
-                d.random_rollouts - k
-            ),
-        },
+        d.random_rollouts,
         d.episode_seconds,
         learned.evaluation_episodes,
         models.join(", "),

@@ -49,11 +49,7 @@ impl Stream {
     }
 }
 
-/// Seed for `stream` derived from the user `seed` with the SplitMix64 finaliser.
+/// Seed for `stream` derived from the user `seed` ([`msgp_core::numeric::seed::derive`]).
 pub fn rng_for(seed: u64, stream: Stream) -> u64 {
-    let mut z = seed ^ stream.tag().wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
+    msgp_core::numeric::seed::derive(seed, stream.tag())
 }

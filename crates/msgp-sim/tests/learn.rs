@@ -146,103 +146,6 @@ fn a_warm_started_loop_continues_its_previous_model() {
     assert_eq!(again.iterations[1].gains, w[1].gains);
 }
 
-/// Random-policy rollouts: the first `random_policies` of the random episodes run drawn gains
-/// (inside the first search's box, recorded with their stability verdict), the rest the
-/// excitation; the draws follow the seed, and more policies than random episodes is an error.
-#[test]
-fn random_policy_rollouts_run_drawn_gains_and_record_them() {
-    let params = PendulumParams::tier(PlantTier::Noisy);
-    let settings = LearnSettings {
-        random_policies: 1,
-        ..small(1)
-    };
-    let a = learn_policy(&params, &settings, &mut |_| {}).expect("learn");
-    assert_eq!(a.random_policies.len(), 1);
-    assert_eq!(a.episodes.len(), 3);
-    let (g, stable) = a.random_policies[0];
-    let drawn = [g.kp_x, g.ki_x, g.kd_x, g.kp_theta, g.kd_theta];
-    for (v, s) in drawn.iter().zip(settings.gain_scale) {
-        assert!((0.0..=2.0 * s).contains(v), "{v} outside [0, {}]", 2.0 * s);
-    }
-    // the gains the episode ran are those recorded: same seed, same controller, same episode
-    let mut controller = msgp_sim::PidPdPolicy::new(g, &params).expect("policy");
-    let replay = msgp_sim::run_episode(
-        &params,
-        &mut controller,
-        &msgp_sim::EpisodeConfig {
-            seconds: settings.episode_seconds,
-            seed: settings.seed.wrapping_mul(1000),
-            initial_theta: None,
-        },
-    )
-    .expect("replay");
-    assert_eq!(replay.samples, a.episodes[0].samples);
-    assert_eq!(
-        stable,
-        msgp_sim::stability_test(
-            &params,
-            &g,
-            settings.seed,
-            &msgp_sim::StabilityCriteria::default()
-        )
-        .expect("test")
-        .passed
-    );
-    // a different seed draws different gains; the same seed the same
-    let other = msgp_sim::learn::random_gains(1000, &settings.gain_scale);
-    assert_ne!(other, g);
-    assert_eq!(msgp_sim::learn::random_gains(0, &settings.gain_scale), g);
-    // the excitation-only default records nothing
-    assert!(
-        learn_policy(&params, &small(1), &mut |_| {})
-            .expect("default")
-            .random_policies
-            .is_empty()
-    );
-    let too_many = LearnSettings {
-        random_policies: 3,
-        ..small(1)
-    };
-    let err = learn_policy(&params, &too_many, &mut |_| {}).expect_err("3 of 2");
-    assert!(err.to_string().contains("random_policies"), "{err}");
-    let mut nan_scale = small(1);
-    nan_scale.gain_scale[3] = f64::NAN;
-    let err = learn_policy(&params, &nan_scale, &mut |_| {}).expect_err("NaN scale");
-    assert!(err.to_string().contains("gain_scale"), "{err}");
-}
-
-/// `fb_segment` cuts the feedback episodes for MSGP fits (the second model then differs from
-/// the one fitted to whole episodes) and leaves one-step fits alone (they see every pair once).
-#[test]
-fn feedback_segments_change_msgp_fits_only() {
-    let params = PendulumParams::tier(PlantTier::Noisy);
-    let run = |method: msgp_core::model::Method, fb_segment: Option<usize>| {
-        let small = small(2);
-        let fit = match method {
-            Method::GpNarx => small.fit.one_step_start().expect("msgp settings"),
-            _ => small.fit.clone(),
-        };
-        let settings = LearnSettings {
-            fit,
-            fb_segment,
-            ..small
-        };
-        learn_policy(&params, &settings, &mut |_| {})
-            .expect("learn")
-            .iterations
-    };
-    use msgp_core::model::Method;
-    let (whole, cut) = (run(Method::Msgp, None), run(Method::Msgp, Some(20)));
-    assert_eq!(
-        whole[0].predicted_cost, cut[0].predicted_cost,
-        "no feedback yet"
-    );
-    assert_ne!(whole[1].predicted_cost, cut[1].predicted_cost);
-    assert!(cut[1].predicted_cost.is_finite());
-    let (whole, cut) = (run(Method::GpNarx, None), run(Method::GpNarx, Some(20)));
-    assert_eq!(whole[1].predicted_cost, cut[1].predicted_cost);
-}
-
 /// The defaults per model: a linear-kf loop declares the end effector kinematic, the others
 /// keep the default settings; a small linear-kf loop runs and is reproducible.
 #[test]
@@ -402,60 +305,6 @@ fn the_observed_loop_reports_fits_searches_and_iterations_in_order() {
     }
 }
 
-/// `hold_margin`: with a margin no search can beat, every iteration after the first runs the
-/// first gains again (`held`, their own predicted cost); without one, the searches move them.
-#[test]
-fn a_hold_margin_keeps_the_running_gains_unless_the_model_predicts_a_gain() {
-    use msgp_core::model::Method;
-    let kf = LearnSettings::for_method(Method::LinearKf);
-    let run = |hold_margin: f64| {
-        let settings = LearnSettings {
-            iterations: 3,
-            random_rollouts: 2,
-            episode_seconds: 1.0,
-            evaluation_episodes: 2,
-            hold_margin,
-            search: PolicySearchSettings {
-                iterations: 3,
-                restarts: 0,
-                candidates: 4,
-                ..kf.search
-            },
-            ..kf.clone()
-        };
-        learn_policy(
-            &PendulumParams::tier(PlantTier::Noisy),
-            &settings,
-            &mut |_| {},
-        )
-        .expect("loop runs")
-    };
-    let moving = run(0.0);
-    assert!(moving.iterations.iter().all(|r| !r.held));
-    assert_ne!(moving.iterations[0].gains, moving.iterations[1].gains);
-    let held = run(1e9);
-    let flags: Vec<bool> = held.iterations.iter().map(|r| r.held).collect();
-    assert_eq!(flags, [false, true, true]);
-    assert!(
-        held.iterations
-            .iter()
-            .all(|r| r.gains == held.iterations[0].gains)
-    );
-    let first = |r: &msgp_sim::learn::IterationReport| {
-        (r.gains, r.predicted_cost, r.actual_cost, r.expected_cost)
-    };
-    assert_eq!(
-        first(&held.iterations[0]),
-        first(&moving.iterations[0]),
-        "the first iteration alike"
-    );
-    assert!(
-        held.iterations[1].predicted_cost.is_finite()
-            && held.iterations[1].predicted_cost != moving.iterations[1].predicted_cost
-    );
-    assert!(held.iterations.iter().all(|r| r.expected_cost.is_some()));
-}
-
 /// The prequential choice of the filtered MSGP loop: every iteration reports which model its
 /// search ran on and both models' filter likelihoods of the episode it then ran; the first
 /// search runs on the linear model (nothing predicted yet), each later one on the GP model
@@ -499,7 +348,8 @@ fn the_prequential_choice_searches_on_the_model_that_predicted_unseen_episodes_b
         })
         .collect();
     let newest = episode_trajectory(&a.episodes[2]).expect("trajectory");
-    let mut choice = ModelChoice::new(&settings).expect("an MSGP loop");
+    let learner = msgp_sim::learn::learner_settings(&params, &settings).expect("valid");
+    let mut choice = ModelChoice::new(&learner).expect("an MSGP loop");
     let linear = choice.fit(&training, 1).expect("linear fit");
     let gp_settings = FitSettings {
         seed: settings.seed + 1,

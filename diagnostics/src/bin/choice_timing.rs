@@ -96,7 +96,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         &settings.fit,
         None,
     )?;
-    let mut choice = ModelChoice::new(&settings)?;
+    let mut choice = ModelChoice::new(&msgp_sim::learn::learner_settings(&params, &settings)?)?;
     let linear_cold = choice.fit(&training[..n - 1], 1)?;
     for warm in [100, 40] {
         timed_fit(

@@ -1,5 +1,5 @@
 //! How much of a box of PID + PD gains balances the default plant: draws `samples` gain sets
-//! uniformly in `[0, hi]` per gain (the draws of [`random_gains`] with seeds `0..samples`),
+//! uniformly in `[0, hi]` per gain ([`random_gains`] with seeds `0..samples`),
 //! runs the stability test (seed 0) on each and prints the ones that pass. A diagnostic for
 //! docs/design.md: the default `hi` is the box the loop's first policy search can reach.
 //!
@@ -7,8 +7,23 @@
 //! [hi_kp_x,hi_ki_x,hi_kd_x,hi_kp_theta,hi_kd_theta]` (default: 200 samples in
 //! `[0, 2 × typical]` = `2,0.6,2,20,4`; no switches)
 use msgp_diagnostics::{Switches, numbers, usage_error};
-use msgp_sim::learn::random_gains;
-use msgp_sim::{PendulumParams, StabilityCriteria, stability_test};
+use msgp_sim::seed::{Stream, rng_for};
+use msgp_sim::{PendulumParams, PidPdGains, Saturation, StabilityCriteria, stability_test};
+use rand::{RngExt, SeedableRng};
+
+/// A random gain set: each gain drawn uniformly in `[0, 2 scale]` from `seed`'s random-gains
+/// stream, sine saturation.
+fn random_gains(seed: u64, scale: &[f64; 5]) -> PidPdGains {
+    let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(rng_for(seed, Stream::RandomGains));
+    let mut g = [0.0; 5];
+    for (gk, s) in g.iter_mut().zip(scale) {
+        *gk = rng.random_range(0.0..=2.0 * s.abs());
+    }
+    PidPdGains {
+        saturation: Saturation::Sine,
+        ..PidPdGains::from_array(g)
+    }
+}
 
 const USAGE: &str = "stable_region [samples] [hi_kp_x,hi_ki_x,hi_kd_x,hi_kp_theta,hi_kd_theta]";
 

@@ -26,8 +26,8 @@ pub fn model_name(m: ModelArg) -> &'static str {
     Method::from(m).name()
 }
 
-/// A budget error in the command line's words: the option as its flag (`--episode-seconds`,
-/// `--experimental trust-region`); other errors as they are.
+/// A budget error in the command line's words: the option as its flag (`--episode-seconds`);
+/// other errors as they are.
 pub fn flagged(e: SimError) -> anyhow::Error {
     match e {
         SimError::Budget { option, reason } => {
@@ -124,20 +124,6 @@ pub fn learn(
         b.abandon();
     }
     let outcome = learned.context("policy learning failed")?;
-    if !quiet {
-        for (k, (g, stable)) in outcome.random_policies.iter().enumerate() {
-            eprintln!(
-                "random policy {}: kp_x {:.3}, ki_x {:.3}, kd_x {:.3}, kp_theta {:.2}, kd_theta {:.2}; stability test {}",
-                k + 1,
-                g.kp_x,
-                g.ki_x,
-                g.kd_x,
-                g.kp_theta,
-                g.kd_theta,
-                if *stable { "passed" } else { "failed" }
-            );
-        }
-    }
     Ok((outcome, started.elapsed().as_secs_f64()))
 }
 

@@ -2,7 +2,8 @@
 //! code runs on (f64 or forward-mode duals), robust Cholesky factorisations with a recorded
 //! jitter policy ([`linalg`], and [`dense`] for the large one-step matrices), the dual-number
 //! gradient machinery ([`dual`]), the f64 SIMD building blocks of the fast kernels (`simd`,
-//! crate-private) and deterministic fan-out over threads ([`parallel`]).
+//! crate-private), deterministic fan-out over threads ([`parallel`]) and independent seeded
+//! random streams ([`seed`]).
 //!
 //! Nothing here knows about GPs, windows or trajectories.
 
@@ -11,6 +12,7 @@ pub mod dual;
 pub mod linalg;
 pub mod parallel;
 pub mod scalar;
+pub mod seed;
 pub(crate) mod simd;
 
 pub use scalar::{Scalar, c};

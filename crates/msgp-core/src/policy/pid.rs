@@ -92,18 +92,27 @@ impl<T: Scalar> PidPolicy<T> {
         crate::moments::saturation::saturate(2.0 * u_tilde / (3.0 * u_max), u_max)
     }
 
-    /// One step at a point: returns `(u_t, p_t)` from `y_t` and `p_{t−1} = [y_{t−1}; I_{t−1}]`.
+    /// One step at a point: returns `(u_t, p_t)` from `y_t` and `p_{t−1} = [y_{t−1}; I_{t−1}]`:
+    /// `I_t = I_{t−1} + T y_t`, `ũ = Σ_j Kp y_j + Ki I_{t,j} + Kd (y_j − y_{t−1,j}) / T`, summed
+    /// from the last output to the first (the order of the simulator's PID + PD controller on
+    /// `[θ, x]`, whose episodes a plant run of this policy then reproduces bit for bit).
     pub fn act(&self, y: &[f64], state: &[f64]) -> (Vec<f64>, Vec<f64>) {
         let (du, dy) = self.kp.shape();
-        let l = self.linear_map();
-        let q: Vec<f64> = y.iter().chain(state.iter()).copied().collect();
-        let out: Vec<f64> = (0..du + 2 * dy)
-            .map(|r| (0..3 * dy).map(|k| l[(r, k)].re() * q[k]).sum())
-            .collect();
+        let (previous, integral) = state.split_at(dy);
+        let integral: Vec<f64> = (0..dy).map(|j| integral[j] + y[j] * self.period).collect();
         let u = (0..du)
-            .map(|i| Self::saturate(out[i], self.u_max[i]))
+            .map(|i| {
+                let mut u = 0.0;
+                for j in (0..dy).rev() {
+                    let derivative = (y[j] - previous[j]) / self.period;
+                    u += self.kp[(i, j)].re() * y[j];
+                    u += self.ki[(i, j)].re() * integral[j];
+                    u += self.kd[(i, j)].re() * derivative;
+                }
+                Self::saturate(u, self.u_max[i])
+            })
             .collect();
-        (u, out[du..].to_vec())
+        (u, y.iter().copied().chain(integral).collect())
     }
 }
 

@@ -1,12 +1,11 @@
 //! Smooth random excitation for the initial (open-loop) rollouts.
 
-use rand::{RngExt, SeedableRng};
+use msgp_core::learner::excitation::Multisine;
 use serde::{Deserialize, Serialize};
 
 use super::Controller;
 use crate::error::{SimError, require_positive};
 use crate::plant::Measurement;
-use crate::seed::{Stream, rng_for};
 
 /// Shape of the random sum of sines.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -60,44 +59,35 @@ impl ExcitationConfig {
 /// `φ_i ~ U[0, 2π)` and raw weights `w_i ~ U[0.5, 1]` scaled so that `Σ a_i² / 2 = rms²`
 /// (the long-run RMS of a sum of sines with distinct frequencies). Open loop: measurements
 /// are ignored. Fully determined by the seed.
+/// The command's channel of [`msgp_core::learner::excitation::Multisine`].
 #[derive(Debug, Clone)]
 pub struct RandomExcitation {
     seed: u64,
-    components: Vec<(f64, f64, f64)>,
+    components: u32,
+    signal: Multisine,
 }
 
 impl RandomExcitation {
     /// Draws the components from `seed`.
     pub fn new(seed: u64, config: &ExcitationConfig) -> Result<Self, SimError> {
         config.validate()?;
-        let mut rng =
-            rand::rngs::Xoshiro256PlusPlus::seed_from_u64(rng_for(seed, Stream::Excitation));
-        let mut components: Vec<(f64, f64, f64)> = (0..config.components)
-            .map(|_| {
-                let f = if config.max_hz > config.min_hz {
-                    rng.random_range(config.min_hz..config.max_hz)
-                } else {
-                    config.min_hz
-                };
-                let phase = rng.random_range(0.0..std::f64::consts::TAU);
-                let weight = rng.random_range(0.5..=1.0);
-                (weight, f, phase)
-            })
-            .collect();
-        let power: f64 = components.iter().map(|(w, _, _)| 0.5 * w * w).sum();
-        let scale = config.rms / power.sqrt();
-        for c in &mut components {
-            c.0 *= scale;
-        }
-        Ok(Self { seed, components })
+        let signal = Multisine::new(
+            seed,
+            config.components,
+            (config.min_hz, config.max_hz),
+            &[0.0],
+            &[config.rms],
+        );
+        Ok(Self {
+            seed,
+            components: config.components,
+            signal,
+        })
     }
 
     /// Signal value at time `t` \[s\].
     pub fn value(&self, t: f64) -> f64 {
-        self.components
-            .iter()
-            .map(|&(a, f, phase)| a * (std::f64::consts::TAU * f * t + phase).sin())
-            .sum()
+        self.signal.value(t)[0]
     }
 }
 
@@ -111,8 +101,7 @@ impl Controller for RandomExcitation {
     fn describe(&self) -> String {
         format!(
             "random_excitation seed={} components={}",
-            self.seed,
-            self.components.len()
+            self.seed, self.components
         )
     }
 }

@@ -1,12 +1,14 @@
-//! The policy-search problem on the pendulum: the simulator's gains as the modelled policy, the
-//! start at rest, and the cost of a measured episode.
+//! The pendulum's task for the learning loop: the saturating cost on `[θ, x]`, the start at
+//! rest upright, the PID + PD gains as the searched policy, and the cost of a measured episode.
 
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DVector};
 
+use msgp_core::learner::{ExcitationConfig, LearnerSettings, StartDistribution, Task};
 use msgp_core::policy::{PidPolicy, Policy};
-use msgp_core::policy_search::PolicyProblem;
 use msgp_core::policy_search::cost::SaturatingCost;
+use msgp_core::policy_search::{PidMask, PolicyProblem, SearchSpace};
 
+use super::settings::LearnSettings;
 use crate::controller::{PidPdGains, Saturation};
 use crate::episode::Episode;
 use crate::error::SimError;
@@ -34,18 +36,114 @@ pub fn pendulum_problem<'a>(
     cost: SaturatingCost,
     horizon: usize,
 ) -> PolicyProblem<'a> {
+    let (mean, var) = start(params);
     PolicyProblem {
         model,
-        y0_mean: vec![0.0, 0.0],
-        y0_var: vec![params.initial_theta_std.powi(2), 1e-8],
+        y0_mean: mean,
+        y0_var: var,
         u0: vec![0.0],
         cost,
         horizon,
     }
 }
 
+/// The start of the predicted rollouts: upright with the plant's spread of initial angles, the
+/// end effector at 0.
+fn start(params: &PendulumParams) -> (Vec<f64>, Vec<f64>) {
+    (vec![0.0, 0.0], vec![params.initial_theta_std.powi(2), 1e-8])
+}
+
+/// The loop's task on the pendulum of `params` under `settings`: the saturating cost of
+/// [`LearnSettings::cost_widths`] around upright and centred, episodes of
+/// [`LearnSettings::episode_seconds`], rollouts of [`LearnSettings::policy_horizon_seconds`]
+/// from rest, the PID + PD gains from [`LearnSettings::gain_scale`] with `kp` and `kd` on both
+/// outputs and `ki` on the end effector free, each at its typical magnitude.
+pub fn pendulum_task(params: &PendulumParams, settings: &LearnSettings) -> Result<Task, SimError> {
+    let cost = SaturatingCost::with_widths(DVector::from_element(2, 0.0), &settings.cost_widths)?;
+    let steps = |seconds: f64, name: &'static str| -> Result<usize, SimError> {
+        let n = (seconds * params.control_rate_hz).round();
+        if !(n >= 1.0 && n.is_finite()) {
+            return Err(SimError::invalid(
+                name,
+                seconds,
+                "needs at least one control step",
+            ));
+        }
+        Ok(n as usize)
+    };
+    let episode_steps = steps(settings.episode_seconds, "episode_seconds")?;
+    let policy_horizon = steps(settings.policy_horizon_seconds, "policy_horizon_seconds")?;
+    if let Some(bad) = settings.gain_scale.iter().find(|g| !g.is_finite()) {
+        return Err(SimError::invalid(
+            "gain_scale",
+            *bad,
+            "typical gain magnitudes must be finite",
+        ));
+    }
+    let mask = gain_mask();
+    let initial = modelled_policy(&initial_gains(&settings.gain_scale), params)?;
+    let typical = mask.pack(&initial).into_iter().map(f64::abs).collect();
+    let (mean, var) = start(params);
+    Ok(Task {
+        cost,
+        episode_steps,
+        policy_horizon,
+        start: StartDistribution::Fixed { mean, var },
+        rest_command: vec![0.0],
+        space: SearchSpace::pid(&initial, &mask),
+        typical,
+    })
+}
+
+/// The loop's settings on the pendulum of `params`: the random episodes' excitation as a
+/// fraction of the action limit.
+pub fn learner_settings(
+    params: &PendulumParams,
+    s: &LearnSettings,
+) -> Result<LearnerSettings, SimError> {
+    s.excitation.validate()?;
+    Ok(LearnerSettings {
+        iterations: s.iterations,
+        random_rollouts: s.random_rollouts,
+        excitation: ExcitationConfig {
+            components: s.excitation.components,
+            min_hz: s.excitation.min_hz,
+            max_hz: s.excitation.max_hz,
+            rms_fraction: s.excitation.rms / params.action_limit,
+        },
+        seed: s.seed,
+        fit: s.fit.clone(),
+        search: s.search,
+        evaluation_episodes: s.evaluation_episodes,
+        prequential_choice: s.prequential_choice,
+        ff_segment: s.ff_segment,
+        warm_start: s.warm_start,
+    })
+}
+
+/// The gains the search moves: `kp` and `kd` on both outputs, `ki` on the end effector.
+fn gain_mask() -> PidMask {
+    PidMask {
+        kp: DMatrix::from_element(1, 2, true),
+        ki: DMatrix::from_row_slice(1, 2, &[false, true]),
+        kd: DMatrix::from_element(1, 2, true),
+    }
+}
+
+/// The gains of the loop's first search: [`LearnSettings::gain_scale`] with the sine saturation.
+pub(super) fn initial_gains(s: &[f64; 5]) -> PidPdGains {
+    PidPdGains {
+        kp_x: s[0],
+        ki_x: s[1],
+        kd_x: s[2],
+        kp_theta: s[3],
+        kd_theta: s[4],
+        saturation: Saturation::Sine,
+    }
+}
+
 /// The pendulum's gains of a searched policy (the loop searches PID policies only).
-pub(super) fn gains_from(c: &Policy) -> Result<PidPdGains, SimError> {
+pub fn gains_from(c: &Policy) -> Result<PidPdGains, SimError> {
     let Policy::Pid(p) = c else {
         return Err(SimError::invalid(
             "policy",

@@ -51,10 +51,6 @@ pub fn summary(
         "model": settings.method().name(),
         "seed": settings.seed,
         "random_rollouts": settings.random_rollouts,
-        "random_policies": outcome.random_policies.iter().map(|(g, stable)| json!({
-            "gains": g,
-            "stable": stable,
-        })).collect::<Vec<_>>(),
         "episode_seconds": settings.episode_seconds,
         "plant": params,
         "settings": settings,
@@ -138,9 +134,7 @@ pub fn write_run_dir(
         &iterations_csv(&outcome.iterations),
     )?;
     for (k, ep) in outcome.episodes.iter().enumerate() {
-        let kind = if k < settings.random_policies {
-            "random-policy".to_string()
-        } else if k < settings.random_rollouts {
+        let kind = if k < settings.random_rollouts {
             "random".to_string()
         } else {
             format!("policy-it{}", k + 1 - settings.random_rollouts)

@@ -2,9 +2,12 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::choice::{HeldOut, SearchModel};
+use msgp_core::learner::{self, HeldOut, SearchModel};
+
+use super::problem::gains_from;
 use crate::controller::PidPdGains;
 use crate::episode::Episode;
+use crate::error::SimError;
 
 /// One iteration of the loop.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -25,12 +28,7 @@ pub struct IterationReport {
     /// without evaluation episodes (and in runs made before it was measured).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub expected_cost: Option<f64>,
-    /// The search's gains were not run: this iteration's model did not predict them to pay
-    /// by [`LearnSettings::hold_margin`](super::LearnSettings::hold_margin), so the previous
-    /// gains ran again (and `predicted_cost` is theirs).
-    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
-    pub held: bool,
-    /// Under the prequential choice (`learn::choice`), the model this iteration's search
+    /// Under the prequential choice ([`msgp_core::learner::choice`]), the model this iteration's search
     /// ran on.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub search_model: Option<SearchModel>,
@@ -60,6 +58,36 @@ pub struct IterationReport {
     pub gains: PidPdGains,
 }
 
+impl IterationReport {
+    /// The loop's report with the pendulum's names: the success test is the stability test,
+    /// the policy its PID + PD gains.
+    pub fn from_loop(r: &learner::IterationReport) -> Result<Self, SimError> {
+        let Some(policy) = &r.policy else {
+            return Err(SimError::invalid(
+                "iteration report",
+                r.iteration as f64,
+                "carries no policy",
+            ));
+        };
+        Ok(Self {
+            iteration: r.iteration,
+            predicted_cost: r.predicted_cost,
+            predicted_cost_std: r.predicted_cost_std,
+            actual_cost: r.actual_cost,
+            expected_cost: r.expected_cost,
+            search_model: r.search_model,
+            held_out: r.held_out,
+            interaction_seconds: r.interaction_seconds,
+            stable: r.success.unwrap_or(false),
+            fit_seconds: r.fit_seconds,
+            search_seconds: r.search_seconds,
+            fit_numerical_stop: r.fit_numerical_stop.clone(),
+            search_failure: r.search_failure.clone(),
+            gains: gains_from(policy)?,
+        })
+    }
+}
+
 /// Everything the loop produced.
 #[derive(Clone, Debug)]
 pub struct LearnOutcome {
@@ -69,9 +97,6 @@ pub struct LearnOutcome {
     pub episodes: Vec<Episode>,
     /// The last gains.
     pub final_gains: PidPdGains,
-    /// The random policies' gains and whether each passed the stability test (which, as after
-    /// every iteration, is neither interaction nor training data).
-    pub random_policies: Vec<(PidPdGains, bool)>,
 }
 
 impl LearnOutcome {

@@ -22,17 +22,7 @@ pub struct LearnSettings {
     pub iterations: usize,
     /// Random episodes before the first policy.
     pub random_rollouts: usize,
-    /// How many of the `random_rollouts` run a *random policy* instead of open-loop
-    /// excitation: PID + PD gains drawn uniformly in `[0, 2 × gain_scale]` each (the box the
-    /// first policy search's trust region spans), so that the first model sees the loop closed
-    /// with gains of the kind the search will ask about. They enter the model loss under their
-    /// gains (the paper's `L_fb`), like the loop's own episodes. 0 (the default): the paper's
-    /// smooth random signals only. Whether a drawn gain set would pass the stability test is
-    /// recorded ([`LearnOutcome::random_policies`](super::LearnOutcome::random_policies)), so
-    /// that luck is not read as learning.
-    #[serde(default)]
-    pub random_policies: usize,
-    /// The smooth random signal of those episodes. Its band reaches 10 Hz: a NARX model at
+    /// The smooth random signal of the random episodes. Its band reaches 10 Hz: a NARX model at
     /// 50 Hz only learns how the pole answers quick changes of the command (the inputs' lags
     /// differ) if the first data have them, and every feedback policy makes them (its
     /// derivative term passes on measurement noise). With 0.1–2 Hz the input lags are nearly
@@ -66,16 +56,7 @@ pub struct LearnSettings {
     /// stability test, neither interaction nor training data. 0: none.
     #[serde(default = "evaluation_episodes")]
     pub evaluation_episodes: usize,
-    /// A change of the running gains must be predicted to pay: from the second iteration on,
-    /// the search's gains replace the running ones only if this iteration's model predicts
-    /// their expected cost (over the policy horizon) below the running gains' by more than
-    /// this many standard deviations of the predicted cost (per-step variances summed); else
-    /// the running gains run again. A model that ranks nearby gains wrongly otherwise walks
-    /// the gains away from stable ones a little each iteration (docs/design.md). 0: every
-    /// search's gains run.
-    #[serde(default)]
-    pub hold_margin: f64,
-    /// The prequential choice of the MSGP loop (`learn::choice`): every iteration also fits
+    /// The prequential choice of the MSGP loop ([`msgp_core::learner::choice`]): every iteration also fits
     /// the linear model of the data (linear-kf), scores both on the episode that follows, and
     /// runs the search on the GP model only while its predictions of episodes it had not seen
     /// beat the linear model's in total. `false`: always the GP model.
@@ -87,15 +68,6 @@ pub struct LearnSettings {
     /// information after a second or so (initial uncertainty grows like `e^{3.5 t}`), and fitting
     /// the trajectory likelihood of whole falls distorts the dynamics (docs/design.md).
     pub ff_segment: Option<usize>,
-    /// Feedback (policy) episodes enter the model loss as overlapping segments of this many
-    /// samples (stride half of it), each under the gains that ran it; `None` (the default)
-    /// keeps them whole, as the paper does. MSGP only. A feedback episode of weakly damped
-    /// gains oscillates and falls; fitted whole, its trajectory likelihood can turn the
-    /// model's pole into a damped oscillator (docs/design.md). A segment's modelled PID
-    /// integral sums its own samples only; the controller's had run since the episode began
-    /// (with the loop's integral gains, a small offset of the command).
-    #[serde(default)]
-    pub fb_segment: Option<usize>,
     /// Typical gain magnitudes `[kp_x, ki_x, kd_x, kp_θ, kd_θ]`: the first policy's gains and
     /// the optimiser's coordinate scales (units of the problem, not a solution).
     pub gain_scale: [f64; 5],
@@ -117,7 +89,6 @@ impl Default for LearnSettings {
         Self {
             iterations: 8,
             random_rollouts: 4,
-            random_policies: 0,
             excitation: learn_excitation(),
             episode_seconds: 3.0,
             policy_horizon_seconds: 5.0,
@@ -151,10 +122,8 @@ impl Default for LearnSettings {
             },
             cost_widths: [0.1, 0.3],
             evaluation_episodes: EVALUATION_EPISODES,
-            hold_margin: 0.0,
             prequential_choice: false,
             ff_segment: Some(30),
-            fb_segment: None,
             gain_scale: [1.0, 0.3, 1.0, 10.0, 2.0],
             warm_start: None,
         }

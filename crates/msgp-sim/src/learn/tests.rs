@@ -1,6 +1,7 @@
 //! Tests of the learning loop.
 
 use super::*;
+use crate::controller::{PidPdGains, Saturation};
 
 fn report(iteration: usize, actual_cost: f64, stable: bool) -> IterationReport {
     IterationReport {
@@ -9,7 +10,6 @@ fn report(iteration: usize, actual_cost: f64, stable: bool) -> IterationReport {
         predicted_cost_std: 0.1,
         actual_cost,
         expected_cost: None,
-        held: false,
         search_model: None,
         held_out: None,
         interaction_seconds: 12.0 + 3.0 * iteration as f64,
@@ -34,7 +34,6 @@ fn outcome(iterations: Vec<IterationReport>) -> LearnOutcome {
         iterations,
         episodes: Vec::new(),
         final_gains: PidPdGains::hand_tuned(),
-        random_policies: Vec::new(),
     }
 }
 
@@ -63,57 +62,81 @@ fn the_best_iteration_is_the_first_stable_else_the_cheapest() {
     assert_eq!(best(&outcome(Vec::new())), None);
 }
 
-/// The expected cost of the loop's reports is the mean of its evaluation episodes: seeded (the
-/// same call, the same number; another iteration, other episodes), near the mean of many more
-/// episodes (a single episode's cost is not: its spread is as large as its mean), and absent
-/// without evaluation episodes.
+/// The pendulum as the loop's plant runs the simulator's own episodes: the excitation and the
+/// PID + PD gains through [`msgp_core::learner::run_episode`] give the samples
+/// [`crate::episode::run_episode`] gives with the simulator's controllers (the same initial
+/// angle, noise and commands), and the recorded episodes are those samples.
 #[test]
-fn the_expected_cost_is_the_mean_of_seeded_evaluation_episodes() {
+fn the_pendulum_plant_runs_the_simulators_episodes() {
+    use msgp_core::learner::{Actor, Multisine, run_episode};
+    use msgp_core::policy::Policy;
+
+    use crate::controller::{PidPdPolicy, RandomExcitation};
+    use crate::episode::{EpisodeConfig, run_episode as sim_episode};
+
     let params = PendulumParams::default();
-    let gains = PidPdGains::apollo_lqr();
     let settings = LearnSettings::default();
-    let cost = SaturatingCost::with_widths(DVector::from_element(2, 0.0), &settings.cost_widths)
-        .expect("cost");
-    let scored = (3, 148);
-    let at = |it: usize, s: &LearnSettings| {
-        expected_cost(&params, &gains, s, it, &cost, scored).expect("episodes")
+    let config = |seed| EpisodeConfig {
+        seconds: 3.0,
+        seed,
+        initial_theta: None,
     };
-    let fifty = at(1, &settings).expect("evaluated");
-    assert_eq!(at(1, &settings), Some(fifty), "seeded");
-    assert_ne!(
-        at(2, &settings),
-        Some(fifty),
-        "each iteration its own episodes"
-    );
-    let many = LearnSettings {
-        evaluation_episodes: 200,
-        seed: 99,
-        ..settings.clone()
+    let mut plant = PendulumPlant::new(&params, 3.0).expect("valid");
+    let learner = learner_settings(&params, &settings).expect("valid");
+    let bounds = msgp_core::policy::CommandBounds::symmetric(&[params.action_limit]).expect("ok");
+    let signal = Multisine::for_bounds(7, &learner.excitation, &bounds);
+    let ep = run_episode(&mut plant, &Actor::Excitation(&signal), 7, 150).expect("runs");
+    let excited_last = (7, ep.commands[ep.len() - 1][0]);
+    let mut excitation = RandomExcitation::new(7, &settings.excitation).expect("valid");
+    let reference = sim_episode(&params, &mut excitation, &config(7)).expect("runs");
+    assert_eq!(ep.len(), reference.samples.len());
+    for (k, s) in reference.samples.iter().enumerate() {
+        assert_eq!(ep.commands[k][0], s.command, "excitation, row {k}");
+        assert_eq!(ep.outputs[k], vec![s.measurement.theta, s.measurement.x]);
+    }
+    // a stabilising and a falling gain set: the falling one ends early on both sides
+    let lqr = PidPdGains {
+        saturation: Saturation::Sine,
+        ..PidPdGains::apollo_lqr()
     };
-    let reference = at(1, &many).expect("evaluated");
-    assert!(
-        (fifty / reference - 1.0).abs() < 0.35,
-        "mean of 50: {fifty}, of 200: {reference}"
-    );
-    // single episodes scatter over a factor far above 2 around that mean
-    let singles: Vec<f64> = (0..20)
-        .map(|k| {
-            let one = LearnSettings {
-                evaluation_episodes: 1,
-                seed: 1000 + k,
-                ..settings.clone()
-            };
-            at(1, &one).expect("one episode") / reference
-        })
-        .collect();
-    let within = singles.iter().filter(|r| (0.5..=2.0).contains(*r)).count();
-    assert!(
-        within < 16,
-        "single episodes within 2x of the mean: {within}/20 {singles:?}"
-    );
-    let none = LearnSettings {
-        evaluation_episodes: 0,
-        ..settings
+    let falling = PidPdGains {
+        kp_theta: 5.0,
+        ..lqr
     };
-    assert_eq!(at(1, &none), None);
+    for gains in [lqr, falling] {
+        let policy = Policy::Pid(modelled_policy(&gains, &params).expect("valid"));
+        let actor = Actor::Policy {
+            policy: &policy,
+            rest: &[0.0],
+        };
+        let ep = run_episode(&mut plant, &actor, 11, 150).expect("runs");
+        let mut controller = PidPdPolicy::new(gains, &params).expect("valid");
+        let reference = sim_episode(&params, &mut controller, &config(11)).expect("runs");
+        assert_eq!(ep.len(), reference.samples.len(), "{gains:?}");
+        assert_eq!(
+            ep.ended_early,
+            reference.info.termination != crate::episode::Termination::Completed
+        );
+        for (k, s) in reference.samples.iter().enumerate() {
+            assert_eq!(ep.commands[k][0], s.command, "{gains:?}, row {k}");
+            assert_eq!(ep.outputs[k], vec![s.measurement.theta, s.measurement.x]);
+        }
+    }
+    let recorded = plant.take_episodes(&[excited_last]);
+    assert_eq!(recorded.len(), 3);
+    let reference = reference_episode(&params, &settings);
+    assert_eq!(recorded[0].samples, reference.samples);
+    assert_eq!(recorded[0].info.termination, reference.info.termination);
+}
+
+/// The simulator's own episode of seed 7 under the excitation.
+fn reference_episode(params: &PendulumParams, settings: &LearnSettings) -> crate::episode::Episode {
+    let mut excitation =
+        crate::controller::RandomExcitation::new(7, &settings.excitation).expect("valid");
+    let config = crate::episode::EpisodeConfig {
+        seconds: 3.0,
+        seed: 7,
+        initial_theta: None,
+    };
+    crate::episode::run_episode(params, &mut excitation, &config).expect("runs")
 }

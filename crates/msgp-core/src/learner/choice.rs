@@ -4,7 +4,7 @@
 //! linear-Gaussian window model alone (linear-kf: the same window, the same filter likelihood,
 //! no GP). The episode the iteration then runs is data neither model was trained on, so both
 //! predict it honestly: each model's filter likelihood of it (the joint density of its
-//! outputs given its inputs, [`msgp_core::model::Model::filter_nll`], in original units) is
+//! outputs given its inputs, [`crate::model::Model::filter_nll`], in original units) is
 //! the model's score on that episode. Summed over the episodes so far this is Dawid's
 //! *prequential* comparison: the GP model earns the policy search only while its predictions of
 //! episodes it had not seen are, in total, better than the linear model's. Until then (and at the
@@ -16,12 +16,18 @@
 
 use std::ops::ControlFlow;
 
-use msgp_core::fit::{FitSettings, TrainingEpisode, fit_episodes_observed};
-use msgp_core::model::{Method, Model};
 use serde::{Deserialize, Serialize};
 
-use super::settings::LearnSettings;
-use crate::error::SimError;
+use super::settings::LearnerSettings;
+use crate::MsgpError;
+use crate::error::Result;
+use crate::fit::{FitSettings, LinearKfSettings, TrainingEpisode, fit_episodes_observed};
+use crate::model::{Method, Model};
+
+/// Most L-BFGS iterations of the linear competitor's fit; from the second iteration on, it
+/// continues the previous one for at most as many (the solver stops by itself when converged,
+/// after 10–40 on the pendulum).
+pub const LINEAR_FIT_ITERATIONS: usize = 300;
 
 /// Which model a search ran on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -51,13 +57,13 @@ const LOST: f64 = 1e9;
 
 /// A model's filter likelihood of one held-out entry; infinite when its filter fails
 /// numerically on it (the model predicts the episode impossible).
-fn held_out_nll(model: &Model, e: &TrainingEpisode) -> Result<(f64, usize), SimError> {
+fn held_out_nll(model: &Model, e: &TrainingEpisode) -> Result<(f64, usize)> {
     match model.filter_nll(&e.traj) {
         Ok(v) => Ok(v),
-        Err(
-            msgp_core::MsgpError::NonFinite(_) | msgp_core::MsgpError::NotPositiveDefinite { .. },
-        ) => Ok((f64::INFINITY, 0)),
-        Err(e) => Err(e.into()),
+        Err(MsgpError::NonFinite(_) | MsgpError::NotPositiveDefinite { .. }) => {
+            Ok((f64::INFINITY, 0))
+        }
+        Err(e) => Err(e),
     }
 }
 
@@ -77,27 +83,30 @@ pub struct ModelChoice {
 }
 
 impl ModelChoice {
-    /// The choice for the loop of `settings` (an MSGP loop: the competitor takes the
-    /// linear-kf loop's defaults on the same history, outputs and threads).
-    pub fn new(settings: &LearnSettings) -> Result<Self, SimError> {
+    /// The choice for the loop of `settings` (an MSGP loop): the competitor is the linear-kf
+    /// model on the same history, outputs, integrators and threads.
+    pub fn new(settings: &LearnerSettings) -> Result<Self> {
         if settings.method() != Method::Msgp {
-            return Err(SimError::invalid(
-                "prequential_choice",
-                1.0,
-                "the choice between a GP model and its linear part needs an MSGP loop",
-            ));
+            return Err(MsgpError::InvalidSetting {
+                name: "prequential_choice",
+                reason: "the choice between a GP model and its linear part needs an MSGP loop"
+                    .into(),
+            });
         }
-        let linear = LearnSettings::for_model(Method::LinearKf, None);
         let fit = FitSettings {
             seed: settings.seed,
             ly: settings.fit.ly,
             lu: settings.fit.lu,
             threads: settings.fit.threads,
-            ..linear.fit
+            integrators: settings.fit.integrators.clone(),
+            method: LinearKfSettings {
+                iterations: LINEAR_FIT_ITERATIONS,
+            }
+            .into(),
         };
         Ok(Self {
             settings: fit,
-            warm_start: linear.warm_start,
+            warm_start: Some(LINEAR_FIT_ITERATIONS),
             previous: None,
             advantage: 0.0,
             scored: 0,
@@ -106,7 +115,7 @@ impl ModelChoice {
 
     /// Fits the linear model of `training` for iteration `it` (seeded by the loop's seed and
     /// the iteration, as the GP model's fit), continuing the previous one when the linear-kf loop would.
-    pub fn fit(&mut self, training: &[TrainingEpisode], it: usize) -> Result<Model, SimError> {
+    pub fn fit(&mut self, training: &[TrainingEpisode], it: usize) -> Result<Model> {
         let seeded = FitSettings {
             seed: self.settings.seed.wrapping_add(it as u64),
             ..self.settings.clone()
@@ -141,7 +150,7 @@ impl ModelChoice {
         gp: &Model,
         linear: &Model,
         newest: &[TrainingEpisode],
-    ) -> Result<HeldOut, SimError> {
+    ) -> Result<HeldOut> {
         let (mut g, mut l, mut steps) = (0.0, 0.0, 0);
         for e in newest {
             let (gn, n) = held_out_nll(gp, e)?;

@@ -1,0 +1,334 @@
+//! The learning loop of PILCO with MSGP models (paper section 4.2) on any [`Plant`]: random
+//! episodes → fit the model on every episode so far (open-loop ones feed-forward, policy ones
+//! in closed loop under the policy that ran them, the paper's `L_fb`) → search the policy on
+//! the model (the expected saturating cost of a closed-loop moment-matching rollout, exact
+//! gradients, [`crate::policy_search`]) → run it on the plant for one episode → repeat.
+//!
+//! A [`Task`] says what is asked of the plant; [`LearnerSettings`] how the loop fits and
+//! searches. A [`Learner`] holds the loop's state — every episode run so far stays with it when
+//! the plant fails or an observer stops the loop. [`improve`] is one iteration's fit and search
+//! on episodes logged elsewhere (a real robot's). Under the prequential choice ([`choice`]) the
+//! search runs on the GP model only while it predicts the episodes it had not seen better than
+//! the linear model of the same data.
+
+pub mod choice;
+pub mod episode;
+pub mod excitation;
+pub mod improve;
+pub mod report;
+pub mod settings;
+pub mod task;
+
+pub use choice::{HeldOut, ModelChoice, SearchModel};
+pub use episode::{Actor, Episode, run_episode, segments};
+pub use excitation::{ExcitationConfig, Multisine};
+pub use improve::{FitAndSearch, fit_and_search, training_entries};
+pub use report::IterationReport;
+pub use settings::LearnerSettings;
+pub use task::{StartDistribution, Task, target_cost};
+
+use std::ops::ControlFlow;
+
+use crate::error::{MsgpError, Result};
+use crate::fit::{FitProgress, TrainingEpisode};
+use crate::model::Model;
+use crate::numeric::seed::derive;
+use crate::plant::Plant;
+use crate::policy::Policy;
+
+/// What the loop reports while it runs ([`Learner::run`]).
+#[derive(Clone, Copy, Debug)]
+pub enum LearnEvent<'a> {
+    /// An episode on the plant ended (random, policy or evaluation episode).
+    Episode {
+        /// The episode.
+        episode: &'a Episode,
+        /// It is an evaluation episode (neither interaction nor training data).
+        evaluation: bool,
+    },
+    /// The model fit of policy iteration `iteration` (from 1) starts.
+    FitStarted {
+        /// The policy iteration.
+        iteration: usize,
+    },
+    /// The model fit finished a solver iteration (MSGP fits only).
+    Fit {
+        /// The policy iteration.
+        iteration: usize,
+        /// The fit's own progress.
+        progress: &'a FitProgress,
+    },
+    /// The policy search of an iteration starts.
+    SearchStarted {
+        /// The policy iteration.
+        iteration: usize,
+    },
+    /// A policy iteration completed.
+    Iteration(&'a IterationReport),
+}
+
+/// The task's success test of a policy (the pendulum's stability test, a mean return over
+/// seeded starts), run after every iteration; neither interaction nor training data.
+pub trait SuccessTest {
+    /// Whether `policy` passes.
+    fn passed(&mut self, policy: &Policy) -> Result<bool>;
+}
+
+/// The tag of evaluation episode `episode` of `iteration` ([`derive`]).
+pub fn evaluation_stream(iteration: usize, episode: usize) -> u64 {
+    let it = u64::try_from(iteration).unwrap_or(u64::MAX) & 0xFFFF_FFFF;
+    (2 << 48) + (it << 16) + (episode as u64 & 0xFFFF)
+}
+
+/// The seed of random episode `k` of a loop seeded `seed`.
+pub fn random_episode_seed(seed: u64, k: usize) -> u64 {
+    seed.wrapping_mul(1000).wrapping_add(k as u64)
+}
+
+/// The seed of the episode of policy iteration `it`.
+pub fn policy_episode_seed(seed: u64, it: usize) -> u64 {
+    seed.wrapping_mul(1000).wrapping_add(500 + it as u64)
+}
+
+/// The loop's state (see the module docs).
+#[derive(Clone, Debug)]
+pub struct Learner {
+    task: Task,
+    settings: LearnerSettings,
+    episodes: Vec<Episode>,
+    training: Vec<TrainingEpisode>,
+    reports: Vec<IterationReport>,
+    policy: Policy,
+    previous: Option<Model>,
+    choice: Option<ModelChoice>,
+    seconds: f64,
+}
+
+impl Learner {
+    /// A loop of `task` under `settings` (both checked when it runs on a plant).
+    pub fn new(task: Task, settings: LearnerSettings) -> Result<Self> {
+        settings.validate()?;
+        let choice = match settings.prequential_choice {
+            true => Some(ModelChoice::new(&settings)?),
+            false => None,
+        };
+        Ok(Self {
+            policy: task.space.base.clone(),
+            task,
+            settings,
+            episodes: Vec::new(),
+            training: Vec::new(),
+            reports: Vec::new(),
+            previous: None,
+            choice,
+            seconds: 0.0,
+        })
+    }
+
+    /// Every interaction episode so far, random ones first.
+    pub fn episodes(&self) -> &[Episode] {
+        &self.episodes
+    }
+
+    /// The iterations completed so far.
+    pub fn reports(&self) -> &[IterationReport] {
+        &self.reports
+    }
+
+    /// The policy that runs next (the last searched).
+    pub fn policy(&self) -> &Policy {
+        &self.policy
+    }
+
+    /// The task.
+    pub fn task(&self) -> &Task {
+        &self.task
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &LearnerSettings {
+        &self.settings
+    }
+
+    /// Runs the loop on `plant` to its last iteration: the random episodes not yet run, then
+    /// the policy iterations not yet done. `success` judges each iteration's policy; `observe`
+    /// sees the loop's progress and can stop it ([`ControlFlow::Break`]: the loop ends with
+    /// [`MsgpError::Stopped`] at the next event, an MSGP fit at its next solver iteration).
+    /// On any error the episodes run so far stay in the learner.
+    pub fn run(
+        &mut self,
+        plant: &mut dyn Plant,
+        mut success: Option<&mut dyn SuccessTest>,
+        observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
+    ) -> Result<()> {
+        self.task.validate(plant.spec())?;
+        let spec = plant.spec().clone();
+        let bounds = spec.bounds()?;
+        let steps = self.task.episode_steps;
+        while self.episodes.len() < self.settings.random_rollouts {
+            let k = self.episodes.len();
+            let seed = random_episode_seed(self.settings.seed, k);
+            let signal = Multisine::for_bounds(seed, &self.settings.excitation, &bounds);
+            let ep = run_episode(plant, &Actor::Excitation(&signal), seed, steps)?;
+            self.record(ep, spec.period, observe)?;
+        }
+        while self.reports.len() < self.settings.iterations {
+            let it = self.reports.len() + 1;
+            let test = success.as_mut().map(|s| &mut **s as &mut dyn SuccessTest);
+            self.iterate(plant, it, test, observe)?;
+        }
+        Ok(())
+    }
+
+    /// Keeps an interaction episode and its training entries.
+    fn record(
+        &mut self,
+        ep: Episode,
+        period: f64,
+        observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
+    ) -> Result<()> {
+        self.seconds += ep.len().saturating_sub(1) as f64 * period;
+        self.training.extend(training_entries(&ep, &self.settings)?);
+        self.episodes.push(ep);
+        let flow = observe(LearnEvent::Episode {
+            episode: self.episodes.last().expect("just pushed"),
+            evaluation: false,
+        });
+        match flow {
+            ControlFlow::Break(()) => Err(MsgpError::Stopped {
+                iteration: self.reports.len(),
+            }),
+            ControlFlow::Continue(()) => Ok(()),
+        }
+    }
+
+    /// The scored rows of an episode: those after the model's window.
+    fn scored(&self) -> (usize, usize) {
+        let window = self.settings.fit.ly.max(self.settings.fit.lu);
+        (window, (self.task.episode_steps + 1).saturating_sub(window))
+    }
+
+    /// One policy iteration: fit, search, run, score, judge.
+    fn iterate(
+        &mut self,
+        plant: &mut dyn Plant,
+        it: usize,
+        success: Option<&mut dyn SuccessTest>,
+        observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
+    ) -> Result<()> {
+        let (window, scored) = self.scored();
+        if scored == 0 {
+            return Err(MsgpError::InvalidSetting {
+                name: "episode_steps",
+                reason: "an episode needs at least one control step after the model's window"
+                    .into(),
+            });
+        }
+        let step = fit_and_search(
+            &self.task,
+            &self.settings,
+            (&self.episodes, &self.training),
+            self.previous.as_ref(),
+            &self.policy,
+            it,
+            self.choice.as_mut(),
+            observe,
+        )?;
+        if self.settings.warm_start.is_some() {
+            // a one-step fallback model is not continued: the next fit starts over
+            self.previous =
+                (step.model.method == self.settings.method()).then(|| step.model.clone());
+        }
+        let (predicted, var, search_failure) = match &step.searched {
+            Ok(result) => {
+                self.policy = result.policy.clone();
+                let steps = &result.steps[..scored.min(result.steps.len())];
+                let predicted: f64 = steps.iter().map(|(m, _)| m).sum();
+                let var: f64 = steps.iter().map(|(_, v)| v).sum();
+                (predicted, var, None)
+            }
+            // the model's rollouts diverge for every start: it predicts failure whatever the
+            // policy (every step costs 1); the policy stays and the episode adds data
+            Err(e) => (scored as f64, 0.0, Some(e.to_string())),
+        };
+        let seed = policy_episode_seed(self.settings.seed, it);
+        let rest = self.task.rest_command.clone();
+        let actor = Actor::Policy {
+            policy: &self.policy,
+            rest: &rest,
+        };
+        let ep = run_episode(plant, &actor, seed, self.task.episode_steps)?;
+        let actual = ep.cost(&self.task.cost, window, scored);
+        let entries = training_entries(&ep, &self.settings)?;
+        // both models of this iteration predict the episode neither was trained on (a
+        // one-step fallback model is not the loop's model and is not scored)
+        let held_out = match (self.choice.as_mut(), &step.linear) {
+            (Some(c), Some(l)) if step.model.method == self.settings.method() => {
+                Some(c.score(&step.model, l, &entries)?)
+            }
+            _ => None,
+        };
+        self.record(ep, plant.spec().period, observe)?;
+        let success = match success {
+            Some(test) => Some(test.passed(&self.policy)?),
+            None => None,
+        };
+        let expected = self.expected_cost(plant, it, observe)?;
+        let report = IterationReport {
+            iteration: it,
+            predicted_cost: predicted,
+            predicted_cost_std: var.sqrt(),
+            actual_cost: actual,
+            expected_cost: expected,
+            search_model: step.search_model,
+            held_out,
+            interaction_seconds: self.seconds,
+            success,
+            fit_seconds: step.fit_seconds,
+            search_seconds: step.search_seconds,
+            fit_numerical_stop: step.fit_report.numerical_stop,
+            search_failure,
+            policy: Some(self.policy.clone()),
+        };
+        let flow = observe(LearnEvent::Iteration(&report));
+        self.reports.push(report);
+        match flow {
+            ControlFlow::Break(()) => Err(MsgpError::Stopped { iteration: it }),
+            ControlFlow::Continue(()) => Ok(()),
+        }
+    }
+
+    /// The mean measured cost of the evaluation episodes of the running policy after `it`.
+    fn expected_cost(
+        &self,
+        plant: &mut dyn Plant,
+        it: usize,
+        observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
+    ) -> Result<Option<f64>> {
+        let n = self.settings.evaluation_episodes;
+        if n == 0 {
+            return Ok(None);
+        }
+        let (window, scored) = self.scored();
+        let rest = &self.task.rest_command;
+        let actor = Actor::Policy {
+            policy: &self.policy,
+            rest,
+        };
+        let mut total = 0.0;
+        for k in 0..n {
+            let seed = derive(self.settings.seed, evaluation_stream(it, k));
+            let ep = run_episode(plant, &actor, seed, self.task.episode_steps)?;
+            total += ep.cost(&self.task.cost, window, scored);
+            if observe(LearnEvent::Episode {
+                episode: &ep,
+                evaluation: true,
+            })
+            .is_break()
+            {
+                return Err(MsgpError::Stopped { iteration: it });
+            }
+        }
+        Ok(Some(total / n as f64))
+    }
+}
