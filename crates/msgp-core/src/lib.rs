@@ -29,7 +29,9 @@
 //! - [`plant`]: a system the learning loop runs episodes on (the trait the simulator, a
 //!   Gymnasium environment or a user's model implements);
 //! - [`learner`]: PILCO's outer loop on a plant: episodes, fits, searches, the prequential
-//!   choice, one iteration's step on logged episodes.
+//!   choice, one iteration's step on logged episodes;
+//! - [`policy_file`]: the versioned policy file (a policy, its plant's signals, its task and
+//!   what the model predicted of it).
 
 #![warn(missing_docs)]
 
@@ -47,6 +49,7 @@ pub mod numeric;
 pub mod optim;
 pub mod plant;
 pub mod policy;
+pub mod policy_file;
 pub mod policy_search;
 pub mod reproduce;
 pub mod rollout;

@@ -24,7 +24,8 @@ pub struct CommandSpec {
     pub high: f64,
 }
 
-/// One output of a plant: its name and whether it is an angle (radians, wrapping at ±π).
+/// One output of a plant: its name, its range where known, and whether it is an angle
+/// (radians, wrapping at ±π).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct OutputSpec {
     /// Name.
@@ -32,6 +33,34 @@ pub struct OutputSpec {
     /// The output is an angle in radians.
     #[serde(default)]
     pub angle: bool,
+    /// Lowest value it takes, when bounded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub low: Option<f64>,
+    /// Highest value it takes, when bounded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub high: Option<f64>,
+}
+
+impl OutputSpec {
+    /// An unbounded output that is not an angle.
+    pub fn named(name: &str) -> Self {
+        Self {
+            name: name.into(),
+            angle: false,
+            low: None,
+            high: None,
+        }
+    }
+
+    /// Its range's middle and half width when both ends are known and finite.
+    pub fn range(&self) -> Option<(f64, f64)> {
+        match (self.low, self.high) {
+            (Some(l), Some(h)) if l.is_finite() && h.is_finite() && l < h => {
+                Some((0.5 * (l + h), 0.5 * (h - l)))
+            }
+            _ => None,
+        }
+    }
 }
 
 /// What a plant's signals are.

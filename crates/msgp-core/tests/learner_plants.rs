@@ -45,10 +45,7 @@ impl Lag {
                     low: -3.0,
                     high: 3.0,
                 }],
-                outputs: vec![OutputSpec {
-                    name: "y".into(),
-                    angle: false,
-                }],
+                outputs: vec![OutputSpec::named("y")],
             },
             cubic,
             noise: 0.01,

@@ -4,6 +4,8 @@
 //!   as the `msgp` command line, so both give the same numbers;
 //! - [`sim`]: the synthetic systems, the pendulum simulator, its stability test and the
 //!   policy-learning loop;
+//! - [`learner`]: the policy-learning loop on the user's own plant (a Gymnasium environment
+//!   through `msgp.gym`) and the policy it learns;
 //! - [`data`]: data files loaded as `msgp fit` loads them;
 //! - [`reproduce`]: the paper's Table 1 and Figure 4 as independent units, for sweeps
 //!   (`msgp.sweep`);
@@ -15,6 +17,7 @@
 pub mod convert;
 pub mod data;
 pub mod error;
+pub mod learner;
 pub mod model;
 pub mod reproduce;
 pub mod sim;
@@ -38,6 +41,8 @@ fn _msgp(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("ModelFileError", py.get_type::<error::ModelFileError>())?;
     m.add("NotFittedError", py.get_type::<error::NotFittedError>())?;
     m.add_class::<model::Msgp>()?;
+    m.add_class::<learner::PyPolicy>()?;
+    m.add_function(wrap_pyfunction!(learner::learn_on_plant, m)?)?;
     m.add_function(wrap_pyfunction!(data::load, m)?)?;
     m.add_function(wrap_pyfunction!(sim::synthetic_system, m)?)?;
     m.add_function(wrap_pyfunction!(sim::defaults, m)?)?;

@@ -51,8 +51,10 @@ def test_stubs_match_the_module():
                     assert init == runtime_signature(cls), node.name
     public = {n for n in dir(_msgp) if not n.startswith("_")}
     assert public == stubbed, public ^ stubbed
-    # the package re-exports the compiled module but for the pieces msgp.sweep builds on
+    # the package re-exports the compiled module but for the pieces msgp.sweep and msgp.gym
+    # build on
     sweep_parts = {"table1_plan", "table1_unit", "table1_report", "update_results_section",
-                   "figure4_plan", "figure4_budget", "figure4_unit", "figure4_report"}
+                   "figure4_plan", "figure4_budget", "figure4_unit", "figure4_report",
+                   "learn_on_plant"}
     assert set(msgp.__all__) - {"__version__", "sweep"} == stubbed - sweep_parts
     assert (STUB.parent / "py.typed").is_file()

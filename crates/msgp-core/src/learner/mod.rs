@@ -17,6 +17,7 @@ pub mod excitation;
 pub mod improve;
 pub mod report;
 pub mod settings;
+pub mod target;
 pub mod task;
 
 pub use choice::{HeldOut, ModelChoice, SearchModel};
@@ -25,6 +26,7 @@ pub use excitation::{ExcitationConfig, Multisine};
 pub use improve::{FitAndSearch, fit_and_search, training_entries};
 pub use report::IterationReport;
 pub use settings::LearnerSettings;
+pub use target::{PolicyFamily, TargetTask};
 pub use task::{StartDistribution, Task, target_cost};
 
 use std::ops::ControlFlow;

@@ -121,6 +121,15 @@ impl Policy {
         }
     }
 
+    /// Size of the observation it acts on.
+    pub fn observation_dim(&self) -> usize {
+        match self {
+            Policy::Pid(p) => p.kp.ncols(),
+            Policy::StateFeedback(p) => p.dy(),
+            Policy::Rbf(p) => p.centres.ncols(),
+        }
+    }
+
     /// Number of commands.
     pub fn command_dim(&self) -> usize {
         match self {

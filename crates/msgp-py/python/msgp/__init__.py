@@ -14,6 +14,8 @@ Every number is computed in Rust; long calls release the GIL. Errors derive from
 ``MsgpError``; bad input raises ``InvalidInputError``, which is also a ``ValueError``.
 """
 
+from . import _msgp
+from . import gym as _gym
 from ._msgp import (
     InvalidInputError,
     ModelFileError,
@@ -22,13 +24,62 @@ from ._msgp import (
     NotFittedError,
     NumericalError,
     __version__,
+    Policy,
     defaults,
-    learn_policy,
     load,
     run_episode,
     stability_test,
     synthetic_system,
 )
+
+
+def learn_policy(
+    method="msgp",
+    iterations=None,
+    seed=0,
+    *,
+    env=None,
+    likelihood=None,
+    params=None,
+    settings=None,
+    progress=None,
+    **task,
+):
+    """PILCO on a plant. With ``env`` (a Gymnasium environment with a ``Box`` action space):
+    the loop on that environment, returning a ``msgp.gym.LearnResult`` (``.policy``,
+    ``.iterations``, ``.episodes``); ``task`` takes ``target``, ``widths``, ``episode_steps``,
+    ``policy_horizon``, ``policy`` and ``period`` (see ``msgp.gym``). Without: the built-in
+    simulated pendulum with the ``method``'s model ("msgp", "gp-narx", "pilco-narx",
+    "linear-kf"; ``likelihood`` and ``params`` as for the pendulum), returning one report per
+    iteration (8 by default)."""
+    if env is not None:
+        if method != "msgp" or likelihood is not None or params is not None:
+            raise InvalidInputError(
+                "learn_policy(env=...): method, likelihood and params belong to the built-in "
+                "pendulum; the environment's loop takes its model settings in settings=..."
+            )
+        return _gym.learn_policy(
+            env,
+            seed=seed,
+            iterations=iterations,
+            settings=settings,
+            progress=progress,
+            **task,
+        )
+    if task:
+        raise InvalidInputError(
+            f"{', '.join(sorted(task))}: options of learn_policy(env=...), not of the built-in "
+            "pendulum"
+        )
+    return _msgp.learn_policy(
+        method,
+        8 if iterations is None else iterations,
+        seed,
+        likelihood=likelihood,
+        params=params,
+        settings=settings,
+        progress=progress,
+    )
 
 
 def __getattr__(name):
@@ -47,6 +98,7 @@ __all__ = [
     "MsgpError",
     "NotFittedError",
     "NumericalError",
+    "Policy",
     "__version__",
     "defaults",
     "learn_policy",

@@ -215,6 +215,36 @@ def learn_policy(
     each iteration's report as it completes; Ctrl-C or an exception it raises stops the loop
     within one model fit and raises."""
 
+class Policy:
+    """A learned policy: `policy(obs)` gives the command for an observation (inside the command
+    bounds), remembering what a stateful policy needs between calls until `reset()`; `save`
+    writes the versioned policy file, `Policy.load` reads one."""
+
+    def __call__(self, observation: ArrayLike) -> Array: ...
+    def reset(self) -> None: ...
+    @property
+    def kind(self) -> str:
+        """The policy's family: "pid", "linear" or "rbf"."""
+    def to_dict(self) -> Dict[str, Any]: ...
+    def save(self, path: PathLike) -> None: ...
+    @staticmethod
+    def load(path: PathLike) -> "Policy": ...
+
+def learn_on_plant(
+    plant: Any,
+    spec: Dict[str, Any],
+    task: Dict[str, Any],
+    *,
+    settings: Optional[Dict[str, Any]] = None,
+    seed: int = 0,
+    progress: Optional[Callable[[Dict[str, Any]], Any]] = None,
+) -> Dict[str, Any]:
+    """The PILCO loop on `plant` (an object with `reset(seed) -> obs` and
+    `step(command) -> (obs, done)`), its signals described by `spec`, the task in the target
+    form; `msgp.learn_policy(env=...)` builds on it. Returns {"iterations", "episodes",
+    "policy", "settings"}; an exception of the plant or of `progress`, or Ctrl-C, is raised as
+    it was with the run so far in its `partial` attribute."""
+
 def table1_plan(
     seeds: Sequence[int],
     *,

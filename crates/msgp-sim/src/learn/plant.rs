@@ -52,13 +52,10 @@ impl PendulumPlant {
             }],
             outputs: vec![
                 OutputSpec {
-                    name: "theta".into(),
                     angle: true,
+                    ..OutputSpec::named("theta")
                 },
-                OutputSpec {
-                    name: "x".into(),
-                    angle: false,
-                },
+                OutputSpec::named("x"),
             ],
         };
         Ok(Self {
