@@ -569,7 +569,7 @@ pub struct LearnArgs {
     #[arg(long)]
     pub quiet: bool,
     #[command(flatten)]
-    pub plant: PlantArgs,
+    pub plant: PlantChoiceArgs,
 }
 
 /// Subcommands of `msgp reproduce`.
@@ -695,7 +695,7 @@ pub struct Figure4Args {
     #[command(flatten)]
     pub budget: BudgetArgs,
     #[command(flatten)]
-    pub plant: PlantArgs,
+    pub plant: PlantChoiceArgs,
 }
 
 /// Options of `msgp demo`.
@@ -844,18 +844,28 @@ pub enum Preset {
     Zero,
 }
 
-/// Plant parameter overrides (defaults: `msgp_sim::PendulumParams::default()`).
+/// The plant of the learning commands: a tier and a parameter file.
+#[derive(Debug, Args)]
+#[command(next_help_heading = "Plant")]
+pub struct PlantChoiceArgs {
+    /// Measurement-noise tier: apollo (σθ 5.2e-5 rad as in the Apollo code's simulator, σx
+    /// 0.1 mm: the default) or noisy (σθ 5e-3 rad, σx 2 mm: the stress tier); --params and
+    /// the simulator's parameter flags override it.
+    #[arg(long, value_enum, default_value_t = PlantArg::Apollo)]
+    pub plant: PlantArg,
+    /// JSON file with plant parameters (missing fields keep the tier's values; the fields of
+    /// `msgp sim pendulum --help`'s flags, e.g. {"pole_length": 0.8, "action_limit": 5}).
+    #[arg(long, value_name = "PARAMS.json")]
+    pub params: Option<PathBuf>,
+}
+
+/// The simulator's plant: a tier, a parameter file and single-parameter overrides (defaults:
+/// `msgp_sim::PendulumParams::default()`).
 #[derive(Debug, Args)]
 #[command(next_help_heading = "Plant")]
 pub struct PlantArgs {
-    /// Measurement-noise tier: apollo (σθ 5.2e-5 rad as in the Apollo code's simulator, σx
-    /// 0.1 mm: the default) or noisy (σθ 5e-3 rad, σx 2 mm: the stress tier); the other flags
-    /// and --params override it.
-    #[arg(long, value_enum, default_value_t = PlantArg::Apollo)]
-    pub plant: PlantArg,
-    /// JSON file with plant parameters (missing fields keep the tier's values).
-    #[arg(long, value_name = "PARAMS.json")]
-    pub params: Option<PathBuf>,
+    #[command(flatten)]
+    pub choice: PlantChoiceArgs,
     /// Pole length [m] (default 1.067).
     #[arg(long)]
     pub pole_length: Option<f64>,

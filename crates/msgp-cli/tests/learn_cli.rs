@@ -373,8 +373,9 @@ fn bad_learning_options_fail_with_a_message() {
             "--experimental",
         ),
         (
+            // the simulator's single-parameter flags are not the learning loop's (--params is)
             vec!["learn-policy", "--sim", "pendulum", "--pole-length=-1"],
-            "pole",
+            "--pole-length",
         ),
     ] {
         let o = run(&dir, &args);

@@ -12,7 +12,9 @@
 
 use std::path::Path;
 
-use crate::args::{PendulumArgs, PlantArgs, Preset, SaturationArgs, SimCommand, StabilityArgs};
+use crate::args::{
+    PendulumArgs, PlantArgs, PlantChoiceArgs, Preset, SaturationArgs, SimCommand, StabilityArgs,
+};
 use anyhow::{Context, bail};
 use msgp_sim::{
     Controller, EpisodeConfig, ExcitationConfig, LogFormat, PendulumParams, PidPdGains,
@@ -33,12 +35,18 @@ impl SaturationArgs {
     }
 }
 
-impl PlantArgs {
-    /// The tier ← `--params` file (its fields over the tier's) ← individual flags, then
-    /// validated.
+impl PlantChoiceArgs {
+    /// The tier ← `--params` file (its fields over the tier's), validated.
     pub(crate) fn resolve(&self) -> anyhow::Result<PendulumParams> {
+        let p = self.unchecked()?;
+        p.validate().context("invalid plant parameters")?;
+        Ok(p)
+    }
+
+    /// The tier ← `--params` file, not yet validated.
+    fn unchecked(&self) -> anyhow::Result<PendulumParams> {
         let tier = PendulumParams::tier(self.plant.into());
-        let mut p = match &self.params {
+        Ok(match &self.params {
             Some(path) => {
                 let text = std::fs::read_to_string(path)
                     .with_context(|| format!("cannot read plant parameters {}", path.display()))?;
@@ -54,7 +62,14 @@ impl PlantArgs {
                 serde_json::from_value::<PendulumParams>(merged).with_context(bad)?
             }
             None => tier,
-        };
+        })
+    }
+}
+
+impl PlantArgs {
+    /// The tier ← `--params` file ← individual flags, then validated.
+    pub(crate) fn resolve(&self) -> anyhow::Result<PendulumParams> {
+        let mut p = self.choice.unchecked()?;
         let set = |field: &mut f64, value: Option<f64>| {
             if let Some(v) = value {
                 *field = v;
