@@ -45,6 +45,60 @@ pub enum Command {
     /// Simulate the pole on the robot end effector (rapier), run stability tests.
     #[command(subcommand)]
     Sim(Box<SimCommand>),
+    /// Policy files: the next policy from the episodes logged on a machine, a policy's
+    /// predicted cost on a model.
+    #[command(subcommand)]
+    Policy(PolicyCommand),
+}
+
+/// `msgp policy …`.
+#[derive(Debug, Subcommand)]
+pub enum PolicyCommand {
+    /// The next policy from the episodes logged so far (a real robot's loop: run the policy,
+    /// log the episode, improve, repeat): the loop's model fits replayed on the episodes, then
+    /// one fit and search.
+    Improve(Box<ImproveArgs>),
+    /// A policy's expected cost on a model (the task of the policy file).
+    Eval(PolicyEvalArgs),
+}
+
+/// Options of `msgp policy improve`.
+#[derive(Debug, Args)]
+pub struct ImproveArgs {
+    /// The episodes so far, in the order they ran (`--data` repeated): first the loop's
+    /// random episodes, then one per policy file after the first.
+    #[command(flatten)]
+    pub data: DataArgs,
+    /// The policy files so far, in order (repeat): the loop's first policy (its task and
+    /// settings), then the policy each policy episode ran; the last produced the last episode.
+    #[arg(long = "policy", value_name = "FILE", required = true)]
+    pub policies: Vec<PathBuf>,
+    /// The next policy file.
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+    /// Also save the loop's model of this iteration (the model file of `msgp fit`).
+    #[arg(long, value_name = "FILE")]
+    pub model_out: Option<PathBuf>,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Options of `msgp policy eval`.
+#[derive(Debug, Args)]
+pub struct PolicyEvalArgs {
+    /// The model file (`msgp fit --out`, `msgp policy improve --model-out`).
+    #[arg(long, value_name = "FILE")]
+    pub model: PathBuf,
+    /// The policy file (its task says the cost, the start and the horizon).
+    #[arg(long, value_name = "FILE")]
+    pub policy: PathBuf,
+    /// Control steps of the prediction [default: the task's episode].
+    #[arg(long, value_name = "N")]
+    pub horizon: Option<usize>,
+    /// Print the result as JSON.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Options that select the data (shared by `fit`, `eval` and `simulate`).

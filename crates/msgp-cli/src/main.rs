@@ -30,6 +30,7 @@ fn main() -> std::process::ExitCode {
         }
         Command::Demo(args) => commands::demo::run(args),
         Command::Sim(cmd) => commands::sim::run(cmd),
+        Command::Policy(cmd) => commands::policy::run(cmd),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

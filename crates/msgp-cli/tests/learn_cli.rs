@@ -476,3 +476,195 @@ fn an_unstable_msgp_loop_points_at_linear_kf() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The real-robot route on the simulator's logs: `msgp policy improve` on the episodes a
+/// `learn-policy` run logged (MCAP, read as `msgp fit` reads data) and its policy files gives,
+/// round after round, the policies `learn-policy` ran with the same seed, to the bit;
+/// `msgp policy eval` predicts a policy's cost on the model `improve` saved.
+#[test]
+fn policy_improve_on_logged_episodes_reproduces_learn_policy() {
+    let dir = scratch("improve");
+    let o = run(
+        &dir,
+        &[
+            &[
+                "learn-policy",
+                "--sim",
+                "pendulum",
+                "--iterations",
+                "2",
+                "--seed",
+                "0",
+            ][..],
+            &TINY[..],
+            &["--out", "run", "--quiet"][..],
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let episodes = [
+        "run/episodes/00-random.mcap",
+        "run/episodes/01-random.mcap",
+        "run/episodes/02-policy-it1.mcap",
+    ];
+    let columns = [
+        "--input",
+        "/pendulum/command:acceleration",
+        "--output",
+        "/pendulum/measurement:theta,/pendulum/measurement:x",
+    ];
+    let improve = |n: usize, extra: &[&str]| -> Output {
+        let mut args = vec!["policy", "improve"];
+        for e in &episodes[..2 + n] {
+            args.extend(["--data", e]);
+        }
+        args.extend(columns);
+        let policies = ["run/policies/00.json", "run/policies/01.json"];
+        for p in &policies[..=n] {
+            args.extend(["--policy", p]);
+        }
+        args.extend(extra);
+        run(&dir, &args)
+    };
+    let policy_of = |path: &str| -> Value {
+        let text = std::fs::read_to_string(dir.join(path)).expect("policy file");
+        serde_json::from_str::<Value>(&text).expect("JSON")["policy"].clone()
+    };
+    for n in 0..2 {
+        let out = format!("next{n}.json");
+        let o = improve(n, &["--out", &out, "--model-out", "model.json", "--json"]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let summary: Value = serde_json::from_slice(&o.stdout).expect("JSON summary");
+        assert_eq!(summary["iteration"], n + 1);
+        assert_eq!(
+            policy_of(&out),
+            policy_of(&format!("run/policies/{:02}.json", n + 1)),
+            "round {}",
+            n + 1
+        );
+    }
+    let o = run(
+        &dir,
+        &[
+            "policy",
+            "eval",
+            "--model",
+            "model.json",
+            "--policy",
+            "next1.json",
+            "--json",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: Value = serde_json::from_slice(&o.stdout).expect("JSON");
+    assert!(
+        v["expected_cost"]
+            .as_f64()
+            .is_some_and(|c| c.is_finite() && c >= 0.0),
+        "{v}"
+    );
+    // bad input: episodes and policies that do not match, a log without the command column,
+    // a policy file of another format version, a command outside the plant's bounds
+    let o = improve(1, &["--out", "x.json"]);
+    assert!(o.status.success());
+    let o = run(
+        &dir,
+        &[
+            "policy",
+            "improve",
+            "--data",
+            episodes[0],
+            "--data",
+            episodes[1],
+            "--input",
+            "/pendulum/command:acceleration",
+            "--output",
+            "/pendulum/measurement:theta,/pendulum/measurement:x",
+            "--policy",
+            "run/policies/00.json",
+            "--policy",
+            "run/policies/01.json",
+            "--out",
+            "x.json",
+        ],
+    );
+    assert!(!o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stderr)
+            .contains("2 episodes for 2 random ones and 1 policy episodes"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let o = run(
+        &dir,
+        &[
+            "policy",
+            "improve",
+            "--data",
+            episodes[0],
+            "--data",
+            episodes[1],
+            "--input",
+            "/pendulum/command:torque",
+            "--output",
+            "/pendulum/measurement:theta,/pendulum/measurement:x",
+            "--policy",
+            "run/policies/00.json",
+            "--out",
+            "x.json",
+        ],
+    );
+    assert!(!o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("torque"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let text = std::fs::read_to_string(dir.join("run/policies/00.json")).expect("policy");
+    std::fs::write(dir.join("future.json"), text.replace("\"1.0\"", "\"2.0\"")).expect("write");
+    let o = run(
+        &dir,
+        &[
+            "policy",
+            "eval",
+            "--model",
+            "model.json",
+            "--policy",
+            "future.json",
+        ],
+    );
+    assert!(!o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("format version 2.0 is not supported"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let csv = "t,command,theta,x\n0,0.0,0.01,0\n0.02,9.5,0.011,0\n0.04,0.0,0.012,0\n0.06,0.0,0.013,0\n0.08,0.0,0.014,0\n0.1,0.0,0.015,0\n";
+    std::fs::write(dir.join("wild.csv"), csv).expect("write");
+    let o = run(
+        &dir,
+        &[
+            "policy",
+            "improve",
+            "--data",
+            "wild.csv",
+            "--data",
+            "wild.csv",
+            "--input",
+            "command",
+            "--output",
+            "theta,x",
+            "--policy",
+            "run/policies/00.json",
+            "--out",
+            "x.json",
+        ],
+    );
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("wild.csv: row 2: command 0") && err.contains("outside the plant's bounds"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

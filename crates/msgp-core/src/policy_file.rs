@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::error::{MsgpError, Result};
-use crate::learner::{StartDistribution, Task, target_cost};
+use crate::learner::{LearnerSettings, StartDistribution, Task, target_cost};
 use crate::model_file::write_atomically;
 use crate::plant::PlantSpec;
 use crate::policy::{CommandBounds, PidPolicy, Policy, RbfPolicy, StateFeedback};
@@ -321,6 +321,10 @@ pub struct PolicyFile {
     /// The loop iteration that produced it (0: the first policy, before any search).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub iteration: Option<usize>,
+    /// The loop's settings (its model, search, seeds), when it came from a loop: what
+    /// `msgp policy improve` continues with.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settings: Option<LearnerSettings>,
 }
 
 fn invalid(path: &Path, message: String) -> MsgpError {
@@ -347,6 +351,7 @@ impl PolicyFile {
             task: None,
             prediction: None,
             iteration: None,
+            settings: None,
         }
     }
 

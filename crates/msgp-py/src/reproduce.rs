@@ -252,7 +252,7 @@ pub fn figure4_unit<'py>(
                 started.elapsed().as_secs_f64(),
             );
             let label = format!("{} seed {}", unit.model.name(), unit.seed);
-            write_run_dir(&dir, &outcome, &settings, &summary, &label)?;
+            write_run_dir(&dir, &outcome, (&settings, &plan.plant), &summary, &label)?;
             Ok(summary)
         });
         Ok((done, raised))

@@ -493,3 +493,91 @@ const STORED_LINEAR_KF: &[[f64; 4]] = &[
         2.277982966864927,
     ],
 ];
+
+/// The real-robot route: the loop's episodes logged to CSV (as the simulator writes them) and
+/// read back as `msgp fit` reads data, the loop's state replayed from them
+/// ([`msgp_core::learner::Learner::from_episodes`]), then one improvement step: for every
+/// iteration of a filtered MSGP loop (its warm starts and prequential choice carried across
+/// iterations) it gives the gains the loop ran next, to the bit.
+#[test]
+fn improving_from_logged_episodes_gives_the_loops_policies() {
+    use std::path::PathBuf;
+
+    use msgp_core::data::dataset::{Dataset, Selection};
+    use msgp_core::learner::{Episode, Learner};
+    use msgp_core::policy::Policy;
+    use msgp_sim::learn::{gains_from, learner_settings, modelled_policy, pendulum_task};
+
+    let settings = LearnSettings {
+        evaluation_episodes: 0,
+        ..small_filtered(3)
+    };
+    let params = PendulumParams::default();
+    let out = learn_policy(&params, &settings, &mut |_| {}).expect("loop runs");
+    let dir = std::env::temp_dir().join(format!("msgp-improve-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    let r = settings.random_rollouts;
+    let (inputs, outputs) = (
+        vec!["command".to_string()],
+        vec!["meas_theta".to_string(), "meas_x".to_string()],
+    );
+    let selection = Selection {
+        inputs: &inputs,
+        outputs: &outputs,
+        topic: None,
+        time: Default::default(),
+        sort_time: false,
+    };
+    let episodes: Vec<Episode> = out
+        .episodes
+        .iter()
+        .enumerate()
+        .map(|(k, ep)| {
+            let path: PathBuf = dir.join(format!("{k:02}.csv"));
+            msgp_sim::write_run(&path, ep).expect("log written");
+            let data = Dataset::load(&[path], &selection).expect("log read");
+            let traj = &data.parts[0].traj;
+            let rows = |m: &nalgebra::DMatrix<f64>| -> Vec<Vec<f64>> {
+                (0..m.nrows())
+                    .map(|i| m.row(i).iter().copied().collect())
+                    .collect()
+            };
+            let policy = (k >= r).then(|| {
+                Policy::Pid(modelled_policy(&out.iterations[k - r].gains, &params).expect("gains"))
+            });
+            Episode {
+                seed: ep.info.seed,
+                outputs: rows(&traj.y),
+                commands: rows(&traj.u),
+                ended_early: false,
+                policy,
+            }
+        })
+        .collect();
+    let _ = std::fs::remove_dir_all(&dir);
+    let task = pendulum_task(&params, &settings).expect("task");
+    let loop_settings = learner_settings(&params, &settings).expect("settings");
+    let quiet = &mut |_: msgp_core::learner::LearnEvent<'_>| ControlFlow::Continue(());
+    for n in 0..settings.iterations {
+        let logged = episodes[..r + n].to_vec();
+        let mut learner =
+            Learner::from_episodes(task.clone(), loop_settings.clone(), logged, quiet)
+                .expect("replays");
+        let step = learner.improve(quiet).expect("improves");
+        let found = step.searched.expect("the search found a policy");
+        assert_eq!(
+            gains_from(&found.policy).expect("PID"),
+            out.iterations[n].gains,
+            "iteration {}",
+            n + 1
+        );
+        assert_eq!(step.search_model, out.iterations[n].search_model);
+    }
+    // the episodes must come in the loop's order: a policy episode among the random ones is
+    // refused with the place named
+    let mut shuffled = episodes[..r + 1].to_vec();
+    shuffled.swap(0, r);
+    let err =
+        Learner::from_episodes(task, loop_settings, shuffled, quiet).expect_err("out of order");
+    assert!(err.to_string().contains("episode 0 out of place"), "{err}");
+}

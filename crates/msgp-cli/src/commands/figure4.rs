@@ -82,8 +82,14 @@ fn run_unit(plan: &Plan, unit: Unit, threads: Option<Threads>, quiet: bool) -> a
     let (outcome, seconds) = learn(&plan.plant, &running, quiet)?;
     let summary = summary(&outcome, &settings, &plan.plant, seconds);
     let label = format!("{} seed {}", unit.model.name(), unit.seed);
-    write_run_dir(&run_dir, &outcome, &settings, &summary, &label)
-        .with_context(|| format!("writing {}", run_dir.display()))?;
+    write_run_dir(
+        &run_dir,
+        &outcome,
+        (&settings, &plan.plant),
+        &summary,
+        &label,
+    )
+    .with_context(|| format!("writing {}", run_dir.display()))?;
     let run = plan
         .finished(&unit)?
         .with_context(|| format!("{} does not read back", run_dir.display()))?;

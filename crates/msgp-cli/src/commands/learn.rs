@@ -156,7 +156,13 @@ pub fn run(args: &LearnArgs) -> anyhow::Result<()> {
     }
     let (outcome, seconds) = learn(&params, &settings, quiet)?;
     let summary = summary(&outcome, &settings, &params, seconds);
-    write_run_dir(&dir, &outcome, &settings, &summary, model_name(args.model))?;
+    write_run_dir(
+        &dir,
+        &outcome,
+        (&settings, &params),
+        &summary,
+        model_name(args.model),
+    )?;
     if args.json {
         return out_json(&summary);
     }

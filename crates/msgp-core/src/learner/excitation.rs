@@ -10,7 +10,7 @@ use crate::error::{MsgpError, Result};
 use crate::numeric::seed::derive;
 use crate::policy::CommandBounds;
 
-/// The stream tag of an episode's excitation ([`derive`]).
+/// The stream tag of an episode's excitation ([`derive()`]).
 pub const EXCITATION_STREAM: u64 = 3;
 
 /// The shape of the excitation, relative to each command's range.

@@ -139,7 +139,7 @@ pub fn fit_and_search(
 
 /// The model fit of iteration `it`, falling back to the one-step model when an MSGP fit fails
 /// numerically at its start (its report says so).
-fn fit(
+pub(super) fn fit(
     settings: &LearnerSettings,
     training: &[TrainingEpisode],
     previous: Option<&Model>,

@@ -76,7 +76,7 @@ pub trait SuccessTest {
     fn passed(&mut self, policy: &Policy) -> Result<bool>;
 }
 
-/// The tag of evaluation episode `episode` of `iteration` ([`derive`]).
+/// The tag of evaluation episode `episode` of `iteration` ([`derive()`]).
 pub fn evaluation_stream(iteration: usize, episode: usize) -> u64 {
     let it = u64::try_from(iteration).unwrap_or(u64::MAX) & 0xFFFF_FFFF;
     (2 << 48) + (it << 16) + (episode as u64 & 0xFFFF)
@@ -125,6 +125,97 @@ impl Learner {
             choice,
             seconds: 0.0,
         })
+    }
+
+    /// The learner after episodes run elsewhere (logged on a real machine): the random ones
+    /// first, then one per iteration under the policy that ran it. Each iteration's model fits
+    /// are replayed (not its search: the policies are given), so the warm-started models and
+    /// the prequential choice's scores are the ones the loop would have had; [`Learner::improve`]
+    /// then gives the policy the loop would run next, to the bit.
+    pub fn from_episodes(
+        task: Task,
+        settings: LearnerSettings,
+        episodes: Vec<Episode>,
+        observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
+    ) -> Result<Self> {
+        let mut l = Self::new(task, settings)?;
+        let r = l.settings.random_rollouts;
+        let misplaced = episodes
+            .iter()
+            .enumerate()
+            .find(|(k, e)| (*k < r) == e.policy.is_some());
+        if episodes.len() < r || misplaced.is_some() {
+            return Err(MsgpError::Data(format!(
+                "the loop's episodes are its {r} random ones, then one per iteration under its                  policy; got {} episodes, {} with a policy (episode {} out of place)",
+                episodes.len(),
+                episodes.iter().filter(|e| e.policy.is_some()).count(),
+                misplaced.map_or(0, |(k, _)| k)
+            )));
+        }
+        for (k, ep) in episodes.into_iter().enumerate() {
+            if let Some(policy) = &ep.policy {
+                l.replay(k + 1 - r, &ep, observe)?;
+                l.policy = policy.clone();
+            }
+            l.training.extend(training_entries(&ep, &l.settings)?);
+            l.episodes.push(ep);
+        }
+        Ok(l)
+    }
+
+    /// Iteration `it`'s model fits on the episodes so far, and their scores on `ep`, the
+    /// episode its policy ran.
+    fn replay(
+        &mut self,
+        it: usize,
+        ep: &Episode,
+        observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
+    ) -> Result<()> {
+        let (model, _) = improve::fit(
+            &self.settings,
+            &self.training,
+            self.previous.as_ref(),
+            it,
+            observe,
+        )?;
+        let linear = match self.choice.as_mut() {
+            Some(c) => Some(c.fit(&self.training, it)?),
+            None => None,
+        };
+        let method = self.settings.method();
+        if let (Some(c), Some(l)) = (self.choice.as_mut(), &linear)
+            && model.method == method
+        {
+            c.score(&model, l, &training_entries(ep, &self.settings)?)?;
+        }
+        if self.settings.warm_start.is_some() {
+            self.previous = (model.method == method).then_some(model);
+        }
+        Ok(())
+    }
+
+    /// The next iteration's fit and search on the episodes so far, from the running policy:
+    /// the step `msgp policy improve` takes between two episodes on a real machine.
+    pub fn improve(
+        &mut self,
+        observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
+    ) -> Result<FitAndSearch> {
+        let it = self.policy_episodes() + 1;
+        fit_and_search(
+            &self.task,
+            &self.settings,
+            (&self.episodes, &self.training),
+            self.previous.as_ref(),
+            &self.policy,
+            it,
+            self.choice.as_mut(),
+            observe,
+        )
+    }
+
+    /// Episodes run by a policy so far.
+    fn policy_episodes(&self) -> usize {
+        self.episodes.iter().filter(|e| e.policy.is_some()).count()
     }
 
     /// Every interaction episode so far, random ones first.

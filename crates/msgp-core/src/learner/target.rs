@@ -15,7 +15,7 @@ use crate::plant::PlantSpec;
 use crate::policy::{Policy, RbfPolicy, StateFeedback};
 use crate::policy_search::SearchSpace;
 
-/// The stream tag of the first policy's draw ([`derive`]).
+/// The stream tag of the first policy's draw ([`derive()`]).
 const POLICY_STREAM: u64 = 5;
 
 /// Which policy the search moves.

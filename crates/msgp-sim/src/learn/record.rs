@@ -2,8 +2,10 @@
 //! reproduction collects again.
 //!
 //! `policy.json` (the last gains, runnable by `msgp sim pendulum --policy`), `best_policy.json`
-//! (the first stable gains, else those with the lowest measured cost), `iterations.csv` (one
-//! row per iteration), `episodes/NN-<kind>.mcap` (every interaction episode), `cost.png`
+//! (the first stable gains, else those with the lowest measured cost), `policies/NN.json` (the
+//! loop's policy files: `00` its first policy, `NN` iteration NN's, each with the task and the
+//! loop's settings, what `msgp policy improve` continues), `iterations.csv` (one row per
+//! iteration), `episodes/NN-<kind>.mcap` (every interaction episode), `cost.png`
 //! (predicted and actual cost per iteration) and, written last, `summary.json` (the plant, the
 //! settings, every iteration). A folder whose summary names the same plant and settings is a
 //! finished run ([`finished_run`]), so runs can be made anywhere and collected afterwards.
@@ -12,6 +14,8 @@ use std::path::Path;
 
 use serde_json::{Value, json};
 
+use super::plant::PendulumPlant;
+use super::problem::{learner_settings, modelled_policy, pendulum_task};
 use super::report::{IterationReport, LearnOutcome};
 use super::settings::LearnSettings;
 use crate::error::SimError;
@@ -104,12 +108,60 @@ fn write_file(path: &Path, text: &str) -> Result<(), SimError> {
     })
 }
 
+/// `policies/NN.json`: the loop's policy files (`docs/policy-format.md`), `00.json` its first
+/// policy (before any search) and `NN.json` the one iteration `NN` ran, each with the task and
+/// the loop's settings: what `msgp policy improve` continues from logged episodes.
+fn write_policy_files(
+    dir: &Path,
+    outcome: &LearnOutcome,
+    settings: &LearnSettings,
+    params: &PendulumParams,
+) -> Result<(), SimError> {
+    use msgp_core::learner::SearchModel;
+    use msgp_core::policy::Policy;
+    use msgp_core::policy_file::{PolicyFile, Prediction, TaskRecord};
+
+    std::fs::create_dir_all(dir).map_err(|source| SimError::Io {
+        action: "cannot create",
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let task = pendulum_task(params, settings)?;
+    let plant = PendulumPlant::new(params, settings.episode_seconds)?;
+    let file = |policy: &Policy, iteration: usize| {
+        let mut f = PolicyFile::new(policy);
+        f.plant = Some(msgp_core::plant::Plant::spec(&plant).clone());
+        f.task = Some(TaskRecord::of(&task));
+        f.settings = learner_settings(params, settings).ok();
+        f.iteration = Some(iteration);
+        f
+    };
+    let first = file(&task.space.base, 0);
+    first.write(&dir.join("00.json"))?;
+    for r in &outcome.iterations {
+        let mut f = file(
+            &Policy::Pid(modelled_policy(&r.gains, params)?),
+            r.iteration,
+        );
+        f.prediction = Some(Prediction {
+            cost: r.predicted_cost,
+            cost_std: r.predicted_cost_std,
+            model: match r.search_model {
+                Some(SearchModel::Linear) => "linear-kf".into(),
+                _ => settings.method().name().into(),
+            },
+        });
+        f.write(&dir.join(format!("{:02}.json", r.iteration)))?;
+    }
+    Ok(())
+}
+
 /// Writes every artefact of a run into `dir` (created if missing), each file atomically and
 /// `summary.json` last; `label` titles the cost plot.
 pub fn write_run_dir(
     dir: &Path,
     outcome: &LearnOutcome,
-    settings: &LearnSettings,
+    (settings, params): (&LearnSettings, &PendulumParams),
     summary: &Value,
     label: &str,
 ) -> Result<(), SimError> {
@@ -133,6 +185,7 @@ pub fn write_run_dir(
         &dir.join("iterations.csv"),
         &iterations_csv(&outcome.iterations),
     )?;
+    write_policy_files(&dir.join("policies"), outcome, settings, params)?;
     for (k, ep) in outcome.episodes.iter().enumerate() {
         let kind = if k < settings.random_rollouts {
             "random".to_string()
