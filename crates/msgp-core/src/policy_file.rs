@@ -29,6 +29,9 @@ pub const FORMAT_MAJOR: u32 = 1;
 /// Minor format version written by this build (readers accept any minor of their major).
 pub const FORMAT_MINOR: u32 = 0;
 
+/// Most observations or commands a linear policy's window holds.
+const MAX_LAGS: usize = 1000;
+
 /// A policy as data (see the module docs); matrices as lists of rows.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
@@ -163,6 +166,12 @@ impl PolicyRecord {
                 high,
             } => {
                 finite("offset", offset)?;
+                if *output_lags > MAX_LAGS || *input_lags > MAX_LAGS {
+                    return Err(MsgpError::Data(format!(
+                        "policy `output_lags`/`input_lags`: at most {MAX_LAGS}, got {output_lags} \
+                         and {input_lags}"
+                    )));
+                }
                 let bounds = CommandBounds::new(low.clone(), high.clone())?;
                 let gain = matrix("gain", gain)?;
                 let du = bounds.len();
@@ -334,6 +343,24 @@ fn invalid(path: &Path, message: String) -> MsgpError {
     }
 }
 
+/// The signals a policy acts on, unnamed (period 1 s).
+fn signals_of(policy: &Policy) -> PlantSpec {
+    let bounds = policy.bounds();
+    PlantSpec {
+        period: 1.0,
+        commands: (0..bounds.len())
+            .map(|j| crate::plant::CommandSpec {
+                name: format!("command{j}"),
+                low: bounds.low()[j],
+                high: bounds.high()[j],
+            })
+            .collect(),
+        outputs: (0..policy.observation_dim())
+            .map(|j| crate::plant::OutputSpec::named(&format!("output{j}")))
+            .collect(),
+    }
+}
+
 /// Parses `MAJOR.MINOR`.
 fn parse_version(s: &str) -> Option<(u32, u32)> {
     let (major, minor) = s.split_once('.')?;
@@ -398,24 +425,28 @@ impl PolicyFile {
         Ok(file)
     }
 
-    /// The parts agree: the plant's signals with the policy's, the task with both.
+    /// The parts agree: the plant's signals with the policy's, the task with both (without a
+    /// plant, with the signals the policy acts on).
     fn check(&self, policy: &Policy) -> Result<()> {
-        if let Some(task) = &self.task {
-            let task = task.to_task(policy.clone())?;
-            match &self.plant {
-                Some(spec) => task.validate(spec)?,
-                None => task.space.validate()?,
+        let spec = match &self.plant {
+            Some(spec) => spec.clone(),
+            None => signals_of(policy),
+        };
+        match &self.task {
+            Some(task) => task.to_task(policy.clone())?.validate(&spec),
+            None if spec.command_dim() != policy.command_dim()
+                || spec.output_dim() != policy.observation_dim() =>
+            {
+                Err(MsgpError::Shape(format!(
+                    "the policy maps {} outputs to {} commands, the plant has {} and {}",
+                    policy.observation_dim(),
+                    policy.command_dim(),
+                    spec.output_dim(),
+                    spec.command_dim()
+                )))
             }
-        } else if let Some(spec) = &self.plant
-            && spec.command_dim() != policy.command_dim()
-        {
-            return Err(MsgpError::Shape(format!(
-                "the policy gives {} commands, the plant takes {}",
-                policy.command_dim(),
-                spec.command_dim()
-            )));
+            None => Ok(()),
         }
-        Ok(())
     }
 
     /// Reads and checks a policy file.
@@ -536,5 +567,35 @@ mod tests {
             .expect_err("ragged")
             .to_string();
         assert!(e.contains("`weights`: row 1"), "{e}");
+        // a task that does not fit the policy (without a plant: the policy's own signals)
+        let policy = &policies()[1];
+        let mut file = PolicyFile::new(policy);
+        file.task = Some(TaskRecord {
+            target: vec![0.0; 3],
+            widths: vec![Some(1.0); 3],
+            episode_steps: 10,
+            policy_horizon: 10,
+            start: StartRecord::Observed { floor: 1e-6 },
+            rest_command: vec![0.0],
+            free: vec![true; policy.param_len()],
+            typical: vec![1.0; policy.param_len()],
+        });
+        let e = PolicyFile::from_json(file.to_json().expect("json").as_bytes(), path)
+            .expect_err("short rest command")
+            .to_string();
+        assert!(e.contains("rest command"), "{e}");
+        if let Some(t) = &mut file.task {
+            t.rest_command = vec![0.0, 0.5];
+        }
+        assert!(PolicyFile::from_json(file.to_json().expect("json").as_bytes(), path).is_ok());
+        // absurd window lengths are refused before anything is allocated
+        let mut file = PolicyFile::new(policy);
+        if let PolicyRecord::Linear { input_lags, .. } = &mut file.policy {
+            *input_lags = usize::MAX / 2;
+        }
+        let e = PolicyFile::from_json(file.to_json().expect("json").as_bytes(), path)
+            .expect_err("huge lags")
+            .to_string();
+        assert!(e.contains("at most 1000"), "{e}");
     }
 }

@@ -32,6 +32,9 @@ struct Lag {
     bad_shape_at: Option<usize>,
     /// Returns NaN at this step.
     nan_at: Option<usize>,
+    /// Fails (an error, as a robot's emergency stop) at this step of all it runs.
+    fail_at: Option<usize>,
+    total: usize,
     steps: usize,
 }
 
@@ -54,6 +57,8 @@ impl Lag {
             rng: StdRng::seed_from_u64(0),
             bad_shape_at: None,
             nan_at: None,
+            fail_at: None,
+            total: 0,
             steps: 0,
         }
     }
@@ -78,6 +83,10 @@ impl Plant for Lag {
             .sample(&mut self.rng);
         self.y += self.spec.period * (drift + command[0]) + eps;
         self.steps += 1;
+        self.total += 1;
+        if self.fail_at == Some(self.total) {
+            return Err(MsgpError::Plant("emergency stop".into()));
+        }
         let observation = match (self.bad_shape_at, self.nan_at) {
             (Some(k), _) if k == self.steps => vec![self.y, 0.0],
             (_, Some(k)) if k == self.steps => vec![f64::NAN],
@@ -257,6 +266,16 @@ fn bad_observations_and_bounds() {
         )
         .expect("valid"),
     );
+    // a policy on two outputs for a plant with one
+    let two = Policy::StateFeedback(
+        StateFeedback::new(DMatrix::zeros(1, 2), DVector::zeros(1), 2, (1, 0), bounds())
+            .expect("valid"),
+    );
+    let mut learner = Learner::new(task(two, 1.0), settings(linear_kf(), 1)).expect("valid");
+    let err = learner
+        .run(&mut Lag::new(false), None, &mut never)
+        .expect_err("must fail");
+    assert!(err.to_string().contains("acts on 2 outputs"), "{err}");
     let mut learner = Learner::new(task(wide, 1.0), settings(linear_kf(), 1)).expect("valid");
     let err = learner
         .run(&mut Lag::new(false), None, &mut never)
@@ -344,27 +363,49 @@ fn nonlinear_plant_learns_with_an_rbf_policy() {
     assert!(expected < first, "{expected} vs {first}");
 }
 
-/// An observer's stop ends the loop with `Stopped`; every episode run so far stays, and the
-/// loop continues from there when run again.
+/// An observer's stop ends the loop with `Stopped` — also when it answers a policy episode,
+/// which then keeps its iteration's report — and a plant's failure during a policy episode
+/// leaves the loop's state as it was before the iteration; every episode run to its end stays,
+/// and the loop continues from there to the episodes an uninterrupted loop runs.
 #[test]
 fn a_stopped_loop_keeps_its_episodes_and_resumes() {
-    let mut learner =
-        Learner::new(task(linear_feedback(), 1.0), settings(linear_kf(), 2)).expect("valid");
-    let mut plant = Lag::new(false);
-    let err = learner
-        .run(&mut plant, None, &mut |e| match e {
-            LearnEvent::Iteration(_) => ControlFlow::Break(()),
-            _ => ControlFlow::Continue(()),
-        })
-        .expect_err("must fail");
-    assert!(matches!(err, MsgpError::Stopped { iteration: 1 }), "{err}");
-    assert_eq!((learner.episodes().len(), learner.reports().len()), (3, 1));
-    learner.run(&mut plant, None, &mut never).expect("resumes");
-    assert_eq!((learner.episodes().len(), learner.reports().len()), (4, 2));
-    let mut whole =
-        Learner::new(task(linear_feedback(), 1.0), settings(linear_kf(), 2)).expect("valid");
+    let fresh =
+        || Learner::new(task(linear_feedback(), 1.0), settings(linear_kf(), 2)).expect("valid");
+    let mut whole = fresh();
     whole
         .run(&mut Lag::new(false), None, &mut never)
         .expect("runs");
+    // stopped at the first policy episode
+    let mut learner = fresh();
+    let mut plant = Lag::new(false);
+    let err = learner
+        .run(&mut plant, None, &mut |e| match e {
+            LearnEvent::Episode {
+                episode,
+                evaluation: false,
+            } if episode.policy.is_some() => ControlFlow::Break(()),
+            _ => ControlFlow::Continue(()),
+        })
+        .expect_err("must stop");
+    assert!(matches!(err, MsgpError::Stopped { iteration: 1 }), "{err}");
+    assert_eq!((learner.episodes().len(), learner.reports().len()), (3, 1));
+    learner.run(&mut plant, None, &mut never).expect("resumes");
     assert_eq!(whole.episodes(), learner.episodes());
+    // the plant fails in the first policy episode (the random ones take 2 × 30 steps)
+    let mut learner = fresh();
+    let mut failing = Lag::new(false);
+    failing.fail_at = Some(65);
+    let err = learner
+        .run(&mut failing, None, &mut never)
+        .expect_err("must fail");
+    assert!(err.to_string().contains("emergency stop"), "{err}");
+    assert_eq!((learner.episodes().len(), learner.reports().len()), (2, 0));
+    assert_eq!(learner.policy(), &linear_feedback());
+    learner
+        .run(&mut Lag::new(false), None, &mut never)
+        .expect("resumes");
+    assert_eq!(whole.episodes(), learner.episodes());
+    let policies =
+        |l: &Learner| -> Vec<_> { l.reports().iter().map(|r| r.policy.clone()).collect() };
+    assert_eq!(policies(&whole), policies(&learner));
 }

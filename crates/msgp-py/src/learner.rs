@@ -187,6 +187,7 @@ fn policy_file(learner: &Learner, spec: &PlantSpec) -> PolicyFile {
     let mut file = PolicyFile::new(learner.policy());
     file.plant = Some(spec.clone());
     file.task = Some(TaskRecord::of(learner.task()));
+    file.settings = Some(learner.settings().clone());
     let last = learner.reports().last();
     file.iteration = Some(last.map_or(0, |r| r.iteration));
     file.prediction = last.map(|r| Prediction {

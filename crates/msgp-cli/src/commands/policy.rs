@@ -111,7 +111,17 @@ fn improve(args: &ImproveArgs) -> anyhow::Result<()> {
     };
     let mut ran = Vec::new();
     for path in &args.policies[1..] {
-        ran.push(PolicyFile::read(path)?.to_policy()?);
+        let policy = PolicyFile::read(path)?.to_policy()?;
+        task.to_task(policy.clone())?
+            .validate(&first.plant)
+            .with_context(|| {
+                format!(
+                    "{}: the policy does not fit the loop of {}",
+                    path.display(),
+                    first_path.display()
+                )
+            })?;
+        ran.push(policy);
     }
     let data = Dataset::load(&args.data.data, &args.data.selection())?;
     for w in &data.warnings {
@@ -265,6 +275,13 @@ fn eval(args: &PolicyEvalArgs) -> anyhow::Result<()> {
     } else {
         task.policy_horizon = task.episode_steps;
     }
+    task.check_model(&model).with_context(|| {
+        format!(
+            "{} and {} do not fit together",
+            args.model.display(),
+            args.policy.display()
+        )
+    })?;
     let problem = task.problem(&model, &[]);
     let (total, steps) = problem.evaluate(policy.lift::<f64>().as_ref())?;
     let var: f64 = steps.iter().map(|(_, v)| v).sum();

@@ -60,6 +60,15 @@ impl Episode {
         let n = self.len();
         let dy = self.outputs.first().map_or(0, Vec::len);
         let du = self.commands.first().map_or(0, Vec::len);
+        let ragged = (0..n).find(|&k| {
+            self.outputs[k].len() != dy || self.commands.get(k).is_none_or(|u| u.len() != du)
+        });
+        if let Some(k) = ragged.or((self.commands.len() != n).then_some(n)) {
+            return Err(MsgpError::Data(format!(
+                "episode (seed {}): row {k} has another number of outputs or commands than row 0",
+                self.seed
+            )));
+        }
         let y = DMatrix::from_fn(n, dy, |k, j| self.outputs[k][j]);
         let u = DMatrix::from_fn(n, du, |k, j| self.commands[k][j]);
         Trajectory::new(u, y)

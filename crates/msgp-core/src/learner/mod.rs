@@ -255,6 +255,13 @@ impl Learner {
         observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
     ) -> Result<()> {
         self.task.validate(plant.spec())?;
+        if self.scored().1 == 0 {
+            return Err(MsgpError::InvalidSetting {
+                name: "episode_steps",
+                reason: "an episode needs at least one control step after the model's window"
+                    .into(),
+            });
+        }
         let spec = plant.spec().clone();
         let bounds = spec.bounds()?;
         let steps = self.task.episode_steps;
@@ -263,36 +270,34 @@ impl Learner {
             let seed = random_episode_seed(self.settings.seed, k);
             let signal = Multisine::for_bounds(seed, &self.settings.excitation, &bounds);
             let ep = run_episode(plant, &Actor::Excitation(&signal), seed, steps)?;
-            self.record(ep, spec.period, observe)?;
+            if self.record(ep, spec.period, observe)?.is_break() {
+                return Err(MsgpError::Stopped { iteration: 0 });
+            }
         }
-        while self.reports.len() < self.settings.iterations {
-            let it = self.reports.len() + 1;
+        while self.policy_episodes() < self.settings.iterations {
+            let it = self.policy_episodes() + 1;
             let test = success.as_mut().map(|s| &mut **s as &mut dyn SuccessTest);
             self.iterate(plant, it, test, observe)?;
         }
         Ok(())
     }
 
-    /// Keeps an interaction episode and its training entries.
+    /// Keeps an interaction episode and its training entries; the observer's answer to it.
     fn record(
         &mut self,
         ep: Episode,
         period: f64,
         observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
-    ) -> Result<()> {
+    ) -> Result<ControlFlow<()>> {
         self.seconds += ep.len().saturating_sub(1) as f64 * period;
-        self.training.extend(training_entries(&ep, &self.settings)?);
-        self.episodes.push(ep);
+        let entries = training_entries(&ep, &self.settings)?;
         let flow = observe(LearnEvent::Episode {
-            episode: self.episodes.last().expect("just pushed"),
+            episode: &ep,
             evaluation: false,
         });
-        match flow {
-            ControlFlow::Break(()) => Err(MsgpError::Stopped {
-                iteration: self.reports.len(),
-            }),
-            ControlFlow::Continue(()) => Ok(()),
-        }
+        self.training.extend(entries);
+        self.episodes.push(ep);
+        Ok(flow)
     }
 
     /// The scored rows of an episode: those after the model's window.
@@ -301,7 +306,12 @@ impl Learner {
         (window, (self.task.episode_steps + 1).saturating_sub(window))
     }
 
-    /// One policy iteration: fit, search, run, score, judge.
+    /// One policy iteration: fit, search, run, score, judge. Atomic for the loop's state: a
+    /// failure before its episode has run leaves the state as it was (the episode, when the
+    /// plant failed during it, is lost with it); once the episode has run, it, the new policy
+    /// and the iteration's report are kept together (a failing success test or evaluation
+    /// leaves the report without those figures and is then raised), so a resumed loop runs
+    /// the iterations an uninterrupted one would.
     fn iterate(
         &mut self,
         plant: &mut dyn Plant,
@@ -310,31 +320,17 @@ impl Learner {
         observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
     ) -> Result<()> {
         let (window, scored) = self.scored();
-        if scored == 0 {
-            return Err(MsgpError::InvalidSetting {
-                name: "episode_steps",
-                reason: "an episode needs at least one control step after the model's window"
-                    .into(),
-            });
-        }
-        let step = fit_and_search(
-            &self.task,
-            &self.settings,
-            (&self.episodes, &self.training),
-            self.previous.as_ref(),
-            &self.policy,
-            it,
-            self.choice.as_mut(),
-            observe,
-        )?;
-        if self.settings.warm_start.is_some() {
-            // a one-step fallback model is not continued: the next fit starts over
-            self.previous =
-                (step.model.method == self.settings.method()).then(|| step.model.clone());
-        }
+        let saved = (self.previous.clone(), self.choice.clone());
+        let ran = self.fit_search_run(plant, it, observe);
+        let (step, next, ep) = match ran {
+            Ok(ran) => ran,
+            Err(e) => {
+                (self.previous, self.choice) = saved;
+                return Err(e);
+            }
+        };
         let (predicted, var, search_failure) = match &step.searched {
             Ok(result) => {
-                self.policy = result.policy.clone();
                 let steps = &result.steps[..scored.min(result.steps.len())];
                 let predicted: f64 = steps.iter().map(|(m, _)| m).sum();
                 let var: f64 = steps.iter().map(|(_, v)| v).sum();
@@ -344,13 +340,6 @@ impl Learner {
             // policy (every step costs 1); the policy stays and the episode adds data
             Err(e) => (scored as f64, 0.0, Some(e.to_string())),
         };
-        let seed = policy_episode_seed(self.settings.seed, it);
-        let rest = self.task.rest_command.clone();
-        let actor = Actor::Policy {
-            policy: &self.policy,
-            rest: &rest,
-        };
-        let ep = run_episode(plant, &actor, seed, self.task.episode_steps)?;
         let actual = ep.cost(&self.task.cost, window, scored);
         let entries = training_entries(&ep, &self.settings)?;
         // both models of this iteration predict the episode neither was trained on (a
@@ -361,12 +350,35 @@ impl Learner {
             }
             _ => None,
         };
-        self.record(ep, plant.spec().period, observe)?;
-        let success = match success {
-            Some(test) => Some(test.passed(&self.policy)?),
+        if self.settings.warm_start.is_some() {
+            // a one-step fallback model is not continued: the next fit starts over
+            self.previous =
+                (step.model.method == self.settings.method()).then(|| step.model.clone());
+        }
+        self.policy = next;
+        let mut stop = self.record(ep, plant.spec().period, observe)?.is_break();
+        let mut failure = None;
+        let success = match success.map(|t| t.passed(&self.policy)) {
+            Some(Ok(passed)) => Some(passed),
+            Some(Err(e)) => {
+                failure = Some(e);
+                None
+            }
             None => None,
         };
-        let expected = self.expected_cost(plant, it, observe)?;
+        let expected = match failure {
+            Some(_) => None,
+            None => match self.expected_cost(plant, it, observe) {
+                Ok((expected, broke)) => {
+                    stop |= broke;
+                    expected
+                }
+                Err(e) => {
+                    failure = Some(e);
+                    None
+                }
+            },
+        };
         let report = IterationReport {
             iteration: it,
             predicted_cost: predicted,
@@ -383,12 +395,44 @@ impl Learner {
             search_failure,
             policy: Some(self.policy.clone()),
         };
-        let flow = observe(LearnEvent::Iteration(&report));
+        stop |= observe(LearnEvent::Iteration(&report)).is_break();
         self.reports.push(report);
-        match flow {
-            ControlFlow::Break(()) => Err(MsgpError::Stopped { iteration: it }),
-            ControlFlow::Continue(()) => Ok(()),
+        match (failure, stop) {
+            (Some(e), _) => Err(e),
+            (None, true) => Err(MsgpError::Stopped { iteration: it }),
+            (None, false) => Ok(()),
         }
+    }
+
+    /// Iteration `it`'s fit and search, and the episode of the policy it found (the running
+    /// policy when every search start failed).
+    fn fit_search_run(
+        &mut self,
+        plant: &mut dyn Plant,
+        it: usize,
+        observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
+    ) -> Result<(FitAndSearch, Policy, Episode)> {
+        let step = fit_and_search(
+            &self.task,
+            &self.settings,
+            (&self.episodes, &self.training),
+            self.previous.as_ref(),
+            &self.policy,
+            it,
+            self.choice.as_mut(),
+            observe,
+        )?;
+        let next = match &step.searched {
+            Ok(result) => result.policy.clone(),
+            Err(_) => self.policy.clone(),
+        };
+        let actor = Actor::Policy {
+            policy: &next,
+            rest: &self.task.rest_command,
+        };
+        let seed = policy_episode_seed(self.settings.seed, it);
+        let ep = run_episode(plant, &actor, seed, self.task.episode_steps)?;
+        Ok((step, next, ep))
     }
 
     /// The mean measured cost of the evaluation episodes of the running policy after `it`.
@@ -397,10 +441,10 @@ impl Learner {
         plant: &mut dyn Plant,
         it: usize,
         observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
-    ) -> Result<Option<f64>> {
+    ) -> Result<(Option<f64>, bool)> {
         let n = self.settings.evaluation_episodes;
         if n == 0 {
-            return Ok(None);
+            return Ok((None, false));
         }
         let (window, scored) = self.scored();
         let rest = &self.task.rest_command;
@@ -409,19 +453,17 @@ impl Learner {
             rest,
         };
         let mut total = 0.0;
+        let mut broke = false;
         for k in 0..n {
             let seed = derive(self.settings.seed, evaluation_stream(it, k));
             let ep = run_episode(plant, &actor, seed, self.task.episode_steps)?;
             total += ep.cost(&self.task.cost, window, scored);
-            if observe(LearnEvent::Episode {
+            broke |= observe(LearnEvent::Episode {
                 episode: &ep,
                 evaluation: true,
             })
-            .is_break()
-            {
-                return Err(MsgpError::Stopped { iteration: it });
-            }
+            .is_break();
         }
-        Ok(Some(total / n as f64))
+        Ok((Some(total / n as f64), broke))
     }
 }

@@ -11,7 +11,9 @@ pub struct IterationReport {
     /// 1-based iteration.
     pub iteration: usize,
     /// Expected total cost on the model from the start distribution, over the episode's
-    /// scored steps (the policy is optimised over the task's policy horizon).
+    /// scored steps (the policy is optimised over the task's policy horizon; when that is
+    /// shorter than the episode, over the horizon's steps only, and then not comparable with
+    /// `actual_cost`).
     pub predicted_cost: f64,
     /// Its standard deviation (per-step variances summed; correlations over time ignored).
     pub predicted_cost_std: f64,

@@ -14,6 +14,7 @@ use crate::policy_search::PolicySearchSettings;
 
 /// Settings of the learning loop (any plant, any task).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct LearnerSettings {
     /// Policy iterations after the random episodes.
     pub iterations: usize,

@@ -113,6 +113,15 @@ impl Task {
                 ),
             ));
         }
+        if policy.observation_dim() != dy {
+            return Err(invalid(
+                "policy",
+                format!(
+                    "acts on {} outputs, the plant has {dy}",
+                    policy.observation_dim()
+                ),
+            ));
+        }
         let (pb, sb) = (policy.bounds(), spec.bounds()?);
         for j in 0..du {
             if pb.low()[j] < sb.low()[j] || pb.high()[j] > sb.high()[j] {
@@ -158,6 +167,23 @@ impl Task {
             cost: self.cost.clone(),
             horizon: self.policy_horizon,
         }
+    }
+
+    /// Checks that `model` predicts this task's outputs from its commands.
+    pub fn check_model(&self, model: &crate::model::Model) -> Result<()> {
+        let (dy, du) = (model.spec.dy, model.spec.du);
+        if dy != self.cost.target.len() || du != self.rest_command.len() {
+            return Err(invalid(
+                "model",
+                format!(
+                    "predicts {dy} outputs from {du} inputs; the task has {} outputs and {} \
+                     commands",
+                    self.cost.target.len(),
+                    self.rest_command.len()
+                ),
+            ));
+        }
+        Ok(())
     }
 
     /// The search space from `policy` (the task's free parameters).

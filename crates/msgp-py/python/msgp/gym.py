@@ -20,8 +20,6 @@ the loop within one model fit and are raised as they were, with the run so far i
 exception's ``partial`` attribute (a ``LearnResult``).
 """
 
-import math
-
 import numpy as np
 
 from . import _msgp
@@ -40,6 +38,10 @@ TASKS = {
         "iterations": 10,
     },
 }
+
+
+#: Observation bounds at least this large are taken as no bound.
+_HUGE = 1e6
 
 
 def _flat(observation, what):
@@ -112,7 +114,8 @@ def plant_spec(env, period=None):
     outputs = []
     for j in range(shape[0]):
         out = {"name": f"obs{j}", "angle": False}
-        if math.isfinite(olow[j]) and math.isfinite(ohigh[j]):
+        # a bound of float32's size (CartPole's velocities) says "unbounded"
+        if abs(olow[j]) < _HUGE and abs(ohigh[j]) < _HUGE:
             out["low"], out["high"] = float(olow[j]), float(ohigh[j])
         outputs.append(out)
     commands = [
@@ -167,17 +170,21 @@ def _task_of(env, target, widths, episode_steps, policy_horizon, policy, iterati
             f"msgp knows no task for the environment {env_id!r} (known: "
             f"{', '.join(sorted(TASKS))}); pass target=[...] and widths=[...]"
         )
-    task = {
-        "target": list(target if target is not None else known["target"]),
-        "widths": list(widths if widths is not None else known.get("widths", [])),
-        "episode_steps": episode_steps or known.get("episode_steps", 100),
-        "policy_horizon": policy_horizon
-        or known.get("policy_horizon", episode_steps or known.get("episode_steps", 100)),
-        "policy": policy or known.get("policy", {"kind": "rbf", "basis": 30}),
-    }
     if target is not None and widths is None:
         raise _msgp.InvalidInputError("target needs widths (one per output; None: not counted)")
-    return task, iterations or known.get("iterations", 10)
+
+    def given(value, key, default):
+        return value if value is not None else known.get(key, default)
+
+    steps = given(episode_steps, "episode_steps", 100)
+    task = {
+        "target": list(given(target, "target", [])),
+        "widths": list(given(widths, "widths", [])),
+        "episode_steps": steps,
+        "policy_horizon": given(policy_horizon, "policy_horizon", steps),
+        "policy": given(policy, "policy", {"kind": "rbf", "basis": 30}),
+    }
+    return task, given(iterations, "iterations", 10)
 
 
 def learn_policy(
