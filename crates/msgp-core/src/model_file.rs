@@ -230,7 +230,7 @@ pub fn training_data_hash(train: &[Trajectory]) -> String {
     format!("fnv1a64:{h:016x}")
 }
 
-fn rows_of(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+pub(crate) fn rows_of(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
     (0..m.nrows())
         .map(|i| m.row(i).iter().copied().collect())
         .collect()
@@ -289,7 +289,7 @@ fn check_finite(path: &Path, what: &str, values: &[f64]) -> Result<()> {
 }
 
 /// Parses `MAJOR.MINOR`.
-fn parse_version(s: &str) -> Option<(u32, u32)> {
+pub(crate) fn parse_version(s: &str) -> Option<(u32, u32)> {
     let (major, minor) = s.split_once('.')?;
     Some((major.parse().ok()?, minor.parse().ok()?))
 }

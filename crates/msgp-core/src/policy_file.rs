@@ -17,7 +17,7 @@ use serde_json::Value;
 
 use crate::error::{MsgpError, Result};
 use crate::learner::{LearnerSettings, StartDistribution, Task, target_cost};
-use crate::model_file::write_atomically;
+use crate::model_file::{parse_version, rows_of as rows, write_atomically};
 use crate::plant::PlantSpec;
 use crate::policy::{CommandBounds, PidPolicy, Policy, RbfPolicy, StateFeedback};
 use crate::policy_search::SearchSpace;
@@ -77,12 +77,6 @@ pub enum PolicyRecord {
         /// Upper command bounds.
         high: Vec<f64>,
     },
-}
-
-fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
-    (0..m.nrows())
-        .map(|i| m.row(i).iter().copied().collect())
-        .collect()
 }
 
 /// `rows` as a matrix of `ncols` columns (any number of rows), or a message naming `what`.
@@ -359,12 +353,6 @@ fn signals_of(policy: &Policy) -> PlantSpec {
             .map(|j| crate::plant::OutputSpec::named(&format!("output{j}")))
             .collect(),
     }
-}
-
-/// Parses `MAJOR.MINOR`.
-fn parse_version(s: &str) -> Option<(u32, u32)> {
-    let (major, minor) = s.split_once('.')?;
-    Some((major.parse().ok()?, minor.parse().ok()?))
 }
 
 impl PolicyFile {

@@ -412,16 +412,7 @@ impl Learner {
         it: usize,
         observe: &mut dyn FnMut(LearnEvent<'_>) -> ControlFlow<()>,
     ) -> Result<(FitAndSearch, Policy, Episode)> {
-        let step = fit_and_search(
-            &self.task,
-            &self.settings,
-            (&self.episodes, &self.training),
-            self.previous.as_ref(),
-            &self.policy,
-            it,
-            self.choice.as_mut(),
-            observe,
-        )?;
+        let step = self.improve(observe)?;
         let next = match &step.searched {
             Ok(result) => result.policy.clone(),
             Err(_) => self.policy.clone(),
