@@ -214,6 +214,13 @@ pub enum StartRecord {
         /// Smallest variance.
         floor: f64,
     },
+    /// Each of the latest episodes' first observations, a start of its own.
+    EachObserved {
+        /// Variance of each start.
+        floor: f64,
+        /// Most starts.
+        most: usize,
+    },
 }
 
 /// A task as data: what [`Task`] holds besides the policy.
@@ -255,6 +262,10 @@ impl TaskRecord {
                     var: var.clone(),
                 },
                 StartDistribution::Observed { floor } => StartRecord::Observed { floor: *floor },
+                StartDistribution::EachObserved { floor, most } => StartRecord::EachObserved {
+                    floor: *floor,
+                    most: *most,
+                },
             },
             rest_command: task.rest_command.clone(),
             free: task.space.free.clone(),
@@ -279,6 +290,10 @@ impl TaskRecord {
                     var: var.clone(),
                 },
                 StartRecord::Observed { floor } => StartDistribution::Observed { floor: *floor },
+                StartRecord::EachObserved { floor, most } => StartDistribution::EachObserved {
+                    floor: *floor,
+                    most: *most,
+                },
             },
             rest_command: self.rest_command.clone(),
             space: SearchSpace {

@@ -172,6 +172,7 @@ fn settings(method: MethodSettings, iterations: usize) -> LearnerSettings {
         prequential_choice: false,
         ff_segment: None,
         warm_start: None,
+        search_from_first: false,
     }
 }
 

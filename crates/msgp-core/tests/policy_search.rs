@@ -9,7 +9,8 @@ use msgp_core::numeric::parallel::Threads;
 use msgp_core::policy::PidPolicy;
 use msgp_core::policy_search::cost::SaturatingCost;
 use msgp_core::policy_search::{
-    PidMask, PolicyProblem, PolicySearchSettings, optimise_pid, optimise_pid_scaled,
+    PidMask, PolicyProblem, PolicySearchSettings, PolicySolver, SearchSpace, optimise_over,
+    optimise_pid, optimise_pid_scaled,
 };
 use nalgebra::{DMatrix, DVector};
 use rand::{RngExt, SeedableRng, rngs::StdRng};
@@ -157,5 +158,99 @@ fn threads_do_not_change_the_search_result() {
         (1.1 + 0.5 * one.policy.as_pid().expect("a PID policy").kp[(0, 0)]).abs() < 1.0,
         "{:?}",
         one.policy.as_pid().expect("a PID policy").kp
+    );
+}
+
+/// The same regulation problem from `x0 = y0` (variance 0.01).
+fn from_start(model: &Model, y0: f64) -> PolicyProblem<'_> {
+    let (mut problem, _, _) = p_control_problem(model);
+    problem.y0_mean = vec![y0];
+    problem
+}
+
+/// Several starts, searched by L-BFGS: the objective is the mean of each start's expected
+/// cost (checked against the problems evaluated one by one), and the gain found stabilises
+/// the plant from both.
+#[test]
+fn a_search_over_several_starts_minimises_their_mean_cost() {
+    let model = unstable_plant_model();
+    let (_, initial, mask) = p_control_problem(&model);
+    let problems = [from_start(&model, 1.0), from_start(&model, -0.5)];
+    let space = SearchSpace::pid(&initial, &mask);
+    let s = PolicySearchSettings {
+        iterations: 30,
+        restarts: 0,
+        candidates: 0,
+        solver: PolicySolver::Lbfgs,
+        ..PolicySearchSettings::default()
+    };
+    let both = optimise_over(&problems, &space, &[1.0], &s, &[]).expect("search");
+    let policy = both.policy.lift::<f64>();
+    let each: Vec<f64> = problems
+        .iter()
+        .map(|p| p.evaluate(policy.as_ref()).expect("evaluate").0)
+        .collect();
+    let mean = 0.5 * (each[0] + each[1]);
+    assert!(
+        (both.expected_cost - mean).abs() <= 1e-12 * mean,
+        "{} vs {mean}",
+        both.expected_cost
+    );
+    let k = both.policy.as_pid().expect("a PID policy").kp[(0, 0)];
+    assert!(
+        (1.1 + 0.5 * k).abs() < 0.9,
+        "closed-loop pole {}",
+        1.1 + 0.5 * k
+    );
+    let (zero, _) = problems[0].evaluate(&initial).expect("evaluate");
+    assert!(each[0] < 0.5 * zero, "{} vs {zero}", each[0]);
+    // a trust region has no meaning for L-BFGS: refused, not ignored
+    let bad = PolicySearchSettings {
+        trust_region: 1.0,
+        ..s
+    };
+    assert!(optimise_over(&problems, &space, &[1.0], &bad, &[]).is_err());
+    assert!(optimise_over(&[], &space, &[1.0], &s, &[]).is_err());
+}
+
+/// A further start (the learner's first policy) is searched like the running one: from a
+/// running gain that destabilises the plant and no iterations, the search returns the
+/// further start when it is cheaper; a start of the wrong length is refused.
+#[test]
+fn further_starts_are_searched_and_kept_when_cheaper() {
+    let model = unstable_plant_model();
+    let (problem, initial, mask) = p_control_problem(&model);
+    let mut bad = initial.clone();
+    bad.kp[(0, 0)] = 2.0;
+    let space = SearchSpace::pid(&bad, &mask);
+    let s = PolicySearchSettings {
+        iterations: 0,
+        restarts: 0,
+        candidates: 0,
+        ..PolicySearchSettings::default()
+    };
+    let alone =
+        optimise_over(std::slice::from_ref(&problem), &space, &[1.0], &s, &[]).expect("search");
+    let good = vec![-1.6];
+    let with = optimise_over(
+        std::slice::from_ref(&problem),
+        &space,
+        &[1.0],
+        &s,
+        std::slice::from_ref(&good),
+    )
+    .expect("search");
+    assert_eq!(alone.policy.as_pid().expect("pid").kp[(0, 0)], 2.0);
+    assert_eq!(with.policy.as_pid().expect("pid").kp[(0, 0)], -1.6);
+    assert!(with.expected_cost < alone.expected_cost);
+    assert!(
+        optimise_over(
+            std::slice::from_ref(&problem),
+            &space,
+            &[1.0],
+            &s,
+            &[vec![1.0, 2.0]]
+        )
+        .is_err()
     );
 }

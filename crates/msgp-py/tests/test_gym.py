@@ -24,14 +24,17 @@ def summary(result):
 
 def test_pendulum_v1_preset_learns_and_repeats():
     """With nothing but the environment and a seed msgp knows the task; over a short budget
-    the evaluation return is finite and improves (−385, −367, −362 at this seed); the same
-    seed gives the same numbers and the same policy."""
+    the evaluation return (five 60-step episodes) is finite and improves (−383, −188, −165 at
+    this seed: the first search on the linear model, the next two on the GP model, the
+    linear competitor's filter failing on the data at the second); the same seed gives the
+    same numbers and the same policy."""
     result = msgp.learn_policy(env=gym.make("Pendulum-v1"), seed=0, **SHORT)
     assert result.task["target"] == [1.0, 0.0, 0.0]
     assert len(result.iterations) == 3 and len(result.episodes) == 4
     returns = [r["evaluation_return"] for r in result.iterations]
     assert all(np.isfinite(returns)), returns
-    assert returns[-1] > returns[0], returns
+    assert returns[-1] > returns[0] + 100, returns
+    assert [r["search_model"] for r in result.iterations[1:]] == ["gp", "gp"]
     assert all(np.isfinite(e["return"]) for e in result.episodes)
     assert result.episodes[0]["policy"] is None and result.episodes[1]["policy"] == "rbf"
     assert result.episodes[1]["outputs"].shape == (61, 3)

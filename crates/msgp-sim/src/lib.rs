@@ -38,6 +38,7 @@ pub mod controller;
 pub mod episode;
 pub mod error;
 pub mod figure4;
+pub mod gym_pendulum;
 pub mod learn;
 pub mod log;
 pub mod params;

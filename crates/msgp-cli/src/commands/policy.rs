@@ -260,6 +260,7 @@ fn eval(args: &PolicyEvalArgs) -> anyhow::Result<()> {
     if matches!(
         task.start,
         msgp_core::learner::StartDistribution::Observed { .. }
+            | msgp_core::learner::StartDistribution::EachObserved { .. }
     ) {
         bail!(
             "{}: the task's rollouts start where its episodes started; `msgp policy eval` \
@@ -282,7 +283,10 @@ fn eval(args: &PolicyEvalArgs) -> anyhow::Result<()> {
             args.policy.display()
         )
     })?;
-    let problem = task.problem(&model, &[]);
+    let problems = task.problems(&model, &[]);
+    let Some(problem) = problems.first() else {
+        bail!("the task has no start to roll out from");
+    };
     let (total, steps) = problem.evaluate(policy.lift::<f64>().as_ref())?;
     let var: f64 = steps.iter().map(|(_, v)| v).sum();
     let value = json!({

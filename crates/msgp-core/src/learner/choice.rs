@@ -114,7 +114,9 @@ impl ModelChoice {
     }
 
     /// Fits the linear model of `training` for iteration `it` (seeded by the loop's seed and
-    /// the iteration, as the GP model's fit), continuing the previous one when the linear-kf loop would.
+    /// the iteration, as the GP model's fit), continuing the previous one when the linear-kf
+    /// loop would. A linear model of strongly nonlinear data can fail numerically (its filter
+    /// diverges): the error is returned, and the next fit starts over.
     pub fn fit(&mut self, training: &[TrainingEpisode], it: usize) -> Result<Model> {
         let seeded = FitSettings {
             seed: self.settings.seed.wrapping_add(it as u64),
@@ -125,12 +127,12 @@ impl ModelChoice {
             Some((n, _)) => seeded.with_solver_iterations(n),
             None => seeded,
         };
-        let (model, _) =
-            fit_episodes_observed(training, &settings, warm.map(|(_, m)| m), &mut |_| {
-                ControlFlow::Continue(())
-            })?;
-        self.previous = Some(model.clone());
-        Ok(model)
+        let fitted = fit_episodes_observed(training, &settings, warm.map(|(_, m)| m), &mut |_| {
+            ControlFlow::Continue(())
+        });
+        // a failed fit is not continued: the next one starts over
+        self.previous = fitted.as_ref().ok().map(|(m, _)| m.clone());
+        fitted.map(|(m, _)| m)
     }
 
     /// The model the next search runs on: the GP model once its held-out predictions beat

@@ -13,7 +13,7 @@ use crate::error::{MsgpError, Result};
 use crate::fit::{FitReport, FitSettings, TrainingEpisode, fit_episodes, fit_episodes_observed};
 use crate::model::{Method, Model};
 use crate::policy::{Policy, PolicySpec};
-use crate::policy_search::{PolicySearchResult, PolicySearchSettings, optimise};
+use crate::policy_search::{PolicySearchResult, PolicySearchSettings, optimise_over};
 
 /// How an episode enters the model loss: an open-loop one feed-forward (in segments for a
 /// free-run MSGP fit, [`LearnerSettings::ff_segment`]), a policy's whole under that policy.
@@ -49,6 +49,9 @@ pub struct FitAndSearch {
     pub linear: Option<Model>,
     /// Under the prequential choice, the model the search ran on.
     pub search_model: Option<SearchModel>,
+    /// Under the prequential choice, why the linear competitor's fit failed numerically (the
+    /// search then ran on the GP model).
+    pub linear_fit_failure: Option<String>,
     /// The search's best policy, or why every start failed numerically (the model's rollouts
     /// diverge whatever the policy: it predicts failure).
     pub searched: Result<PolicySearchResult>,
@@ -100,8 +103,18 @@ pub fn fit_and_search(
     }
     let clock = std::time::Instant::now();
     let (model, fit_report) = fit(settings, training, previous, it, observe)?;
+    // a linear competitor that cannot be fitted cannot be searched either: the GP model is
+    // the only model of this iteration
+    let mut linear_failure = None;
     let (linear, search_model) = match choice {
-        Some(c) => (Some(c.fit(training, it)?), Some(c.search_model())),
+        Some(c) => match c.fit(training, it) {
+            Ok(l) => (Some(l), Some(c.search_model())),
+            Err(e) if numerical(&e) => {
+                linear_failure = Some(e.to_string());
+                (None, Some(SearchModel::Gp))
+            }
+            Err(e) => return Err(e),
+        },
         None => (None, None),
     };
     let fit_seconds = clock.elapsed().as_secs_f64();
@@ -113,12 +126,13 @@ pub fn fit_and_search(
         fit_report,
         linear,
         search_model,
+        linear_fit_failure: linear_failure,
         searched: Err(stopped),
         fit_seconds,
         search_seconds: 0.0,
     };
     let clock = std::time::Instant::now();
-    let problem = task.problem(step.searched_model(), episodes);
+    let problems = task.problems(step.searched_model(), episodes);
     let search = PolicySearchSettings {
         seed: settings
             .search
@@ -127,7 +141,18 @@ pub fn fit_and_search(
             .wrapping_add(it as u64),
         ..settings.search
     };
-    let searched = optimise(&problem, &task.space_at(policy), &task.typical, &search);
+    let fresh: Vec<Vec<f64>> = settings
+        .search_from_first
+        .then(|| task.space.start())
+        .into_iter()
+        .collect();
+    let searched = optimise_over(
+        &problems,
+        &task.space_at(policy),
+        &task.typical,
+        &search,
+        &fresh,
+    );
     step.search_seconds = clock.elapsed().as_secs_f64();
     step.searched = match searched {
         Err(MsgpError::Stopped { .. }) => return Err(MsgpError::Stopped { iteration: it }),

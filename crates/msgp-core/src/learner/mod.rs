@@ -386,6 +386,7 @@ impl Learner {
             actual_cost: actual,
             expected_cost: expected,
             search_model: step.search_model,
+            linear_fit_failure: step.linear_fit_failure.clone(),
             held_out,
             interaction_seconds: self.seconds,
             success,

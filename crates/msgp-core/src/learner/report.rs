@@ -27,6 +27,11 @@ pub struct IterationReport {
     /// Under the prequential choice, the model this iteration's search ran on.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub search_model: Option<SearchModel>,
+    /// Under the prequential choice, why the linear competitor could not be fitted (its
+    /// filter failed numerically): the search ran on the GP model, and the episode is not
+    /// scored.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub linear_fit_failure: Option<String>,
     /// Under the prequential choice, both models' scores on the episode this iteration ran.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out: Option<HeldOut>,

@@ -45,6 +45,11 @@ pub struct TargetTask {
     pub policy_horizon: usize,
     /// The searched policy.
     pub policy: PolicyFamily,
+    /// Where the predicted rollouts start: `None`, one Gaussian over the episodes' first
+    /// observations; `Some(k)`, each of the latest `k` episodes' first observation, a start
+    /// of its own ([`StartDistribution::EachObserved`]: for episodes that start anywhere).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub separate_starts: Option<usize>,
 }
 
 /// The middle and half width of output `j`'s range, `(0, 1)` when unbounded.
@@ -78,7 +83,10 @@ impl TargetTask {
             cost: target_cost(&self.target, &widths)?,
             episode_steps: self.episode_steps,
             policy_horizon: self.policy_horizon,
-            start: StartDistribution::Observed { floor: 1e-6 },
+            start: match self.separate_starts {
+                None => StartDistribution::Observed { floor: 1e-6 },
+                Some(most) => StartDistribution::EachObserved { floor: 1e-6, most },
+            },
             rest_command: spec.bounds()?.mid(),
             space: SearchSpace { base: policy, free },
             typical,

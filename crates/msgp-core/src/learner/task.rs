@@ -28,6 +28,17 @@ pub enum StartDistribution {
         /// Smallest variance per output.
         floor: f64,
     },
+    /// At each of the first observations of the `most` latest episodes, each a Gaussian of
+    /// variance `floor`: the policy is judged by its mean expected cost over these starts. For
+    /// a plant whose episodes start anywhere in a region (Gymnasium's pendulum: any angle), one
+    /// Gaussian over the starts is no state the plant is ever in, and a policy good from
+    /// that Gaussian is good from none of them.
+    EachObserved {
+        /// Variance of each start.
+        floor: f64,
+        /// Most starts (the latest episodes'); the search's work grows with their number.
+        most: usize,
+    },
 }
 
 /// A task (see the module docs).
@@ -85,12 +96,19 @@ impl Task {
                 format!("needs {dy} finite means and variances ≥ 0"),
             ));
         }
-        if let StartDistribution::Observed { floor } = self.start
+        if let StartDistribution::Observed { floor } | StartDistribution::EachObserved { floor, .. } =
+            self.start
             && !(floor.is_finite() && floor > 0.0)
         {
             return Err(invalid(
                 "start distribution",
                 format!("the variance floor must be positive, got {floor}"),
+            ));
+        }
+        if let StartDistribution::EachObserved { most: 0, .. } = self.start {
+            return Err(invalid(
+                "start distribution",
+                "needs at least one start (most ≥ 1)".into(),
             ));
         }
         if self.rest_command.len() != du {
@@ -148,24 +166,44 @@ impl Task {
         Ok(())
     }
 
-    /// The policy problem on `model`, starting as [`Task::start`] says (estimated from
-    /// `episodes` for [`StartDistribution::Observed`]).
-    pub fn problem<'a>(
+    /// The policy problems on `model`, one per start ([`Task::start`]; estimated from
+    /// `episodes` unless fixed): the search minimises their mean expected cost. Empty when the
+    /// start is estimated and there are no episodes.
+    pub fn problems<'a>(
         &self,
         model: &'a crate::model::Model,
         episodes: &[Episode],
-    ) -> PolicyProblem<'a> {
-        let (y0_mean, y0_var) = match &self.start {
-            StartDistribution::Fixed { mean, var } => (mean.clone(), var.clone()),
-            StartDistribution::Observed { floor } => observed_start(episodes, *floor),
-        };
-        PolicyProblem {
-            model,
-            y0_mean,
-            y0_var,
-            u0: self.rest_command.clone(),
-            cost: self.cost.clone(),
-            horizon: self.policy_horizon,
+    ) -> Vec<PolicyProblem<'a>> {
+        let starts = self.starts(episodes);
+        starts
+            .into_iter()
+            .map(|(y0_mean, y0_var)| PolicyProblem {
+                model,
+                y0_mean,
+                y0_var,
+                u0: self.rest_command.clone(),
+                cost: self.cost.clone(),
+                horizon: self.policy_horizon,
+            })
+            .collect()
+    }
+
+    /// The rollouts' starts (mean, variance per output) on `episodes`.
+    fn starts(&self, episodes: &[Episode]) -> Vec<(Vec<f64>, Vec<f64>)> {
+        match &self.start {
+            StartDistribution::Fixed { mean, var } => vec![(mean.clone(), var.clone())],
+            StartDistribution::Observed { floor } if !episodes.is_empty() => {
+                vec![observed_start(episodes, *floor)]
+            }
+            StartDistribution::Observed { .. } => Vec::new(),
+            StartDistribution::EachObserved { floor, most } => {
+                let firsts: Vec<&Vec<f64>> =
+                    episodes.iter().filter_map(|e| e.outputs.first()).collect();
+                firsts[firsts.len().saturating_sub(*most)..]
+                    .iter()
+                    .map(|y| (y.to_vec(), vec![*floor; y.len()]))
+                    .collect()
+            }
         }
     }
 
@@ -215,4 +253,91 @@ fn observed_start(episodes: &[Episode], floor: f64) -> (Vec<f64>, Vec<f64>) {
 /// A saturating cost around `target` with `widths` (∞: the output does not count).
 pub fn target_cost(target: &[f64], widths: &[f64]) -> Result<SaturatingCost> {
     SaturatingCost::with_widths(DVector::from_column_slice(target), widths)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::policy::{CommandBounds, StateFeedback};
+    use crate::policy_file::TaskRecord;
+    use nalgebra::DMatrix;
+
+    fn task(start: StartDistribution) -> Task {
+        let bounds = CommandBounds::new(vec![-1.0], vec![1.0]).expect("bounds");
+        let policy = StateFeedback::new(DMatrix::zeros(1, 2), DVector::zeros(1), 2, (1, 0), bounds)
+            .expect("policy");
+        let policy = Policy::StateFeedback(policy);
+        let n = policy.param_len();
+        Task {
+            cost: target_cost(&[0.0, 0.0], &[1.0, f64::INFINITY]).expect("cost"),
+            episode_steps: 5,
+            policy_horizon: 5,
+            start,
+            rest_command: vec![0.0],
+            space: SearchSpace {
+                base: policy,
+                free: vec![true; n],
+            },
+            typical: vec![1.0; n],
+        }
+    }
+
+    fn episode(y0: [f64; 2]) -> Episode {
+        Episode {
+            seed: 0,
+            outputs: vec![y0.to_vec(), vec![0.0, 0.0]],
+            commands: vec![vec![0.0], vec![0.0]],
+            ended_early: false,
+            policy: None,
+        }
+    }
+
+    /// Each observed start is its own: the latest `most` episodes' first observations with
+    /// the floor's variance; one Gaussian over them otherwise; `most = 0` is refused; the
+    /// policy file keeps the choice.
+    #[test]
+    fn each_observed_start_is_a_start_of_its_own() {
+        let episodes: Vec<Episode> = [[1.0, 2.0], [3.0, -2.0], [5.0, 0.0]]
+            .into_iter()
+            .map(episode)
+            .collect();
+        let each = task(StartDistribution::EachObserved {
+            floor: 0.01,
+            most: 2,
+        });
+        let starts = each.starts(&episodes);
+        assert_eq!(
+            starts,
+            vec![
+                (vec![3.0, -2.0], vec![0.01, 0.01]),
+                (vec![5.0, 0.0], vec![0.01, 0.01])
+            ]
+        );
+        assert!(each.starts(&[]).is_empty());
+        let one = task(StartDistribution::Observed { floor: 0.01 }).starts(&episodes);
+        assert_eq!(one.len(), 1);
+        assert!((one[0].0[0] - 3.0).abs() < 1e-15 && (one[0].1[0] - 8.0 / 3.0).abs() < 1e-12);
+        let spec = PlantSpec {
+            period: 0.1,
+            commands: vec![crate::plant::CommandSpec {
+                name: "u".into(),
+                low: -1.0,
+                high: 1.0,
+            }],
+            outputs: vec![
+                crate::plant::OutputSpec::named("a"),
+                crate::plant::OutputSpec::named("b"),
+            ],
+        };
+        assert!(each.validate(&spec).is_ok());
+        let none = task(StartDistribution::EachObserved {
+            floor: 0.01,
+            most: 0,
+        });
+        assert!(none.validate(&spec).is_err());
+        let back = TaskRecord::of(&each)
+            .to_task(each.space.base.clone())
+            .expect("task");
+        assert_eq!(back.start, each.start);
+    }
 }

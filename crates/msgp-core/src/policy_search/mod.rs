@@ -25,6 +25,7 @@ pub use cost::SaturatingCost;
 pub use gradient::{DualPolicyMap, PolicyVjp, closed_loop_cost_gradient};
 pub use objective::{PolicyProblem, RolloutCost, closed_loop_cost, policy_gradient_duals};
 pub use search::{
-    PolicySearchResult, PolicySearchSettings, optimise, optimise_pid, optimise_pid_scaled,
+    PolicySearchResult, PolicySearchSettings, PolicySolver, optimise, optimise_over, optimise_pid,
+    optimise_pid_scaled,
 };
 pub use space::{PidMask, SearchSpace};

@@ -9,7 +9,7 @@ use super::objective::{PolicyProblem, policy_gradient};
 use super::space::{PidMask, SearchSpace};
 use crate::error::{MsgpError, Result};
 use crate::numeric::parallel::{Threads, map_indexed};
-use crate::optim::{Adam, AdamState};
+use crate::optim::{Adam, AdamState, Flow, Lbfgs, Objective, Solver, minimize};
 use crate::policy::{PidPolicy, Policy};
 
 /// Settings of the policy optimisation.
@@ -42,10 +42,27 @@ pub struct PolicySearchSettings {
     /// default) switches it off.
     #[serde(default)]
     pub trust_region: f64,
+    /// The solver of each start: Adam for `iterations` steps of `learning_rate` (the PID
+    /// loop's few gains), or L-BFGS for up to `iterations` iterations, each step at most one
+    /// scale per parameter (PILCO's choice for its RBF networks of many parameters). L-BFGS
+    /// has no trust region.
+    #[serde(default)]
+    pub solver: PolicySolver,
     /// Threads of the screened candidates and the Adam starts (they are independent; the
     /// result does not depend on it).
     #[serde(skip)]
     pub threads: Threads,
+}
+
+/// The solver of each start of the policy search ([`PolicySearchSettings::solver`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PolicySolver {
+    /// Adam.
+    #[default]
+    Adam,
+    /// L-BFGS with a backtracking line search ([`crate::optim::Lbfgs`]).
+    Lbfgs,
 }
 
 impl Default for PolicySearchSettings {
@@ -60,6 +77,7 @@ impl Default for PolicySearchSettings {
             candidate_spread: 2.0,
             candidate_starts: 2,
             trust_region: 0.0,
+            solver: PolicySolver::Adam,
             threads: Threads::default(),
         }
     }
@@ -114,6 +132,29 @@ pub fn optimise(
     typical: &[f64],
     settings: &PolicySearchSettings,
 ) -> Result<PolicySearchResult> {
+    optimise_over(std::slice::from_ref(problem), space, typical, settings, &[])
+}
+
+/// [`optimise`] of the mean expected cost over several problems: one model, rollouts from
+/// several starts (PILCO's policy for a plant whose episodes start anywhere in a region:
+/// a single Gaussian over such starts is no state the plant is ever in). The result's
+/// expected cost and per-step moments are the problems' means. `also_from` are further
+/// starts (free parameters packed like [`SearchSpace::pack`]), run like the base's: the
+/// learner's first policy, so that a search whose running policy saturates (every gradient
+/// near zero) still has PILCO's fresh start.
+pub fn optimise_over(
+    problems: &[PolicyProblem<'_>],
+    space: &SearchSpace,
+    typical: &[f64],
+    settings: &PolicySearchSettings,
+    also_from: &[Vec<f64>],
+) -> Result<PolicySearchResult> {
+    if problems.is_empty() {
+        return Err(MsgpError::InvalidSetting {
+            name: "policy search starts",
+            reason: "the search needs at least one start".into(),
+        });
+    }
     let threads = settings.threads.get();
     space.validate()?;
     if typical.len() != space.len() || typical.iter().any(|t| !(t.is_finite() && *t > 0.0)) {
@@ -129,6 +170,12 @@ pub fn optimise(
         return Err(MsgpError::InvalidSetting {
             name: "trust_region",
             reason: format!("must be finite and ≥ 0, got {}", settings.trust_region),
+        });
+    }
+    if settings.solver == PolicySolver::Lbfgs && settings.trust_region > 0.0 {
+        return Err(MsgpError::InvalidSetting {
+            name: "trust_region",
+            reason: "the L-BFGS policy search has no trust region; set it to 0".into(),
         });
     }
     let x0 = space.start();
@@ -161,6 +208,21 @@ pub fn optimise(
     };
     let mut rng = StdRng::seed_from_u64(settings.seed);
     let mut starts = vec![x0.clone()];
+    for extra in also_from {
+        if extra.len() != x0.len() {
+            return Err(MsgpError::InvalidSetting {
+                name: "policy search starts",
+                reason: format!(
+                    "a start has {} parameters, the space {}",
+                    extra.len(),
+                    x0.len()
+                ),
+            });
+        }
+        if *extra != x0 {
+            starts.push(extra.clone());
+        }
+    }
     for _ in 0..settings.restarts {
         starts.push(draw(&mut rng, &x0, settings.restart_spread));
     }
@@ -175,7 +237,7 @@ pub fn optimise(
             .map(|_| draw(&mut rng, &centre, settings.candidate_spread))
             .collect();
         starts.extend(cheapest_candidates(
-            problem,
+            problems,
             space,
             &drawn,
             settings.candidate_starts,
@@ -185,6 +247,9 @@ pub fn optimise(
     let active: Vec<usize> = (0..x0.len()).collect();
     // each start's Adam run is independent; its best (value, gains), earliest first on ties
     let run_start = |_: usize, start: &Vec<f64>| -> Result<Option<(f64, Vec<f64>)>> {
+        if settings.solver == PolicySolver::Lbfgs {
+            return lbfgs_start(problems, space, &scale, start, settings.iterations);
+        }
         let mut best: Option<(f64, Vec<f64>)> = None;
         // optimise in scaled coordinates z = g / scale so one step size fits every gain
         let mut z: Vec<f64> = start.iter().zip(&scale).map(|(g, s)| g / s).collect();
@@ -196,7 +261,7 @@ pub fn optimise(
         let on = vec![true; z.len()];
         for _ in 0..settings.iterations {
             let g: Vec<f64> = z.iter().zip(&scale).map(|(z, s)| z * s).collect();
-            let evaluated = policy_gradient(problem, space, &g, &active);
+            let evaluated = mean_gradient(problems, space, &g, &active);
             let (value, grad) = match evaluated {
                 // gains whose rollout fails numerically end this start; the best so far stays
                 Err(MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_)) => break,
@@ -214,9 +279,7 @@ pub fn optimise(
             }
         }
         let g: Vec<f64> = z.iter().zip(&scale).map(|(z, s)| z * s).collect();
-        if let Ok((value, _)) = space
-            .policy::<f64>(&g)
-            .and_then(|p| problem.evaluate(p.as_ref()))
+        if let Ok((value, _)) = mean_evaluate(problems, space, &g)
             && value.is_finite()
             && best.as_ref().is_none_or(|b| value < b.0)
         {
@@ -236,12 +299,127 @@ pub fn optimise(
     let (value, g) =
         best.ok_or_else(|| MsgpError::NonFinite("every policy-search start diverged".into()))?;
     let policy = space.controller(&g)?;
-    let (_, steps) = problem.evaluate(space.policy::<f64>(&g)?.as_ref())?;
+    let (_, steps) = mean_evaluate(problems, space, &g)?;
     Ok(PolicySearchResult {
         policy,
         expected_cost: value,
         steps,
     })
+}
+
+/// The search's objective in scaled coordinates `z = x / scale`; a point where a rollout
+/// fails numerically has no value (NaN: the line search's "too far").
+struct Scaled<'a, 'p> {
+    problems: &'a [PolicyProblem<'p>],
+    space: &'a SearchSpace,
+    scale: &'a [f64],
+    active: Vec<usize>,
+}
+
+impl Objective for Scaled<'_, '_> {
+    fn value_and_gradient(&mut self, z: &[f64]) -> Result<(f64, Vec<f64>)> {
+        let x: Vec<f64> = z.iter().zip(self.scale).map(|(z, s)| z * s).collect();
+        match mean_gradient(self.problems, self.space, &x, &self.active) {
+            Ok((v, g)) => Ok((v, g.iter().zip(self.scale).map(|(d, s)| d * s).collect())),
+            Err(MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_)) => {
+                Ok((f64::NAN, vec![0.0; z.len()]))
+            }
+            Err(e) => Err(e),
+        }
+    }
+}
+
+/// One start's L-BFGS run: the best (value, parameters) it reached, `None` when its start
+/// cannot be evaluated.
+fn lbfgs_start(
+    problems: &[PolicyProblem<'_>],
+    space: &SearchSpace,
+    scale: &[f64],
+    start: &[f64],
+    iterations: usize,
+) -> Result<Option<(f64, Vec<f64>)>> {
+    let mut objective = Scaled {
+        problems,
+        space,
+        scale,
+        active: (0..start.len()).collect(),
+    };
+    let z0: Vec<f64> = start.iter().zip(scale).map(|(x, s)| x / s).collect();
+    let solver = Solver::Lbfgs(Lbfgs::default());
+    let on = vec![true; z0.len()];
+    let (z, value) = minimize(&mut objective, &solver, z0, &on, iterations, |_, _, _| {
+        Ok(Flow::Continue)
+    })?;
+    Ok(value
+        .is_finite()
+        .then(|| (value, z.iter().zip(scale).map(|(z, s)| z * s).collect())))
+}
+
+/// The problems' mean expected cost of the policy at `x` and their mean per-step moments.
+fn mean_evaluate(
+    problems: &[PolicyProblem<'_>],
+    space: &SearchSpace,
+    x: &[f64],
+) -> Result<(f64, Vec<(f64, f64)>)> {
+    let policy = space.policy::<f64>(x)?;
+    let n = problems.len() as f64;
+    let mut total = 0.0;
+    let mut steps: Vec<(f64, f64)> = Vec::new();
+    for problem in problems {
+        let (value, s) = problem.evaluate(policy.as_ref())?;
+        total += value / n;
+        steps.resize(s.len().max(steps.len()), (0.0, 0.0));
+        for (acc, (m, v)) in steps.iter_mut().zip(s) {
+            acc.0 += m / n;
+            acc.1 += v / n;
+        }
+    }
+    Ok((total, steps))
+}
+
+/// The problems' mean expected cost at `x` if it is at most `bound` (each rollout stops once
+/// the mean can no longer come in under it), `None` otherwise.
+fn mean_bounded(
+    problems: &[PolicyProblem<'_>],
+    space: &SearchSpace,
+    x: &[f64],
+    bound: f64,
+) -> Result<Option<f64>> {
+    let policy = space.policy::<f64>(x)?;
+    let n = problems.len() as f64;
+    let mut sum = 0.0;
+    for problem in problems {
+        let left = if bound.is_finite() {
+            n * bound - sum
+        } else {
+            f64::INFINITY
+        };
+        match problem.evaluate_bounded(policy.as_ref(), left)? {
+            Some(value) => sum += value,
+            None => return Ok(None),
+        }
+    }
+    Ok(Some(sum / n))
+}
+
+/// The problems' mean expected cost at `x` and its gradient.
+fn mean_gradient(
+    problems: &[PolicyProblem<'_>],
+    space: &SearchSpace,
+    x: &[f64],
+    active: &[usize],
+) -> Result<(f64, Vec<f64>)> {
+    let n = problems.len() as f64;
+    let mut value = 0.0;
+    let mut grad = vec![0.0; x.len()];
+    for problem in problems {
+        let (v, g) = policy_gradient(problem, space, x, active)?;
+        value += v / n;
+        for (acc, d) in grad.iter_mut().zip(g) {
+            *acc += d / n;
+        }
+    }
+    Ok((value, grad))
 }
 
 /// The `keep` cheapest of the `drawn` candidates (cheapest first, the earlier drawn first on
@@ -253,7 +431,7 @@ pub fn optimise(
 /// per step) stop after a fraction of the horizon. A candidate whose rollout fails numerically
 /// is simply not a start.
 fn cheapest_candidates(
-    problem: &PolicyProblem<'_>,
+    problems: &[PolicyProblem<'_>],
     space: &SearchSpace,
     drawn: &[Vec<f64>],
     keep: usize,
@@ -275,10 +453,7 @@ fn cheapest_candidates(
             } else {
                 f64::INFINITY
             };
-            let Ok(Some(value)) = space
-                .policy::<f64>(&drawn[k])
-                .and_then(|p| problem.evaluate_bounded(p.as_ref(), bound))
-            else {
+            let Ok(Some(value)) = mean_bounded(problems, space, &drawn[k], bound) else {
                 continue;
             };
             if !value.is_finite() {
@@ -435,7 +610,13 @@ mod tests {
             let expected: Vec<Vec<f64>> = order[..keep].iter().map(|k| drawn[*k].clone()).collect();
             for threads in [1, 3] {
                 let space = SearchSpace::pid(&initial, &mask);
-                let got = cheapest_candidates(&problem, &space, &drawn, keep, threads);
+                let got = cheapest_candidates(
+                    std::slice::from_ref(&problem),
+                    &space,
+                    &drawn,
+                    keep,
+                    threads,
+                );
                 assert_eq!(got, expected, "keep {keep}, {threads} threads");
             }
         }

@@ -118,6 +118,7 @@ pub fn learner_settings(
         prequential_choice: s.prequential_choice,
         ff_segment: s.ff_segment,
         warm_start: s.warm_start,
+        search_from_first: false,
     })
 }
 
