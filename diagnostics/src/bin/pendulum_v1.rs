@@ -10,7 +10,8 @@
 //! `settings.json` / `task.json`: JSON objects (or files holding them) merged into the
 //! defaults (`LearnerSettings::for_plant`, the Python preset's `TargetTask` without its
 //! settings); `-` keeps them. `starts=N`: evaluation episodes of each policy (default 30).
-//! `research`: after the loop, the next model's closed-loop predictions of the latest
+//! `hanging`: every interaction episode starts hanging (θ = π ± 0.05; evaluation as
+//! always from uniform starts). `research`: after the loop, the next model's closed-loop predictions of the latest
 //! episodes against their measured cost, and searches with other settings on it. `probe`:
 //! the next model's fit, free run of the first episode, and the cost of a rollout and its
 //! gradient.
@@ -22,6 +23,27 @@ use msgp_core::learner::{
 use msgp_core::plant::Plant;
 use msgp_sim::gym_pendulum::{GymPendulum, GymPendulumParams};
 use serde_json::Value;
+
+/// The environment started hanging (θ = π ± 0.05, θ̇ = 0): PILCO's swing-up task, for
+/// telling the difficulty of starts all around the circle from the model's.
+struct Hanging(GymPendulum);
+
+impl Plant for Hanging {
+    fn spec(&self) -> &msgp_core::plant::PlantSpec {
+        self.0.spec()
+    }
+
+    fn reset(&mut self, seed: u64) -> msgp_core::Result<Vec<f64>> {
+        let y = self.0.reset(seed)?;
+        // the uniform draw of θ moved to a small offset from hanging
+        let theta = std::f64::consts::PI + 0.05 * y[1].atan2(y[0]) / std::f64::consts::PI;
+        Ok(self.0.set_state(theta, 0.0))
+    }
+
+    fn step(&mut self, command: &[f64]) -> msgp_core::Result<msgp_core::plant::PlantStep> {
+        self.0.step(command)
+    }
+}
 
 fn merge(base: &mut Value, over: &Value) {
     match (base, over) {
@@ -197,7 +219,13 @@ fn main() {
     let task = target.task(env.spec(), seed).expect("task");
     let mut learner = Learner::new(task, settings).expect("learner");
     let clock = std::time::Instant::now();
-    let result = learner.run(&mut env, None, &mut |e| {
+    let mut hanging = Hanging(env.clone());
+    let plant: &mut dyn Plant = if args.iter().any(|a| a == "hanging") {
+        &mut hanging
+    } else {
+        &mut env
+    };
+    let result = learner.run(plant, None, &mut |e| {
         if let LearnEvent::Iteration(r) = e {
             println!(
                 "it {:2} model {:?} fit {:.1}s search {:.1}s predicted {:.1} actual {:.1} \

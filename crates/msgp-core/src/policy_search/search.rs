@@ -1,5 +1,6 @@
-//! The search: Adam with seeded restarts around the current gains, each gain on its own scale,
-//! minimising [`PolicyProblem`]'s expected cost by its adjoint gradient.
+//! The search: Adam (or L-BFGS) with seeded restarts around the current gains, each gain on its
+//! own scale, minimising [`PolicyProblem`]'s expected cost by its adjoint gradient — or the
+//! mean expected cost of several problems, one per start ([`optimise_over`]).
 
 use rand::{SeedableRng, rngs::StdRng};
 use rand_distr::{Distribution, StandardNormal};
@@ -15,7 +16,7 @@ use crate::policy::{PidPolicy, Policy};
 /// Settings of the policy optimisation.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PolicySearchSettings {
-    /// Adam steps per start.
+    /// Adam steps, or most L-BFGS iterations, per start ([`PolicySearchSettings::solver`]).
     pub iterations: usize,
     /// Adam step size, relative to each gain's scale (`max(|g₀|, typical)`, see
     /// [`optimise_pid_scaled`]).
