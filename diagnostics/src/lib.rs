@@ -16,6 +16,8 @@
 //!   300-iteration run" and docs/design.md "Guarding against noise collapse and overfitting".
 //! - `stable_region`: how much of a box of PID + PD gains passes the stability test;
 //!   docs/design.md "Exploration: how much of the gain box balances, …".
+//! - `swing_up`: the learning loop on the arm swing-up, iteration by iteration; docs/design.md
+//!   "Angles on the pole's tip, and the arm swing-up plant".
 //! - `true_cost`: the loop's cost minimised with the plant as the model, and whether its
 //!   minimiser is stable; docs/design.md "Exploration: …" ("The objective itself: what a perfect
 //!   model would choose").
@@ -162,6 +164,35 @@ pub fn numbers(list: &str) -> Result<Vec<f64>, String> {
 pub fn usage_error(usage: &str, error: &str) -> ! {
     eprintln!("error: {error}\nusage: {usage}");
     std::process::exit(2)
+}
+
+fn merge(base: &mut serde_json::Value, over: &serde_json::Value) {
+    use serde_json::Value;
+    match (base, over) {
+        (Value::Object(b), Value::Object(o)) => {
+            for (k, v) in o {
+                merge(b.entry(k.clone()).or_insert(Value::Null), v);
+            }
+        }
+        (b, o) => *b = o.clone(),
+    }
+}
+
+/// `base` with the JSON object `arg` (a file holding one, or the text itself; absent, empty or
+/// `-`: none) merged in, key by key.
+pub fn overridden<T: serde::Serialize + serde::de::DeserializeOwned>(
+    base: &T,
+    arg: Option<&String>,
+) -> T {
+    let mut v = serde_json::to_value(base).expect("serialisable");
+    if let Some(path) = arg.filter(|a| !a.is_empty() && *a != "-") {
+        let text = std::fs::read_to_string(path)
+            .ok()
+            .unwrap_or_else(|| path.clone());
+        let over: serde_json::Value = serde_json::from_str(&text).expect("JSON overrides");
+        merge(&mut v, &over);
+    }
+    serde_json::from_value(v).expect("valid overrides")
 }
 
 #[cfg(test)]

@@ -106,6 +106,11 @@ impl PlantSpec {
         self.outputs.len()
     }
 
+    /// Per output: it is an angle.
+    pub fn angles(&self) -> Vec<bool> {
+        self.outputs.iter().map(|o| o.angle).collect()
+    }
+
     /// Number of commands.
     pub fn command_dim(&self) -> usize {
         self.commands.len()

@@ -231,6 +231,9 @@ pub struct TaskRecord {
     pub target: Vec<f64>,
     /// The cost's width per output; `null`: the output does not count.
     pub widths: Vec<Option<f64>>,
+    /// Per output: an angle, costed on its unit tip (absent: none is).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub angles: Vec<bool>,
     /// Control steps of an episode.
     pub episode_steps: usize,
     /// Control steps of the rollouts the policy is optimised on.
@@ -248,12 +251,19 @@ pub struct TaskRecord {
 impl TaskRecord {
     /// The record of `task`.
     pub fn of(task: &Task) -> Self {
-        let a = &task.cost.a;
+        let cost = &task.cost;
         Self {
-            target: task.cost.target.iter().copied().collect(),
-            widths: (0..a.nrows())
-                .map(|i| (a[(i, i)] != 0.0).then(|| 1.0 / a[(i, i)]))
+            target: cost.target.iter().copied().collect(),
+            widths: cost
+                .widths
+                .iter()
+                .map(|w| w.is_finite().then_some(*w))
                 .collect(),
+            angles: if cost.angles.contains(&true) {
+                cost.angles.clone()
+            } else {
+                Vec::new()
+            },
             episode_steps: task.episode_steps,
             policy_horizon: task.policy_horizon,
             start: match &task.start {
@@ -273,6 +283,15 @@ impl TaskRecord {
         }
     }
 
+    /// The angle flag per output (none when the record has none).
+    fn angles(&self) -> Vec<bool> {
+        if self.angles.is_empty() {
+            vec![false; self.target.len()]
+        } else {
+            self.angles.clone()
+        }
+    }
+
     /// The task with `policy` as its searched policy.
     pub fn to_task(&self, policy: Policy) -> Result<Task> {
         let widths: Vec<f64> = self
@@ -281,7 +300,7 @@ impl TaskRecord {
             .map(|w| w.unwrap_or(f64::INFINITY))
             .collect();
         Ok(Task {
-            cost: target_cost(&self.target, &widths)?,
+            cost: target_cost(&self.target, &widths, &self.angles())?,
             episode_steps: self.episode_steps,
             policy_horizon: self.policy_horizon,
             start: match &self.start {
@@ -576,6 +595,7 @@ mod tests {
         file.task = Some(TaskRecord {
             target: vec![0.0; 3],
             widths: vec![Some(1.0); 3],
+            angles: Vec::new(),
             episode_steps: 10,
             policy_horizon: 10,
             start: StartRecord::Observed { floor: 1e-6 },

@@ -135,7 +135,7 @@ fn rbf() -> Policy {
 fn task(policy: Policy, target: f64) -> Task {
     let n = policy.param_len();
     Task {
-        cost: target_cost(&[target], &[0.5]).expect("valid"),
+        cost: target_cost(&[target], &[0.5], &[false]).expect("valid"),
         episode_steps: 30,
         policy_horizon: 30,
         start: StartDistribution::Observed { floor: 1e-4 },
@@ -231,7 +231,7 @@ fn episode_rows_and_early_end() {
     assert_eq!(ep.outputs.len(), 2);
     assert!(ep.ended_early);
     // the cost counts every missing row as 1
-    let cost = target_cost(&[0.0], &[1.0]).expect("valid");
+    let cost = target_cost(&[0.0], &[1.0], &[false]).expect("valid");
     let c = ep.cost(&cost, 0, 11);
     assert!(c > 9.0 && c < 11.0, "{c}");
 }

@@ -137,6 +137,19 @@ def test_bad_environments_get_clear_errors():
         msgp.learn_policy(env=Faulty("shape"), **TARGET)
     with pytest.raises(msgp.InvalidInputError, match="2 outputs"):
         msgp.learn_policy(env=Faulty("none"), target=[0.5], widths=[0.5], iterations=1)
+    with pytest.raises(msgp.InvalidInputError, match=r"angles \[2\] are not indices"):
+        msgp.learn_policy(env=Faulty("none"), angles=[2], **TARGET)
+
+
+def test_an_angle_output_is_costed_on_its_tip_and_kept_in_the_policy_file(tmp_path):
+    # a full turn from the target is the target: the first policy's recorded task says which
+    # output is an angle, and the spec flags it
+    spec = msgp.gym.plant_spec(Faulty("none"), angles=[0])
+    assert [o["angle"] for o in spec["outputs"]] == [True, False]
+    result = msgp.learn_policy(env=Faulty("none"), angles=[0], **TARGET)
+    path = tmp_path / "policy.json"
+    result.policy.save(str(path))
+    assert json.loads(path.read_text())["task"]["angles"] == [True, False]
 
 
 def test_an_environment_exception_stops_the_loop_and_keeps_the_episodes():

@@ -105,6 +105,14 @@ pub fn run_episode(
             params.initial_theta_std * n
         }
     };
+    // a balancing episode starts near upright (the swing-up has its own plant)
+    if !(theta0.is_finite() && theta0.abs() < std::f64::consts::FRAC_PI_2) {
+        return Err(SimError::invalid(
+            "initial_theta",
+            theta0,
+            "must be finite with |theta| < pi/2",
+        ));
+    }
     let mut plant = Plant::new(params, theta0)?;
     let mut noise =
         Xoshiro256PlusPlus::seed_from_u64(rng_for(config.seed, Stream::MeasurementNoise));

@@ -47,6 +47,7 @@ pub mod plant;
 pub mod plot;
 pub mod seed;
 pub mod stability;
+pub mod swing_up;
 
 pub use controller::{
     APOLLO_LQR_GAINS, Controller, ExcitationConfig, PidPdGains, PidPdPolicy, RandomExcitation,

@@ -1,5 +1,7 @@
 //! The plant as a controller sees it: noisy measurements in, acceleration commands out.
 
+use std::f64::consts::{PI, TAU};
+
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
@@ -37,7 +39,9 @@ pub struct LatentState {
     pub delayed_command: f64,
 }
 
-/// Simulated robot arm + pole, stepped one control period at a time.
+/// Simulated robot arm + pole, stepped one control period at a time. The pole angle is
+/// continuous: a full turn adds 2π (the rapier world's angle wraps at ±π; the turns are
+/// counted every physics step, far below half a turn apart).
 #[derive(Debug)]
 pub struct Plant {
     params: PendulumParams,
@@ -45,26 +49,37 @@ pub struct Plant {
     world: PoleWorld,
     time: f64,
     steps: u64,
+    /// Whole turns added to the world's angle (0 while it never crossed ±π).
+    turns: f64,
+    /// The world's angle at the last physics step.
+    last_raw: f64,
 }
 
 impl Plant {
-    /// Validates `params` and builds the plant at rest with the pole at `theta0` \[rad\].
+    /// Validates `params` and builds the plant at rest with the pole at `theta0` \[rad\]
+    /// (any finite angle: π hangs it).
     pub fn new(params: &PendulumParams, theta0: f64) -> Result<Self, SimError> {
         params.validate()?;
-        if !theta0.is_finite() || theta0.abs() >= std::f64::consts::FRAC_PI_2 {
-            return Err(SimError::invalid(
-                "initial_theta",
-                theta0,
-                "must be finite with |theta| < pi/2",
-            ));
+        if !theta0.is_finite() {
+            return Err(SimError::invalid("initial_theta", theta0, "must be finite"));
         }
+        let world = PoleWorld::new(params, theta0);
+        let last_raw = world.theta();
+        let turns = ((theta0 - last_raw) / TAU).round();
         Ok(Self {
             params: *params,
             actuator: Actuator::new(params.command_delay_steps, params.lag_time_constant),
-            world: PoleWorld::new(params, theta0),
+            world,
             time: 0.0,
             steps: 0,
+            turns,
+            last_raw,
         })
+    }
+
+    /// The true pole angle, continuous over turns \[rad\].
+    pub fn theta(&self) -> f64 {
+        self.last_raw + TAU * self.turns
     }
 
     /// The plant's parameters.
@@ -83,7 +98,7 @@ impl Plant {
         let n_theta: f64 = StandardNormal.sample(rng);
         let n_x: f64 = StandardNormal.sample(rng);
         Measurement {
-            theta: self.world.theta() + self.params.sigma_theta * n_theta,
+            theta: self.theta() + self.params.sigma_theta * n_theta,
             x: self.actuator.position() + self.params.sigma_x * n_x,
         }
     }
@@ -92,7 +107,7 @@ impl Plant {
     /// it only matters for zero command delay (see [`LatentState::delayed_command`]).
     pub fn latent(&self, pending_command: f64) -> LatentState {
         LatentState {
-            theta: self.world.theta(),
+            theta: self.theta(),
             theta_dot: self.world.theta_dot(),
             x: self.actuator.position(),
             x_dot: self.actuator.velocity(),
@@ -120,10 +135,17 @@ impl Plant {
         for _ in 0..self.params.substeps() {
             self.actuator.advance(h);
             self.world.step(self.actuator.position());
+            let raw = self.world.theta();
+            if raw - self.last_raw > PI {
+                self.turns -= 1.0;
+            } else if raw - self.last_raw < -PI {
+                self.turns += 1.0;
+            }
+            self.last_raw = raw;
         }
         self.steps += 1;
         self.time = self.steps as f64 * self.params.control_period();
-        let theta = self.world.theta();
+        let theta = self.theta();
         if !(theta.is_finite() && self.world.theta_dot().is_finite()) {
             return Err(SimError::NonFiniteState { t: self.time });
         }

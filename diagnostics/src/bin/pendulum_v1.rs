@@ -21,8 +21,8 @@ use msgp_core::learner::{
     Actor, LearnEvent, Learner, LearnerSettings, PolicyFamily, TargetTask, run_episode,
 };
 use msgp_core::plant::Plant;
+use msgp_diagnostics::overridden;
 use msgp_sim::gym_pendulum::{GymPendulum, GymPendulumParams};
-use serde_json::Value;
 
 /// The environment started hanging (θ = π ± 0.05, θ̇ = 0): PILCO's swing-up task, for
 /// telling the difficulty of starts all around the circle from the model's.
@@ -43,32 +43,6 @@ impl Plant for Hanging {
     fn step(&mut self, command: &[f64]) -> msgp_core::Result<msgp_core::plant::PlantStep> {
         self.0.step(command)
     }
-}
-
-fn merge(base: &mut Value, over: &Value) {
-    match (base, over) {
-        (Value::Object(b), Value::Object(o)) => {
-            for (k, v) in o {
-                merge(b.entry(k.clone()).or_insert(Value::Null), v);
-            }
-        }
-        (b, o) => *b = o.clone(),
-    }
-}
-
-fn overridden<T: serde::Serialize + serde::de::DeserializeOwned>(
-    base: &T,
-    arg: Option<&String>,
-) -> T {
-    let mut v = serde_json::to_value(base).expect("serialisable");
-    if let Some(path) = arg.filter(|a| !a.is_empty() && *a != "-") {
-        let text = std::fs::read_to_string(path)
-            .ok()
-            .unwrap_or_else(|| path.clone());
-        let over: Value = serde_json::from_str(&text).expect("JSON overrides");
-        merge(&mut v, &over);
-    }
-    serde_json::from_value(v).expect("valid overrides")
 }
 
 /// Mean return of `policy` over `n` seeded 200-step episodes.

@@ -52,6 +52,9 @@ pub struct FitAndSearch {
     /// Under the prequential choice, why the linear competitor's fit failed numerically (the
     /// search then ran on the GP model).
     pub linear_fit_failure: Option<String>,
+    /// Under the prequential choice, why the search on the linear model failed numerically
+    /// (the search then ran on the GP model).
+    pub linear_search_failure: Option<String>,
     /// The search's best policy, or why every start failed numerically (the model's rollouts
     /// diverge whatever the policy: it predicts failure).
     pub searched: Result<PolicySearchResult>,
@@ -127,12 +130,12 @@ pub fn fit_and_search(
         linear,
         search_model,
         linear_fit_failure: linear_failure,
+        linear_search_failure: None,
         searched: Err(stopped),
         fit_seconds,
         search_seconds: 0.0,
     };
     let clock = std::time::Instant::now();
-    let problems = task.problems(step.searched_model(), episodes);
     let search = PolicySearchSettings {
         seed: settings
             .search
@@ -146,13 +149,26 @@ pub fn fit_and_search(
         .then(|| task.space.start())
         .into_iter()
         .collect();
-    let searched = optimise_over(
-        &problems,
-        &task.space_at(policy),
-        &task.typical,
-        &search,
-        &fresh,
-    );
+    let search_on = |model: &Model| {
+        optimise_over(
+            &task.problems(model, episodes),
+            &task.space_at(policy),
+            &task.typical,
+            &search,
+            &fresh,
+        )
+    };
+    let mut searched = search_on(step.searched_model());
+    // a linear model whose every rollout diverges predicts nothing a search can use: the
+    // iteration searches on the GP model instead, and says so
+    if step.search_model == Some(SearchModel::Linear)
+        && let Err(e) = &searched
+        && numerical(e)
+    {
+        step.linear_search_failure = Some(e.to_string());
+        step.search_model = Some(SearchModel::Gp);
+        searched = search_on(&step.model);
+    }
     step.search_seconds = clock.elapsed().as_secs_f64();
     step.searched = match searched {
         Err(MsgpError::Stopped { .. }) => return Err(MsgpError::Stopped { iteration: it }),

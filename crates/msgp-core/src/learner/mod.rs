@@ -387,6 +387,7 @@ impl Learner {
             expected_cost: expected,
             search_model: step.search_model,
             linear_fit_failure: step.linear_fit_failure.clone(),
+            linear_search_failure: step.linear_search_failure.clone(),
             held_out,
             interaction_seconds: self.seconds,
             success,

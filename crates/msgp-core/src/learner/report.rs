@@ -32,6 +32,10 @@ pub struct IterationReport {
     /// scored.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub linear_fit_failure: Option<String>,
+    /// Under the prequential choice, why the search on the linear model it chose failed
+    /// numerically (every start's rollout diverged); the search then ran on the GP model.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub linear_search_failure: Option<String>,
     /// Under the prequential choice, both models' scores on the episode this iteration ran.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out: Option<HeldOut>,

@@ -80,7 +80,7 @@ impl TargetTask {
         let (policy, typical) = self.first_policy(spec, seed)?;
         let free = vec![true; policy.param_len()];
         Ok(Task {
-            cost: target_cost(&self.target, &widths)?,
+            cost: target_cost(&self.target, &widths, &spec.angles())?,
             episode_steps: self.episode_steps,
             policy_horizon: self.policy_horizon,
             start: match self.separate_starts {

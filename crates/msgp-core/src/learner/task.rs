@@ -250,9 +250,10 @@ fn observed_start(episodes: &[Episode], floor: f64) -> (Vec<f64>, Vec<f64>) {
     (mean, var)
 }
 
-/// A saturating cost around `target` with `widths` (∞: the output does not count).
-pub fn target_cost(target: &[f64], widths: &[f64]) -> Result<SaturatingCost> {
-    SaturatingCost::with_widths(DVector::from_column_slice(target), widths)
+/// A saturating cost around `target` with `widths` (∞: the output does not count), the
+/// outputs flagged in `angles` costed on their unit tip.
+pub fn target_cost(target: &[f64], widths: &[f64], angles: &[bool]) -> Result<SaturatingCost> {
+    SaturatingCost::with_angles(DVector::from_column_slice(target), widths, angles)
 }
 
 #[cfg(test)]
@@ -269,7 +270,7 @@ mod tests {
         let policy = Policy::StateFeedback(policy);
         let n = policy.param_len();
         Task {
-            cost: target_cost(&[0.0, 0.0], &[1.0, f64::INFINITY]).expect("cost"),
+            cost: target_cost(&[0.0, 0.0], &[1.0, f64::INFINITY], &[false; 2]).expect("cost"),
             episode_steps: 5,
             policy_horizon: 5,
             start,

@@ -166,16 +166,13 @@ impl PolicyProblem<'_> {
         StartState { mean, cov }
     }
 
-    /// Normalised cost.
+    /// The cost on the model's normalised outputs.
     fn normalised_cost(&self) -> SaturatingCost {
         let n = &self.model.normalizer;
-        let dy = self.cost.target.len();
-        SaturatingCost {
-            target: DVector::from_fn(dy, |j, _| (self.cost.target[j] - n.y_mean[j]) / n.y_std[j]),
-            a: DMatrix::from_fn(self.cost.a.nrows(), dy, |i, j| {
-                self.cost.a[(i, j)] * n.y_std[j]
-            }),
-        }
+        self.cost.in_units(
+            DVector::from_column_slice(&n.y_mean),
+            DVector::from_column_slice(&n.y_std),
+        )
     }
 
     /// Expected total cost of the policy of `space` with free parameters `x` and its gradient

@@ -245,7 +245,6 @@ pub fn optimise_over(
             threads,
         ));
     }
-    let active: Vec<usize> = (0..x0.len()).collect();
     // each start's Adam run is independent; its best (value, gains), earliest first on ties
     let run_start = |_: usize, start: &Vec<f64>| -> Result<Option<(f64, Vec<f64>)>> {
         if settings.solver == PolicySolver::Lbfgs {
@@ -253,6 +252,7 @@ pub fn optimise_over(
         }
         let mut best: Option<(f64, Vec<f64>)> = None;
         // optimise in scaled coordinates z = g / scale so one step size fits every gain
+        let mut objective = Scaled::new(problems, space, &scale);
         let mut z: Vec<f64> = start.iter().zip(&scale).map(|(g, s)| g / s).collect();
         let adam = Adam {
             learning_rate: settings.learning_rate,
@@ -261,17 +261,14 @@ pub fn optimise_over(
         let mut state = AdamState::new(z.len());
         let on = vec![true; z.len()];
         for _ in 0..settings.iterations {
-            let g: Vec<f64> = z.iter().zip(&scale).map(|(z, s)| z * s).collect();
-            let evaluated = mean_gradient(problems, space, &g, &active);
-            let (value, grad) = match evaluated {
-                // gains whose rollout fails numerically end this start; the best so far stays
-                Err(MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_)) => break,
-                other => other?,
-            };
-            if value.is_finite() && best.as_ref().is_none_or(|b| value < b.0) {
-                best = Some((value, g.clone()));
+            let (value, gz) = objective.value_and_gradient(&z)?;
+            // gains whose rollout fails numerically end this start; the best so far stays
+            if value.is_nan() {
+                break;
             }
-            let gz: Vec<f64> = grad.iter().zip(&scale).map(|(d, s)| d * s).collect();
+            if value.is_finite() && best.as_ref().is_none_or(|b| value < b.0) {
+                best = Some((value, objective.unscaled(&z)));
+            }
             adam.step(&mut state, &mut z, &gz, &on);
             if tr > 0.0 {
                 for ((z, g0), s) in z.iter_mut().zip(&x0).zip(&scale) {
@@ -310,6 +307,7 @@ pub fn optimise_over(
 
 /// The search's objective in scaled coordinates `z = x / scale`; a point where a rollout
 /// fails numerically has no value (NaN: the line search's "too far").
+/// Both solvers of the search run on it.
 struct Scaled<'a, 'p> {
     problems: &'a [PolicyProblem<'p>],
     space: &'a SearchSpace,
@@ -317,9 +315,25 @@ struct Scaled<'a, 'p> {
     active: Vec<usize>,
 }
 
+impl<'a, 'p> Scaled<'a, 'p> {
+    fn new(problems: &'a [PolicyProblem<'p>], space: &'a SearchSpace, scale: &'a [f64]) -> Self {
+        Self {
+            problems,
+            space,
+            scale,
+            active: (0..scale.len()).collect(),
+        }
+    }
+
+    /// The parameters at `z`.
+    fn unscaled(&self, z: &[f64]) -> Vec<f64> {
+        z.iter().zip(self.scale).map(|(z, s)| z * s).collect()
+    }
+}
+
 impl Objective for Scaled<'_, '_> {
     fn value_and_gradient(&mut self, z: &[f64]) -> Result<(f64, Vec<f64>)> {
-        let x: Vec<f64> = z.iter().zip(self.scale).map(|(z, s)| z * s).collect();
+        let x = self.unscaled(z);
         match mean_gradient(self.problems, self.space, &x, &self.active) {
             Ok((v, g)) => Ok((v, g.iter().zip(self.scale).map(|(d, s)| d * s).collect())),
             Err(MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_)) => {
@@ -339,21 +353,14 @@ fn lbfgs_start(
     start: &[f64],
     iterations: usize,
 ) -> Result<Option<(f64, Vec<f64>)>> {
-    let mut objective = Scaled {
-        problems,
-        space,
-        scale,
-        active: (0..start.len()).collect(),
-    };
+    let mut objective = Scaled::new(problems, space, scale);
     let z0: Vec<f64> = start.iter().zip(scale).map(|(x, s)| x / s).collect();
     let solver = Solver::Lbfgs(Lbfgs::default());
     let on = vec![true; z0.len()];
     let (z, value) = minimize(&mut objective, &solver, z0, &on, iterations, |_, _, _| {
         Ok(Flow::Continue)
     })?;
-    Ok(value
-        .is_finite()
-        .then(|| (value, z.iter().zip(scale).map(|(z, s)| z * s).collect())))
+    Ok(value.is_finite().then(|| (value, objective.unscaled(&z))))
 }
 
 /// The problems' mean expected cost of the policy at `x` and their mean per-step moments.
@@ -558,7 +565,7 @@ mod tests {
     #[test]
     fn the_adjoint_search_gradient_matches_duals_and_finite_differences() {
         for mean in [MeanFunction::Zero, MeanFunction::Linear] {
-            search_gradient_matches_duals_and_finite_differences(mean, &free_pid());
+            search_gradient_matches_duals_and_finite_differences(mean, &free_pid(), false);
         }
     }
 
@@ -567,7 +574,24 @@ mod tests {
     #[test]
     fn the_state_feedback_and_rbf_gradients_match_duals_and_finite_differences() {
         for space in [free_state_feedback(), free_rbf()] {
-            search_gradient_matches_duals_and_finite_differences(MeanFunction::Linear, &space);
+            search_gradient_matches_duals_and_finite_differences(
+                MeanFunction::Linear,
+                &space,
+                false,
+            );
+        }
+    }
+
+    /// The same with the first output an angle costed on its unit tip (the trigonometric
+    /// moments inside every step's cost).
+    #[test]
+    fn the_tip_cost_gradient_matches_duals_and_finite_differences() {
+        for space in [free_pid(), free_rbf()] {
+            search_gradient_matches_duals_and_finite_differences(
+                MeanFunction::Linear,
+                &space,
+                true,
+            );
         }
     }
 
@@ -710,10 +734,19 @@ mod tests {
     fn search_gradient_matches_duals_and_finite_differences(
         mean: MeanFunction,
         space: &SearchSpace,
+        angle: bool,
     ) {
         // outputs that follow the input, so the parameters matter
         let model = two_output_model_with(|t, _| 0.3 * (t as f64 * 0.31 - 0.4).sin(), mean);
-        let problem = off_rest_problem(&model, 30);
+        let mut problem = off_rest_problem(&model, 30);
+        if angle {
+            problem.cost = SaturatingCost::with_angles(
+                DVector::from_vec(vec![0.4, 0.0]),
+                &[0.5, 0.5],
+                &[true, false],
+            )
+            .expect("cost");
+        }
         let g = space.start();
         let active: Vec<usize> = (0..g.len()).collect();
         // the search's gradient: the adjoint sweep

@@ -4,7 +4,8 @@
 continuous ``Box`` action space: it calls ``env.reset(seed=...)`` and ``env.step(action)``
 itself, with the environment's own code (nothing of it is copied into msgp). The observation
 vector is the model's output; the cost is PILCO's saturating cost of the distance to a
-``target``, each output on the scale of its width (``None``: the output does not count).
+``target``, each output on the scale of its width (``None``: the output does not count); an
+output named in ``angles`` is costed on the tip of a unit pole at that angle.
 
 Two forms::
 
@@ -89,10 +90,12 @@ def _bounds(space, what):
     return low, high
 
 
-def plant_spec(env, period=None):
+def plant_spec(env, period=None, angles=()):
     """The plant spec msgp reads from ``env``: its ``Box`` action space's bounds, its
     observation space's size and bounds, and the control period (``period``, else
-    ``env.unwrapped.dt``, else 1 / ``metadata["render_fps"]``, else 1 s)."""
+    ``env.unwrapped.dt``, else 1 / ``metadata["render_fps"]``, else 1 s). ``angles``: the
+    indices of observation entries that are angles in radians (costed on a unit pole's tip:
+    ``target`` is then an angle and a full turn is the target again)."""
     actions = env.action_space
     kind = type(actions).__name__
     if kind != "Box":
@@ -117,9 +120,15 @@ def plant_spec(env, period=None):
     if period is None:
         fps = (getattr(env, "metadata", None) or {}).get("render_fps")
         period = 1.0 / fps if fps else 1.0
+    angles = set(angles)
+    bad = [j for j in angles if not (isinstance(j, int) and 0 <= j < shape[0])]
+    if bad:
+        raise _msgp.InvalidInputError(
+            f"angles {bad} are not indices of the observation's {shape[0]} entries"
+        )
     outputs = []
     for j in range(shape[0]):
-        out = {"name": f"obs{j}", "angle": False}
+        out = {"name": f"obs{j}", "angle": j in angles}
         # a bound of float32's size (CartPole's velocities) says "unbounded"
         if abs(olow[j]) < _HUGE and abs(ohigh[j]) < _HUGE:
             out["low"], out["high"] = float(olow[j]), float(ohigh[j])
@@ -217,6 +226,7 @@ def learn_policy(
     policy_horizon=None,
     policy=None,
     separate_starts=None,
+    angles=None,
     period=None,
     settings=None,
     progress=None,
@@ -224,10 +234,11 @@ def learn_policy(
     """PILCO on ``env`` (see the module docs). ``policy``: ``{"kind": "rbf", "basis": N}`` or
     ``{"kind": "linear"}``; ``separate_starts=k``: the search's rollouts start from each of
     the latest ``k`` episodes' first observations (for episodes that start anywhere), by
-    default from one Gaussian over them; ``settings`` overrides the loop's defaults
+    default from one Gaussian over them; ``angles``: indices of observation entries that are
+    angles (radians), costed on a unit pole's tip (``plant_spec``); ``settings`` overrides the loop's defaults
     (``msgp_core::learner::LearnerSettings``; a known task's own settings first);
     ``progress`` is called with each iteration's report."""
-    spec = plant_spec(env, period)
+    spec = plant_spec(env, period, angles or ())
     options = {
         "episode_steps": episode_steps,
         "policy_horizon": policy_horizon,
