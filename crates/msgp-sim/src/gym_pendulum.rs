@@ -12,6 +12,7 @@
 
 use std::f64::consts::PI;
 
+use msgp_core::learner::{LearnerSettings, PolicyFamily, TargetTask};
 use msgp_core::plant::{CommandSpec, OutputSpec, Plant, PlantSpec, PlantStep};
 use rand::{RngExt, SeedableRng, rngs::StdRng};
 
@@ -44,6 +45,32 @@ impl Default for GymPendulumParams {
             max_speed: 8.0,
         }
     }
+}
+
+/// The `Pendulum-v1` task as the Python preset (`msgp.gym.TASKS["Pendulum-v1"]`) states it:
+/// the unit tip `(cos θ, sin θ)` upright with widths 0.5, the speed not costed, 100-step
+/// episodes and rollouts, an RBF network of 50 basis functions searched from each of the
+/// latest 8 episodes' starts.
+pub fn pendulum_v1_task() -> TargetTask {
+    TargetTask {
+        target: vec![1.0, 0.0, 0.0],
+        widths: vec![Some(0.5), Some(0.5), None],
+        episode_steps: 100,
+        policy_horizon: 100,
+        policy: PolicyFamily::Rbf { basis: 50 },
+        separate_starts: Some(8),
+    }
+}
+
+/// The preset's loop settings: the defaults for a plant with a window of one step (the
+/// observation is the whole state) and 14 iterations after the random episode.
+pub fn pendulum_v1_settings(spec: &PlantSpec, seed: u64) -> LearnerSettings {
+    let mut settings = LearnerSettings::for_plant(spec);
+    settings.seed = seed;
+    settings.iterations = 14;
+    settings.fit.ly = 1;
+    settings.fit.lu = 1;
+    settings
 }
 
 /// `θ` wrapped to `[−π, π)`, as the environment's reward wraps it.

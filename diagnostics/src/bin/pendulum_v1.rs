@@ -8,8 +8,8 @@
 //! [task.json] [starts=N] [research] [probe]`
 //!
 //! `settings.json` / `task.json`: JSON objects (or files holding them) merged into the
-//! defaults (`LearnerSettings::for_plant`, the Python preset's `TargetTask` without its
-//! settings); `-` keeps them. `starts=N`: evaluation episodes of each policy (default 30).
+//! Python preset's settings and task (`msgp_sim::gym_pendulum::pendulum_v1_settings`,
+//! `pendulum_v1_task`); `-` keeps them. `starts=N`: evaluation episodes of each policy (default 30).
 //! `hanging`: every interaction episode starts hanging (θ = π ± 0.05; evaluation as
 //! always from uniform starts). `research`: after the loop, the next model's closed-loop predictions of the latest
 //! episodes against their measured cost, and searches with other settings on it. `probe`:
@@ -17,12 +17,12 @@
 //! gradient.
 use std::ops::ControlFlow;
 
-use msgp_core::learner::{
-    Actor, LearnEvent, Learner, LearnerSettings, PolicyFamily, TargetTask, run_episode,
-};
+use msgp_core::learner::{Actor, LearnEvent, Learner, LearnerSettings, TargetTask, run_episode};
 use msgp_core::plant::Plant;
 use msgp_diagnostics::overridden;
-use msgp_sim::gym_pendulum::{GymPendulum, GymPendulumParams};
+use msgp_sim::gym_pendulum::{
+    GymPendulum, GymPendulumParams, pendulum_v1_settings, pendulum_v1_task,
+};
 
 /// The environment started hanging (θ = π ± 0.05, θ̇ = 0): PILCO's swing-up task, for
 /// telling the difficulty of starts all around the circle from the model's.
@@ -178,17 +178,8 @@ fn main() {
         .unwrap_or(30);
     let params = GymPendulumParams::default();
     let mut env = GymPendulum::new(params);
-    let target = TargetTask {
-        target: vec![1.0, 0.0, 0.0],
-        widths: vec![Some(0.5), Some(0.5), None],
-        episode_steps: 100,
-        policy_horizon: 100,
-        policy: PolicyFamily::Rbf { basis: 30 },
-        separate_starts: None,
-    };
-    let target: TargetTask = overridden(&target, args.get(2));
-    let mut settings = LearnerSettings::for_plant(env.spec());
-    settings.seed = seed;
+    let target: TargetTask = overridden(&pendulum_v1_task(), args.get(2));
+    let settings = pendulum_v1_settings(env.spec(), seed);
     let settings: LearnerSettings = overridden(&settings, args.get(1));
     let task = target.task(env.spec(), seed).expect("task");
     let mut learner = Learner::new(task, settings).expect("learner");
