@@ -60,6 +60,68 @@ pub enum PolicyCommand {
     Improve(Box<ImproveArgs>),
     /// A policy's expected cost on a model (the task of the policy file).
     Eval(PolicyEvalArgs),
+    /// The loop's first policy file for a machine no simulator describes: its signals, the
+    /// task (target, widths, episode and horizon) and the loop's settings, with the first
+    /// policy drawn from the seed. Then: log the random episodes, `improve`, repeat.
+    Init(Box<PolicyInitArgs>),
+}
+
+/// The policy family of `msgp policy init`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum PolicyFamilyArg {
+    /// PILCO's RBF network on the observation (`--basis` functions).
+    Rbf,
+    /// A linear feedback with offset on the observation.
+    Linear,
+}
+
+/// Options of `msgp policy init`.
+#[derive(Debug, Args)]
+pub struct PolicyInitArgs {
+    /// The machine's signals as JSON: `{"period": s, "commands": [{"name", "low", "high"}],
+    /// "outputs": [{"name", "angle"?, "low"?, "high"?}]}` (docs/policy-format.md, `plant`).
+    #[arg(long, value_name = "FILE")]
+    pub plant: PathBuf,
+    /// The cost's target per output, comma-separated (an angle in radians: costed on its
+    /// pole's tip).
+    #[arg(
+        long,
+        value_name = "Y,…",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    pub target: Vec<f64>,
+    /// The cost's width per output, comma-separated; `none`: the output does not count.
+    #[arg(long, value_name = "W,…", value_delimiter = ',')]
+    pub widths: Vec<String>,
+    /// Control steps of an episode.
+    #[arg(long, value_name = "N")]
+    pub episode_steps: usize,
+    /// Control steps of the rollouts the policy is optimised on [default: the episode's].
+    #[arg(long, value_name = "N")]
+    pub horizon: Option<usize>,
+    /// The policy the search moves.
+    #[arg(long, value_enum, default_value_t = PolicyFamilyArg::Rbf)]
+    pub policy: PolicyFamilyArg,
+    /// Basis functions of the RBF network.
+    #[arg(long, value_name = "N", default_value_t = 30)]
+    pub basis: usize,
+    /// Search from each of the latest N episodes' first observations (for episodes that start
+    /// anywhere) instead of one Gaussian over them.
+    #[arg(long, value_name = "N")]
+    pub separate_starts: Option<usize>,
+    /// Episodes of your own excitation before the first policy episode.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub random_episodes: usize,
+    /// The model's window `l_y,l_u`.
+    #[arg(long, value_name = "LY,LU", value_delimiter = ',', num_args = 2)]
+    pub history: Option<Vec<usize>>,
+    /// Seed of the first policy's draw and of the loop's fits and searches.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// The policy file to write (atomically).
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
 }
 
 /// Options of `msgp policy improve`.

@@ -668,3 +668,72 @@ fn policy_improve_on_logged_episodes_reproduces_learn_policy() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `msgp policy init` writes a first policy file for a machine described only by its signals,
+/// and `improve` takes the loop's next step from it and one logged episode; bad input names
+/// the file or the entry and exits non-zero.
+#[test]
+fn policy_init_starts_a_loop_that_improve_continues() {
+    let dir = scratch("init");
+    let plant = r#"{"period": 0.1,
+        "commands": [{"name": "u", "low": -1.0, "high": 1.0}],
+        "outputs": [{"name": "angle", "angle": true, "low": -3.2, "high": 3.2},
+                    {"name": "y", "low": -2.0, "high": 2.0}]}"#;
+    std::fs::write(dir.join("plant.json"), plant).expect("plant");
+    // one logged episode of the user's own excitation: a damped system driven by a sine
+    let (mut a, mut y) = (0.3, 0.0);
+    let mut csv = String::from("t,u,angle,y\n");
+    for k in 0..41 {
+        let u = (0.7 * k as f64).sin();
+        csv.push_str(&format!("{},{u},{a},{y}\n", 0.1 * k as f64));
+        (a, y) = (0.9 * a + 0.1 * y, 0.8 * y + 0.2 * u);
+    }
+    std::fs::write(dir.join("ep00.csv"), csv).expect("episode");
+    let init = |extra: &[&str]| -> Output {
+        let base = [
+            "policy",
+            "init",
+            "--plant",
+            "plant.json",
+            "--episode-steps",
+            "40",
+            "--basis",
+            "10",
+            "--out",
+            "p00.json",
+        ];
+        run(&dir, &[&base[..], extra].concat())
+    };
+    let o = init(&["--target", "0,0.5", "--widths", "0.5,none"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let file: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("p00.json")).expect("file"))
+            .expect("JSON");
+    assert_eq!(file["policy"]["kind"], "rbf");
+    assert_eq!(file["task"]["widths"], serde_json::json!([0.5, null]));
+    assert_eq!(file["task"]["angles"], serde_json::json!([true, false]));
+    assert_eq!(file["settings"]["random_rollouts"], 1);
+    assert_eq!(file["iteration"], 0);
+    let o = run(
+        &dir,
+        &[
+            "policy", "improve", "--data", "ep00.csv", "--input", "u", "--output", "angle,y",
+            "--policy", "p00.json", "--out", "p01.json", "--json",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: Value = serde_json::from_slice(&o.stdout).expect("summary");
+    assert_eq!(summary["iteration"], 1);
+    assert!(dir.join("p01.json").exists());
+    // bad input: a width that is no number, a target of the wrong size, a missing plant
+    let o = init(&["--target", "0,0.5", "--widths", "0.5,wide"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("entry 1 is \"wide\""));
+    let o = init(&["--target", "0", "--widths", "0.5,none"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("2 outputs"));
+    std::fs::remove_file(dir.join("plant.json")).expect("remove");
+    let o = init(&["--target", "0,0.5", "--widths", "0.5,none"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("plant.json"));
+}

@@ -1,4 +1,4 @@
-//! `msgp policy improve` and `msgp policy eval`: the learning loop without a simulator in it.
+//! `msgp policy init`, `improve` and `eval`: the learning loop without a simulator in it.
 //! On a real machine the loop is: run the policy, log the episode, `improve`, repeat; the
 //! policy files carry the task and the loop's settings, so `improve` replays the loop's model
 //! fits on the logged episodes ([`msgp_core::learner::Learner::from_episodes`]) and takes the
@@ -9,14 +9,16 @@ use std::path::Path;
 
 use anyhow::{Context, bail};
 use msgp_core::data::dataset::{Dataset, Part};
-use msgp_core::learner::{Episode, LearnEvent, Learner, SearchModel};
+use msgp_core::learner::{
+    Episode, LearnEvent, Learner, LearnerSettings, PolicyFamily, SearchModel, TargetTask,
+};
 use msgp_core::model::Model;
 use msgp_core::model_file::{FitRecord, ModelFile};
 use msgp_core::plant::PlantSpec;
-use msgp_core::policy_file::{PolicyFile, Prediction};
+use msgp_core::policy_file::{PolicyFile, Prediction, TaskRecord};
 use serde_json::json;
 
-use crate::args::{ImproveArgs, PolicyCommand, PolicyEvalArgs};
+use crate::args::{ImproveArgs, PolicyCommand, PolicyEvalArgs, PolicyFamilyArg, PolicyInitArgs};
 use crate::render::output::{out, out_json};
 
 /// Runs `msgp policy …`.
@@ -24,7 +26,70 @@ pub fn run(cmd: &PolicyCommand) -> anyhow::Result<()> {
     match cmd {
         PolicyCommand::Improve(args) => improve(args),
         PolicyCommand::Eval(args) => eval(args),
+        PolicyCommand::Init(args) => init(args),
     }
+}
+
+/// `msgp policy init`: the first policy file of a loop on the machine `--plant` describes.
+fn init(args: &PolicyInitArgs) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(&args.plant)
+        .with_context(|| format!("reading {}", args.plant.display()))?;
+    let plant: PlantSpec = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a plant's signals", args.plant.display()))?;
+    plant
+        .validate()
+        .with_context(|| format!("{}", args.plant.display()))?;
+    let widths = args
+        .widths
+        .iter()
+        .enumerate()
+        .map(|(j, w)| match w.trim() {
+            "none" | "null" => Ok(None),
+            w => match w.parse::<f64>() {
+                Ok(v) if v.is_finite() && v > 0.0 => Ok(Some(v)),
+                _ => bail!("--widths: entry {j} is {w:?}, not a positive number or `none`"),
+            },
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let target = TargetTask {
+        target: args.target.clone(),
+        widths,
+        episode_steps: args.episode_steps,
+        policy_horizon: args.horizon.unwrap_or(args.episode_steps),
+        policy: match args.policy {
+            PolicyFamilyArg::Rbf => PolicyFamily::Rbf { basis: args.basis },
+            PolicyFamilyArg::Linear => PolicyFamily::Linear,
+        },
+        separate_starts: args.separate_starts,
+    };
+    let task = target.task(&plant, args.seed)?;
+    let mut settings = LearnerSettings::for_plant(&plant);
+    settings.seed = args.seed;
+    settings.random_rollouts = args.random_episodes;
+    if let Some([ly, lu]) = args.history.as_deref() {
+        settings.fit.ly = *ly;
+        settings.fit.lu = *lu;
+    }
+    // the loop these make must be one the learner accepts
+    let learner = Learner::new(task, settings)?;
+    learner.task().validate(&plant)?;
+    let mut file = PolicyFile::new(learner.policy());
+    file.plant = Some(plant);
+    file.task = Some(TaskRecord::of(learner.task()));
+    file.settings = Some(learner.settings().clone());
+    file.iteration = Some(0);
+    file.write(&args.out)?;
+    out(&format!(
+        "wrote {} ({} policy, {} parameters). Next: log {} episode(s) of your own excitation \
+         ({} steps each), then `msgp policy improve --data … --policy {}`.",
+        args.out.display(),
+        learner.policy().kind(),
+        learner.policy().param_len(),
+        args.random_episodes,
+        args.episode_steps,
+        args.out.display()
+    ))?;
+    Ok(())
 }
 
 /// The parts of the first policy file a loop needs.
