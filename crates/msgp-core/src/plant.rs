@@ -143,6 +143,9 @@ pub struct PlantStep {
     pub observation: Vec<f64>,
     /// The episode ended at this observation (no further step is taken).
     pub done: bool,
+    /// It ended on a limit of time or of the environment's own (Gymnasium's `truncated`), not
+    /// because the task failed: the steps it did not run are not costed as failures.
+    pub truncated: bool,
 }
 
 /// A system the learning loop runs episodes on (see the module docs).

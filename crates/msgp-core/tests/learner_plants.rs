@@ -95,6 +95,7 @@ impl Plant for Lag {
         Ok(PlantStep {
             observation,
             done: self.y.abs() > self.limit,
+            truncated: false,
         })
     }
 }
@@ -409,4 +410,24 @@ fn a_stopped_loop_keeps_its_episodes_and_resumes() {
     let policies =
         |l: &Learner| -> Vec<_> { l.reports().iter().map(|r| r.policy.clone()).collect() };
     assert_eq!(policies(&whole), policies(&learner));
+}
+
+/// An episode ended by a limit is not costed as a failure: its missing steps count the
+/// measured steps' mean, where a failed episode's count 1 each.
+#[test]
+fn a_truncated_episode_is_not_costed_as_a_failure() {
+    use msgp_core::learner::Episode;
+    let cost = target_cost(&[0.0], &[1.0], &[false]).expect("valid");
+    let mut ep = Episode {
+        seed: 0,
+        outputs: vec![vec![0.0], vec![1.0]],
+        commands: vec![vec![0.0], vec![0.0]],
+        ended_early: true,
+        truncated: false,
+        policy: None,
+    };
+    let measured = cost.at(&[0.0]) + cost.at(&[1.0]);
+    assert!((ep.cost(&cost, 0, 4) - (measured + 2.0)).abs() < 1e-15);
+    ep.truncated = true;
+    assert!((ep.cost(&cost, 0, 4) - 2.0 * measured).abs() < 1e-15);
 }

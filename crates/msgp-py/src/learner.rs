@@ -1,7 +1,7 @@
 //! Policy learning on the user's own plant: any Python object with `reset(seed) -> obs` and
-//! `step(command) -> (obs, done)` (a Gymnasium environment through `msgp.gym`) runs the loop
-//! of `msgp_core::learner`; the policy it learns is a Python object that acts, saves and
-//! loads ([`PyPolicy`]).
+//! `step(command) -> (obs, terminated, truncated)` (a Gymnasium environment through
+//! `msgp.gym`) runs the loop of `msgp_core::learner`; the policy it learns is a Python object
+//! that acts, saves and loads ([`PyPolicy`]).
 //!
 //! The loop runs without the GIL and takes it for every plant call and every event (where
 //! Python sees Ctrl-C). An exception of the plant, of `progress` or a Ctrl-C stops the loop
@@ -55,13 +55,17 @@ impl Plant for PyPlant {
     }
 
     fn step(&mut self, command: &[f64]) -> msgp_core::Result<PlantStep> {
-        let got = Python::attach(|py| -> PyResult<(Vec<f64>, bool)> {
+        let got = Python::attach(|py| -> PyResult<(Vec<f64>, bool, bool)> {
             self.obj
                 .call_method1(py, "step", (command.to_vec(),))?
                 .extract(py)
         });
         match got {
-            Ok((observation, done)) => Ok(PlantStep { observation, done }),
+            Ok((observation, terminated, truncated)) => Ok(PlantStep {
+                observation,
+                done: terminated || truncated,
+                truncated: truncated && !terminated,
+            }),
             Err(e) => Err(self.fail("step", e)),
         }
     }
@@ -178,6 +182,7 @@ fn episode_dict<'py>(py: Python<'py>, e: &Episode) -> PyResult<Bound<'py, PyDict
     d.set_item("outputs", array2(py, &rows(&e.outputs)))?;
     d.set_item("commands", array2(py, &rows(&e.commands)))?;
     d.set_item("ended_early", e.ended_early)?;
+    d.set_item("truncated", e.truncated)?;
     d.set_item("policy", e.policy.as_ref().map(Policy::kind))?;
     Ok(d)
 }

@@ -141,6 +141,14 @@ def test_bad_environments_get_clear_errors():
         msgp.learn_policy(env=Faulty("none"), angles=[2], **TARGET)
 
 
+def test_a_time_limit_truncates_without_costing_a_failure():
+    # the environment's own limit (10 steps) ends every episode before the task's 20: each
+    # is truncated, not failed, and the loop runs on
+    env = gym.wrappers.TimeLimit(Faulty("none"), max_episode_steps=10)
+    result = msgp.learn_policy(env=env, **TARGET)
+    assert result.episodes and all(e["ended_early"] and e["truncated"] for e in result.episodes)
+
+
 def test_an_angle_output_is_costed_on_its_tip_and_kept_in_the_policy_file(tmp_path):
     # a full turn from the target is the target: the first policy's recorded task says which
     # output is an angle, and the spec flags it

@@ -166,6 +166,7 @@ impl Plant for GymPendulum {
         Ok(PlantStep {
             observation: self.observation(),
             done: false,
+            truncated: false,
         })
     }
 }

@@ -196,6 +196,7 @@ impl LoopPlant for SwingUp {
         Ok(PlantStep {
             observation: self.observe()?,
             done,
+            truncated: false,
         })
     }
 }

@@ -550,6 +550,7 @@ fn improving_from_logged_episodes_gives_the_loops_policies() {
                 outputs: rows(&traj.y),
                 commands: rows(&traj.u),
                 ended_early: false,
+                truncated: false,
                 policy,
             }
         })

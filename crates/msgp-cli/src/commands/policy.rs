@@ -162,6 +162,7 @@ fn episode(
         outputs: rows(&traj.y),
         commands: rows(&traj.u),
         ended_early: false,
+        truncated: false,
         policy,
     })
 }

@@ -40,6 +40,8 @@ pub struct Episode {
     pub commands: Vec<Vec<f64>>,
     /// The plant ended the episode before its length.
     pub ended_early: bool,
+    /// It ended early on a limit, not a failure ([`crate::plant::PlantStep::truncated`]).
+    pub truncated: bool,
     /// The policy that chose the commands; `None` for the excitation.
     pub policy: Option<Policy>,
 }
@@ -75,7 +77,8 @@ impl Episode {
     }
 
     /// The measured cost over rows `from..from + steps`; rows after an early end count the
-    /// full cost 1 each (the plant ended the episode because it failed).
+    /// full cost 1 each when the plant ended the episode because it failed, the measured rows'
+    /// mean when it was truncated (a limit, not a failure).
     pub fn cost(&self, cost: &SaturatingCost, from: usize, steps: usize) -> f64 {
         let measured: Vec<f64> = self
             .outputs
@@ -84,7 +87,12 @@ impl Episode {
             .take(steps)
             .map(|y| cost.at(y))
             .collect();
-        measured.iter().sum::<f64>() + (steps - measured.len()) as f64
+        let sum = measured.iter().sum::<f64>();
+        let missing = (steps - measured.len()) as f64;
+        match (self.truncated, measured.len()) {
+            (true, n) if n > 0 => sum + missing * sum / n as f64,
+            _ => sum + missing,
+        }
     }
 }
 
@@ -110,6 +118,7 @@ pub fn run_episode(
         outputs: Vec::with_capacity(steps + 1),
         commands: Vec::with_capacity(steps + 1),
         ended_early: false,
+        truncated: false,
         policy: match actor {
             Actor::Policy { policy, .. } => Some((*policy).clone()),
             Actor::Excitation(_) => None,
@@ -145,6 +154,7 @@ pub fn run_episode(
         let step = plant.step(&episode.commands[k])?;
         spec.check_observation(&step.observation, k + 1)?;
         (y, done) = (step.observation, step.done);
+        episode.truncated = step.done && step.truncated;
     }
     Ok(episode)
 }

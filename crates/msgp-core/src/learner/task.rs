@@ -289,6 +289,7 @@ mod tests {
             outputs: vec![y0.to_vec(), vec![0.0, 0.0]],
             commands: vec![vec![0.0], vec![0.0]],
             ended_early: false,
+            truncated: false,
             policy: None,
         }
     }

@@ -240,8 +240,8 @@ def learn_on_plant(
     progress: Optional[Callable[[Dict[str, Any]], Any]] = None,
 ) -> Dict[str, Any]:
     """The PILCO loop on `plant` (an object with `reset(seed) -> obs` and
-    `step(command) -> (obs, done)`), its signals described by `spec`, the task in the target
-    form; `msgp.learn_policy(env=...)` builds on it. Returns {"iterations", "episodes",
+    `step(command) -> (obs, terminated, truncated)`), its signals described by `spec`, the
+    task in the target form; `msgp.learn_policy(env=...)` builds on it. Returns {"iterations", "episodes",
     "policy", "settings"}; an exception of the plant or of `progress`, or Ctrl-C, is raised as
     it was with the run so far in its `partial` attribute."""
 

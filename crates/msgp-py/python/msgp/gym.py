@@ -61,7 +61,8 @@ def _flat(observation, what):
 
 
 class _GymPlant:
-    """The environment as msgp's plant: ``reset(seed) -> obs``, ``step(u) -> (obs, done)``;
+    """The environment as msgp's plant: ``reset(seed) -> obs``, ``step(u) -> (obs,
+    terminated, truncated)`` (a truncated episode's missing steps are not costed as failures);
     every episode's return is logged (seed, return) in the order run."""
 
     def __init__(self, env):
@@ -79,7 +80,7 @@ class _GymPlant:
         observation, reward, terminated, truncated, _info = self.env.step(action)
         if self.log:
             self.log[-1][1] += float(reward)
-        return _flat(observation, "env.step"), bool(terminated or truncated)
+        return _flat(observation, "env.step"), bool(terminated), bool(truncated)
 
 
 def _bounds(space, what):

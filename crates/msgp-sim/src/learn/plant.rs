@@ -190,6 +190,7 @@ impl LoopPlant for PendulumPlant {
         Ok(PlantStep {
             observation,
             done: termination != Termination::Completed,
+            truncated: false,
         })
     }
 }
