@@ -178,6 +178,20 @@ fn merge(base: &mut serde_json::Value, over: &serde_json::Value) {
     }
 }
 
+/// The seed (the first argument, 0 when absent) and the `starts=N` switch (`default` when
+/// absent) of the loop diagnostics.
+pub fn seed_and_starts(args: &[String], default: usize) -> (u64, usize) {
+    let seed = args.first().map_or(0, |s| s.parse().expect("seed"));
+    let starts = args
+        .iter()
+        .find_map(|a| {
+            a.strip_prefix("starts=")
+                .map(|n| n.parse().expect("starts"))
+        })
+        .unwrap_or(default);
+    (seed, starts)
+}
+
 /// `base` with the JSON object `arg` (a file holding one, or the text itself; absent, empty or
 /// `-`: none) merged in, key by key.
 pub fn overridden<T: serde::Serialize + serde::de::DeserializeOwned>(

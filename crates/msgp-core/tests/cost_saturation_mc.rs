@@ -22,6 +22,22 @@ fn within(what: &str, samples: &[f64], exact: f64) {
     );
 }
 
+/// Each entry's mean and each pair's covariance over `values` (one row per sample) against
+/// `mean` and `cov`.
+fn moments_within(what: &str, values: &[Vec<f64>], mean: &DVector<f64>, cov: &DMatrix<f64>) {
+    for a in 0..mean.len() {
+        let col: Vec<f64> = values.iter().map(|v| v[a]).collect();
+        within(&format!("E[{what}]"), &col, mean[a]);
+        for b in 0..mean.len() {
+            let v: Vec<f64> = values
+                .iter()
+                .map(|f| (f[a] - mean[a]) * (f[b] - mean[b]))
+                .collect();
+            within(&format!("Cov[{what}]"), &v, cov[(a, b)]);
+        }
+    }
+}
+
 fn sample(r: &mut rand::rngs::StdRng, m: &DVector<f64>, s: &DMatrix<f64>) -> Vec<DVector<f64>> {
     let l = cholesky(s, &JitterPolicy::default(), "S").expect("chol").l;
     (0..N)
@@ -62,19 +78,10 @@ fn sine_saturation_moments_match_monte_carlo() {
             .iter()
             .map(|x| (0..2).map(|i| saturate(x[i], u_max[i])).collect())
             .collect();
+        moments_within("u", &us, &mom.mean, &mom.cov);
         let io = &s * &mom.c;
         for i in 0..2 {
-            within(
-                "E[u]",
-                &us.iter().map(|u| u[i]).collect::<Vec<_>>(),
-                mom.mean[i],
-            );
             for j in 0..2 {
-                let v: Vec<f64> = us
-                    .iter()
-                    .map(|u| (u[i] - mom.mean[i]) * (u[j] - mom.mean[j]))
-                    .collect();
-                within("Cov[u]", &v, mom.cov[(i, j)]);
                 let w: Vec<f64> = xs
                     .iter()
                     .zip(&us)
@@ -114,24 +121,11 @@ fn trigonometric_feature_moments_match_monte_carlo() {
         let s = random_cov(&mut r, 3, 0.2 + 0.6 * case as f64);
         let fm = cost.feature_moments(&m, &s);
         let xs = sample(&mut r, &m, &s);
-        let fs: Vec<[f64; 5]> = xs
+        let fs: Vec<Vec<f64>> = xs
             .iter()
-            .map(|x| [x[0].sin(), x[0].cos(), x[1], x[2].sin(), x[2].cos()])
+            .map(|x| vec![x[0].sin(), x[0].cos(), x[1], x[2].sin(), x[2].cos()])
             .collect();
-        for a in 0..5 {
-            within(
-                "E[φ]",
-                &fs.iter().map(|f| f[a]).collect::<Vec<_>>(),
-                fm.mean[a],
-            );
-            for b in 0..5 {
-                let v: Vec<f64> = fs
-                    .iter()
-                    .map(|f| (f[a] - fm.mean[a]) * (f[b] - fm.mean[b]))
-                    .collect();
-                within("Cov[φ]", &v, fm.cov[(a, b)]);
-            }
-        }
+        moments_within("φ", &fs, &fm.mean, &fm.cov);
     }
 }
 

@@ -26,13 +26,14 @@ use msgp_core::MsgpError;
 use msgp_core::learner::{
     Actor, LearnerSettings, PolicyFamily, SuccessTest, TargetTask, run_episode,
 };
-use msgp_core::plant::{CommandSpec, OutputSpec, Plant as LoopPlant, PlantSpec, PlantStep};
+use msgp_core::plant::{OutputSpec, Plant as LoopPlant, PlantSpec, PlantStep};
 use msgp_core::policy::Policy;
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus;
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::error::SimError;
+use crate::learn::plant::acceleration_command;
 use crate::params::PendulumParams;
 use crate::plant::Plant;
 use crate::seed::{Stream, rng_for};
@@ -115,11 +116,7 @@ impl SwingUp {
         let rail = params.stop_x;
         let spec = PlantSpec {
             period: params.control_period(),
-            commands: vec![CommandSpec {
-                name: "acceleration".into(),
-                low: -params.action_limit,
-                high: params.action_limit,
-            }],
+            commands: vec![acceleration_command(params)],
             outputs: vec![
                 OutputSpec {
                     angle: true,

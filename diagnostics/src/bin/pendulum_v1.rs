@@ -19,7 +19,7 @@ use std::ops::ControlFlow;
 
 use msgp_core::learner::{Actor, LearnEvent, Learner, LearnerSettings, TargetTask, run_episode};
 use msgp_core::plant::Plant;
-use msgp_diagnostics::overridden;
+use msgp_diagnostics::{overridden, seed_and_starts};
 use msgp_sim::gym_pendulum::{
     GymPendulum, GymPendulumParams, pendulum_v1_settings, pendulum_v1_task,
 };
@@ -168,14 +168,7 @@ fn research(learner: &Learner, params: GymPendulumParams, n: usize) {
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let seed: u64 = args.first().map_or(0, |s| s.parse().expect("seed"));
-    let starts: usize = args
-        .iter()
-        .find_map(|a| {
-            a.strip_prefix("starts=")
-                .map(|n| n.parse().expect("starts"))
-        })
-        .unwrap_or(30);
+    let (seed, starts) = seed_and_starts(&args, 30);
     let params = GymPendulumParams::default();
     let mut env = GymPendulum::new(params);
     let target: TargetTask = overridden(&pendulum_v1_task(), args.get(2));

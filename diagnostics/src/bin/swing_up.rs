@@ -14,21 +14,14 @@ use std::ops::ControlFlow;
 
 use msgp_core::learner::{LearnEvent, Learner, LearnerSettings, TargetTask};
 use msgp_core::plant::Plant;
-use msgp_diagnostics::overridden;
+use msgp_diagnostics::{overridden, seed_and_starts};
 use msgp_sim::swing_up::{
     SwingUp, SwingUpSuccess, held_upright, swing_up_params, swing_up_settings, swing_up_task,
 };
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let seed: u64 = args.first().map_or(0, |s| s.parse().expect("seed"));
-    let starts: usize = args
-        .iter()
-        .find_map(|a| {
-            a.strip_prefix("starts=")
-                .map(|n| n.parse().expect("starts"))
-        })
-        .unwrap_or(5);
+    let (seed, starts) = seed_and_starts(&args, 5);
     let params: msgp_sim::PendulumParams = overridden(&swing_up_params(), args.get(3));
     let mut plant = SwingUp::new(&params).expect("plant");
     let target: TargetTask = overridden(&swing_up_task(), args.get(2));

@@ -11,7 +11,7 @@
 
 mod budget;
 mod episodes;
-mod plant;
+pub(crate) mod plant;
 mod problem;
 mod record;
 mod report;

@@ -45,11 +45,7 @@ impl PendulumPlant {
         params.validate()?;
         let spec = PlantSpec {
             period: params.control_period(),
-            commands: vec![CommandSpec {
-                name: "acceleration".into(),
-                low: -params.action_limit,
-                high: params.action_limit,
-            }],
+            commands: vec![acceleration_command(params)],
             outputs: vec![
                 OutputSpec {
                     angle: true,
@@ -112,6 +108,15 @@ impl PendulumPlant {
         } else {
             Termination::Completed
         }
+    }
+}
+
+/// The end effector's acceleration command within the action limit.
+pub(crate) fn acceleration_command(params: &PendulumParams) -> CommandSpec {
+    CommandSpec {
+        name: "acceleration".into(),
+        low: -params.action_limit,
+        high: params.action_limit,
     }
 }
 
