@@ -33,7 +33,7 @@ use rand::rngs::Xoshiro256PlusPlus;
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::error::SimError;
-use crate::learn::plant::acceleration_command;
+use crate::learn::plant::{acceleration_command, plant_error};
 use crate::params::PendulumParams;
 use crate::plant::Plant;
 use crate::seed::{Stream, rng_for};
@@ -157,10 +157,6 @@ impl SwingUp {
             latent.x_dot + p.sigma_x * rate * b,
         ])
     }
-}
-
-fn plant_error(e: SimError) -> MsgpError {
-    MsgpError::Plant(e.to_string())
 }
 
 impl LoopPlant for SwingUp {

@@ -120,7 +120,8 @@ pub(crate) fn acceleration_command(params: &PendulumParams) -> CommandSpec {
     }
 }
 
-fn plant_error(e: SimError) -> MsgpError {
+/// A simulator error as the loop's plant error.
+pub(crate) fn plant_error(e: SimError) -> MsgpError {
     MsgpError::Plant(e.to_string())
 }
 
