@@ -18,6 +18,7 @@ use msgp_core::model::{Method, Rollout};
 use msgp_sim::Saturation;
 use msgp_sim::figure4::Figure4Model;
 use msgp_sim::learn::{Budget, LearnSettings};
+use msgp_sim::plant_tasks::PlantTask;
 
 /// Gaussian-process dynamics models optimised for long-term predictions (MSGP).
 #[derive(Debug, Parser)]
@@ -699,6 +700,48 @@ pub enum ReproduceCommand {
     /// How MSGP and GP-NARX models generalise: the synthetic systems on three excitations they
     /// were not trained on, the real series split the other way round.
     Generalisation(GeneralisationArgs),
+    /// PILCO on a named plant task (Gymnasium's Pendulum-v1, the arm swing-up) with each loop
+    /// model, several seeds: the seeds that solved it, the interaction seconds, which model
+    /// each search ran on.
+    PlantTask(PlantTaskArgs),
+}
+
+/// Options of `msgp reproduce plant-task`.
+#[derive(Debug, Args)]
+pub struct PlantTaskArgs {
+    /// The task: pendulum-v1 (Gymnasium's, by its own equations) or swing-up (the arm-mounted
+    /// pendulum from hanging).
+    #[arg(long, value_parser = plant_task)]
+    pub task: PlantTask,
+    /// Markdown file whose `plant-task-<task>` section is (re)written.
+    #[arg(long, value_name = "RESULTS.md", default_value = "RESULTS.md")]
+    pub out: PathBuf,
+    /// Folder for every run's record and the plots [default: results/plant-tasks/<task>].
+    #[arg(long, value_name = "DIR")]
+    pub dir: Option<PathBuf>,
+    /// Seeds 0..N per model.
+    #[arg(long, default_value_t = 5)]
+    pub seeds: u64,
+    /// Policy iterations per run [default: the task's preset].
+    #[arg(long, value_name = "N")]
+    pub iterations: Option<usize>,
+    /// Models to run, comma-separated: msgp (MSGP on the free-run likelihood), msgp-filter
+    /// (MSGP on the filter likelihood, the loop's default), gp-narx (one-step GP-NARX,
+    /// standard PILCO), linear-kf (the linear-Gaussian window model).
+    #[arg(long, value_name = "MODEL,...", value_delimiter = ',', value_parser = model4,
+          default_values = ["msgp-filter", "msgp", "gp-narx", "linear-kf"])]
+    pub models: Vec<Figure4Model>,
+    /// Runs at a time, the threads (`MSGP_THREADS`, else the machine's cores) shared between
+    /// them; results do not depend on it [default: the threads].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
+    pub jobs: Option<u16>,
+    /// No progress lines on stderr.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+fn plant_task(s: &str) -> Result<PlantTask, String> {
+    s.parse()
 }
 
 /// Options of `msgp reproduce generalisation`.

@@ -25,6 +25,7 @@ fn main() -> std::process::ExitCode {
         Command::LearnPolicy(args) => commands::learn::run(args),
         Command::Reproduce(ReproduceCommand::Table1(args)) => commands::table1::run(args),
         Command::Reproduce(ReproduceCommand::Figure4(args)) => commands::figure4::run(args),
+        Command::Reproduce(ReproduceCommand::PlantTask(args)) => commands::plant_task::run(args),
         Command::Reproduce(ReproduceCommand::Generalisation(args)) => {
             commands::generalisation::run(args)
         }

@@ -737,3 +737,76 @@ fn policy_init_starts_a_loop_that_improve_continues() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("plant.json"));
 }
+
+/// `msgp reproduce plant-task` on the swing-up, one seed, two iterations, two models: the
+/// section with a row per model and the prequential record, each run's record with every
+/// iteration's score and searched model, both plots; a second call reuses the records (same
+/// section, no run started) and an unknown task is refused with the known ones.
+#[test]
+fn plant_task_reproduction_writes_records_plots_and_its_section() {
+    let dir = scratch("plant-task");
+    let args = [
+        "reproduce",
+        "plant-task",
+        "--task",
+        "swing-up",
+        "--models",
+        "msgp-filter,linear-kf",
+        "--seeds",
+        "1",
+        "--iterations",
+        "2",
+        "--dir",
+        "pt",
+    ];
+    let o = run(&dir, &args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let md = std::fs::read_to_string(dir.join("RESULTS.md")).expect("results");
+    assert!(md.contains("msgp:plant-task-swing-up:begin"), "{md}");
+    assert!(md.contains("| msgp-filter | 0/1 |"), "{md}");
+    assert!(
+        md.contains("0/1 (0 %)"),
+        "linear-kf never searches on a GP: {md}"
+    );
+    let record: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("pt/msgp-filter-seed0.json")).expect("record"),
+    )
+    .expect("JSON");
+    assert_eq!(record["task"], "swing-up");
+    assert_eq!(record["scores"].as_array().map(Vec::len), Some(2));
+    let its = record["iterations"].as_array().expect("iterations");
+    assert_eq!(its.len(), 2);
+    assert_eq!(its[0]["search_model"], "linear", "nothing predicted yet");
+    assert!(its[1]["held_out"]["gp_nll"].is_number(), "{}", its[1]);
+    assert_eq!(record["settings"]["fit"]["likelihood"], "filter");
+    let linear: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("pt/linear-kf-seed0.json")).expect("record"),
+    )
+    .expect("JSON");
+    assert_eq!(linear["settings"]["fit"]["method"], "LinearKf");
+    assert_eq!(linear["settings"]["prequential_choice"], false);
+    for png in ["pt/scores.png", "pt/costs.png"] {
+        assert!(dir.join(png).is_file(), "{png}");
+    }
+    let again = run(&dir, &args);
+    assert!(again.status.success());
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert!(err.contains("reusing") && !err.contains("started"), "{err}");
+    let md2 = std::fs::read_to_string(dir.join("RESULTS.md")).expect("results");
+    let table = |m: &str| {
+        m.lines()
+            .filter(|l| l.starts_with("| "))
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    assert_eq!(
+        table(&md),
+        table(&md2),
+        "the same rows from the reused records"
+    );
+    let bad = run(&dir, &["reproduce", "plant-task", "--task", "cartpole"]);
+    assert!(!bad.status.success());
+    let bad = String::from_utf8_lossy(&bad.stderr);
+    assert!(bad.contains("pendulum-v1, swing-up"), "{bad}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -14,6 +14,7 @@
 //!   seeded [`RandomExcitation`].
 //! * [`run_episode`] — seeded episodes; same seed, same bytes.
 //! * [`stability_test`] — five fixed starts, pass/fail per start.
+//! * [`plant_tasks`] — the loop's named plant tasks (Pendulum-v1, the arm swing-up) per model.
 //! * [`figure4`] — the paper's Figure 4 as independent learning runs: plan, units, report.
 //! * [`plot`] — PNG cost curves of learning runs (one run, or bands over seeds).
 //! * [`log`] — CSV and MCAP (JSON messages, Foxglove-ready) run logs, written atomically
@@ -44,6 +45,7 @@ pub mod log;
 pub mod params;
 pub mod physics;
 pub mod plant;
+pub mod plant_tasks;
 pub mod plot;
 pub mod seed;
 pub mod stability;

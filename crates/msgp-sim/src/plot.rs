@@ -218,10 +218,16 @@ type Pick = fn(&CostPoint) -> f64;
 
 /// Mean and standard deviation across runs of `f` at each iteration (runs may differ in length).
 fn band(runs: &[Vec<CostPoint>], f: impl Fn(&CostPoint) -> f64) -> Vec<(f64, f64, f64)> {
+    let values: Vec<Vec<f64>> = runs.iter().map(|r| r.iter().map(&f).collect()).collect();
+    band_of(&values)
+}
+
+/// Mean and standard deviation across runs at each iteration (runs may differ in length).
+fn band_of(runs: &[Vec<f64>]) -> Vec<(f64, f64, f64)> {
     let last = runs.iter().map(Vec::len).max().unwrap_or(0);
     (0..last)
         .filter_map(|i| {
-            let v: Vec<f64> = runs.iter().filter_map(|r| r.get(i)).map(&f).collect();
+            let v: Vec<f64> = runs.iter().filter_map(|r| r.get(i)).copied().collect();
             if v.is_empty() {
                 return None;
             }
@@ -311,6 +317,84 @@ fn draw_bands(path: &Path, models: &[(String, Vec<Vec<CostPoint>>)]) -> Result<(
     Ok(())
 }
 
+/// A task's score per iteration: per model, the mean ± 1 standard deviation over seeds (the
+/// y axis spans the data, negative returns included), the mean as a line.
+pub fn plot_score_bands(
+    path: &Path,
+    score: &str,
+    models: &[(String, Vec<Vec<f64>>)],
+) -> Result<(), SimError> {
+    font()?;
+    draw_score_bands(path, score, models).map_err(|m| failed(path, m))
+}
+
+fn draw_score_bands(
+    path: &Path,
+    score: &str,
+    models: &[(String, Vec<Vec<f64>>)],
+) -> Result<(), String> {
+    let e = |e: DrawingAreaErrorKind<_>| e.to_string();
+    let bands: Vec<Vec<(f64, f64, f64)>> = models.iter().map(|(_, runs)| band_of(runs)).collect();
+    let points = || {
+        bands
+            .iter()
+            .flatten()
+            .filter(|p| p.1.is_finite() && p.2.is_finite())
+    };
+    if points().next().is_none() {
+        return Err("nothing to plot".to_string());
+    }
+    let last = points().map(|p| p.0).fold(1.0_f64, f64::max);
+    let lo = points().map(|p| p.1 - p.2).fold(f64::INFINITY, f64::min);
+    let hi = points()
+        .map(|p| p.1 + p.2)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let pad = 0.05 * (hi - lo).max(1.0);
+    let root = BitMapBackend::new(path, (WIDTH, HEIGHT)).into_drawing_area();
+    root.fill(&WHITE).map_err(e)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(score, ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(64)
+        .build_cartesian_2d(0.8_f64..(last + 0.2), (lo - pad)..(hi + pad))
+        .map_err(e)?;
+    chart
+        .configure_mesh()
+        .x_desc("iteration")
+        .y_desc("score of the iteration's policy")
+        .x_labels(last as usize)
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .label_style(("sans-serif", 13))
+        .light_line_style(WHITE.mix(0.0))
+        .draw()
+        .map_err(e)?;
+    for (j, ((label, runs), b)) in models.iter().zip(&bands).enumerate() {
+        let colour = PALETTE[j % PALETTE.len()];
+        let mut poly: Vec<(f64, f64)> = b.iter().map(|p| (p.0, p.1 + p.2)).collect();
+        poly.extend(b.iter().rev().map(|p| (p.0, p.1 - p.2)));
+        chart
+            .draw_series(std::iter::once(Polygon::new(
+                poly,
+                colour.mix(0.15).filled(),
+            )))
+            .map_err(e)?;
+        chart
+            .draw_series(LineSeries::new(
+                b.iter().map(|p| (p.0, p.1)),
+                colour.stroke_width(2),
+            ))
+            .map_err(e)?
+            .label(format!("{label} ({} runs)", runs.len()))
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
+            });
+    }
+    legend(&mut chart)?;
+    root.present().map_err(e)?;
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -339,7 +423,13 @@ mod tests {
         plot_costs(&one, "a run", &[curve]).expect("plot");
         let bands = dir.join("bands.png");
         plot_cost_bands(&bands, &[("msgp".to_string(), vec![run(0.0), run(1.0)])]).expect("bands");
-        for path in [&one, &bands] {
+        let scores = dir.join("scores.png");
+        let returns = vec![vec![-900.0, -400.0, -180.0], vec![-1100.0, -300.0]];
+        plot_score_bands(&scores, "mean return", &[("msgp".to_string(), returns)]).expect("scores");
+        let none = plot_score_bands(&dir.join("none.png"), "x", &[("m".to_string(), vec![])])
+            .expect_err("no scores");
+        assert!(none.to_string().contains("nothing to plot"), "{none}");
+        for path in [&one, &bands, &scores] {
             let bytes = std::fs::read(path).expect("written");
             assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{}", path.display());
             assert!(bytes.len() > 10_000, "{} is nearly empty", path.display());

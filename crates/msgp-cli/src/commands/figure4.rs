@@ -134,7 +134,7 @@ fn run_side_by_side(
 
 /// This process's arguments after the binary, quoted for a POSIX shell where needed: the
 /// section names exactly what made it, budget flags included.
-fn invocation() -> String {
+pub(crate) fn invocation() -> String {
     std::env::args_os()
         .skip(1)
         .map(|a| {

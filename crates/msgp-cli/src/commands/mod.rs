@@ -7,6 +7,7 @@ pub mod figure4;
 pub mod fit;
 pub mod generalisation;
 pub mod learn;
+pub mod plant_task;
 pub mod policy;
 pub mod side_by_side;
 pub mod sim;

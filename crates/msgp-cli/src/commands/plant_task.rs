@@ -1,0 +1,108 @@
+//! `msgp reproduce plant-task --task NAME`: PILCO on a named plant task with each loop model
+//! over seeds, `--jobs` runs at a time (`msgp_sim::plant_tasks`: plan → runs' records →
+//! report); records in the folder with the plan's settings are reused.
+
+use std::time::Instant;
+
+use anyhow::Context;
+use msgp_core::learner::LearnEvent;
+use msgp_core::numeric::parallel::Threads;
+use msgp_core::reproduce::results::{Provenance, machine, today, update_section};
+use msgp_sim::figure4::Unit;
+use msgp_sim::plant_tasks::{self, TaskPlan, TaskRun};
+
+use crate::args::PlantTaskArgs;
+use crate::commands::figure4::invocation;
+use crate::commands::learn::flagged;
+use crate::commands::side_by_side;
+
+/// Runs `msgp reproduce plant-task`.
+pub fn run(args: &PlantTaskArgs) -> anyhow::Result<()> {
+    let started = Instant::now();
+    let plan = TaskPlan::new(
+        args.task,
+        args.models.clone(),
+        (0..args.seeds).collect(),
+        args.iterations,
+        args.dir.clone(),
+    )
+    .map_err(flagged)?;
+    let mut done: Vec<Option<TaskRun>> = Vec::new();
+    let mut todo = Vec::new();
+    for (k, unit) in plan.units().into_iter().enumerate() {
+        match plan.finished(&unit)? {
+            Some(run) => {
+                if !args.quiet {
+                    eprintln!(
+                        "== {}: reusing {}",
+                        unit.name(),
+                        plan.record_path(&unit).display()
+                    );
+                }
+                done.push(Some(run));
+            }
+            None => {
+                done.push(None);
+                todo.push((k, unit));
+            }
+        }
+    }
+    let (jobs, per_run) = side_by_side::share(args.jobs, Threads::from_env()?.get(), todo.len())?;
+    let clock = Instant::now();
+    let finished = side_by_side::run(todo, jobs, |(k, unit): (usize, Unit)| {
+        let name = unit.name();
+        let progress = !args.quiet && jobs == 1;
+        if !args.quiet {
+            eprintln!(
+                "== {name}: started ({:.0} s)",
+                clock.elapsed().as_secs_f64()
+            );
+        }
+        let run = plant_tasks::run_unit(&plan, unit, per_run, &mut |e| {
+            if let (true, LearnEvent::Iteration(r)) = (progress, e) {
+                eprintln!(
+                    "   iteration {:2}: model {:?}, predicted {:.1}, actual {:.1}, solved {:?} \
+                     (fit {:.1} s, search {:.1} s)",
+                    r.iteration,
+                    r.search_model,
+                    r.predicted_cost,
+                    r.actual_cost,
+                    r.success,
+                    r.fit_seconds,
+                    r.search_seconds
+                );
+            }
+        })
+        .with_context(|| format!("run {name}"))?;
+        if !args.quiet {
+            eprintln!(
+                "== {name}: done in {:.0} s, last score {:?}, first success {}{} ({:.0} s)",
+                run.seconds,
+                run.scores.last(),
+                run.first_success()
+                    .map_or("none".to_string(), |r| format!("iteration {}", r.iteration)),
+                run.error
+                    .as_ref()
+                    .map_or(String::new(), |e| format!(", stopped: {e}")),
+                clock.elapsed().as_secs_f64()
+            );
+        }
+        Ok((k, run))
+    })?;
+    for (k, run) in finished {
+        done[k] = Some(run);
+    }
+    let runs: Vec<TaskRun> = done.into_iter().flatten().collect();
+    let provenance = Provenance {
+        command: format!(
+            "`cargo run --release --locked --bin msgp -- {}`",
+            invocation()
+        ),
+        seconds: started.elapsed().as_secs_f64(),
+        machine: machine(),
+        date: today(),
+    };
+    let markdown = plant_tasks::report(&plan, &runs, &provenance)?;
+    update_section(&args.out, &plan.section(), &markdown)?;
+    crate::render::output::out(&markdown)
+}
