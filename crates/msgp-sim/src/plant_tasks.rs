@@ -3,7 +3,7 @@
 //! the arm-mounted pendulum's swing-up ([`crate::swing_up`]).
 //!
 //! A [`TaskPlan`] (task, models, seeds, iterations, folder) lists its runs (one model × seed
-//! each, [`figure4::Unit`]); [`run_unit`] runs one loop with the task's preset and writes its
+//! each, [`crate::figure4::Unit`]); [`run_unit`] runs one loop with the task's preset and writes its
 //! record ([`TaskRun`]: every iteration's report and the task's score of its policy) to
 //! `<folder>/<model>-seed<k>.json`; a record with the plan's settings is reused. [`report`]
 //! draws the score and cost bands and renders the markdown section: per model, the seeds that
