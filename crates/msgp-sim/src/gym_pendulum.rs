@@ -4,7 +4,9 @@
 //! θ = 0 upright; observation `[cos θ, sin θ, θ̇]`; starts uniform in `θ ∈ [−π, π]`,
 //! `θ̇ ∈ [−1, 1]` (this crate's seeded generator, not numpy's: the same distribution, other
 //! draws); reward `−(θ² + 0.1 θ̇² + 0.001 u²)` with θ wrapped to `[−π, π]`. The torque is
-//! float32 as the environment's action, and so are its products (NumPy's promotion).
+//! float32 as the environment's action, and so are its products (NumPy's promotion); the
+//! observation is float32 as the environment returns it (the loop's run from a seed diverges
+//! with the last bits of its data: `docs/design.md`, "The plant tasks, per model").
 //!
 //! The Python bindings run the environment itself; this copy lets the Rust tests, benchmarks
 //! and diagnostics run the task without Python. Its test replays a run of gymnasium's own
@@ -134,8 +136,11 @@ impl GymPendulum {
         self.observation()
     }
 
+    /// `[cos θ, sin θ, θ̇]` as float32, as the environment returns it.
     fn observation(&self) -> Vec<f64> {
-        vec![self.theta.cos(), self.theta.sin(), self.omega]
+        [self.theta.cos(), self.theta.sin(), self.omega]
+            .map(|v| f64::from(v as f32))
+            .to_vec()
     }
 }
 
@@ -199,7 +204,9 @@ mod tests {
         let mut env = GymPendulum::new(GymPendulumParams::default());
         env.set_state(2.5, -0.7);
         for u in torques {
-            env.step(&[f64::from(u)]).expect("steps");
+            let y = env.step(&[f64::from(u)]).expect("steps").observation;
+            assert!(y.iter().all(|&v| f64::from(v as f32) == v), "float32: {y:?}");
+            assert!((y[2] - env.omega).abs() < 1e-6 && y[2] != env.omega, "{y:?}");
         }
         assert!(
             (env.theta - 3.097_569_834_353_038_2).abs() < 1e-12,
