@@ -205,8 +205,14 @@ mod tests {
         env.set_state(2.5, -0.7);
         for u in torques {
             let y = env.step(&[f64::from(u)]).expect("steps").observation;
-            assert!(y.iter().all(|&v| f64::from(v as f32) == v), "float32: {y:?}");
-            assert!((y[2] - env.omega).abs() < 1e-6 && y[2] != env.omega, "{y:?}");
+            assert!(
+                y.iter().all(|&v| f64::from(v as f32) == v),
+                "float32: {y:?}"
+            );
+            assert!(
+                (y[2] - env.omega).abs() < 1e-6 && y[2] != env.omega,
+                "{y:?}"
+            );
         }
         assert!(
             (env.theta - 3.097_569_834_353_038_2).abs() < 1e-12,

@@ -502,7 +502,7 @@ fn render(
     };
     let _ = writeln!(
         s,
-        "{} · {} · {:.0} s · {}\n",
+        "{} · {} · {:.0} s of learning runs, summed · {}\n",
         provenance.command, provenance.machine, provenance.seconds, provenance.date
     );
     let settings = plan.settings(&Unit {
