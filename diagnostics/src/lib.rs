@@ -18,6 +18,9 @@
 //!   docs/design.md "Exploration: how much of the gain box balances, …".
 //! - `swing_up`: the learning loop on the arm swing-up, iteration by iteration; docs/design.md
 //!   "Angles on the pole's tip, and the arm swing-up plant".
+//! - `swing_up_models`: MSGP and GP-NARX fitted to the same swing-up episodes, each model's
+//!   predictions of both searched policies against the plant; docs/design.md "The plant
+//!   tasks, per model".
 //! - `true_cost`: the loop's cost minimised with the plant as the model, and whether its
 //!   minimiser is stable; docs/design.md "Exploration: …" ("The objective itself: what a perfect
 //!   model would choose").
