@@ -725,6 +725,55 @@ fn policy_init_starts_a_loop_that_improve_continues() {
     let summary: Value = serde_json::from_slice(&o.stdout).expect("summary");
     assert_eq!(summary["iteration"], 1);
     assert!(dir.join("p01.json").exists());
+    // without --input/--output the plant's signal names choose the columns, in any order:
+    // the same next policy from the log with its columns shuffled
+    let text = std::fs::read_to_string(dir.join("ep00.csv")).expect("episode");
+    let shuffled: String = text
+        .lines()
+        .map(|l| {
+            let c: Vec<&str> = l.split(',').collect();
+            format!("{},{},{},{}\n", c[3], c[0], c[2], c[1])
+        })
+        .collect();
+    std::fs::write(dir.join("shuffled.csv"), shuffled).expect("shuffled");
+    let improve = |data: &str, out: &str| {
+        let a = [
+            "policy", "improve", "--data", data, "--policy", "p00.json", "--out", out,
+        ];
+        run(&dir, &a)
+    };
+    let o = improve("shuffled.csv", "p01-named.json");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("warning"));
+    let policy = |f: &str| -> Value {
+        let v: Value = serde_json::from_str(&std::fs::read_to_string(dir.join(f)).expect("policy"))
+            .expect("JSON");
+        v["policy"].clone()
+    };
+    assert_eq!(policy("p01.json"), policy("p01-named.json"));
+    // a log that names none of them, with fewer default columns than the plant has signals,
+    // is refused with the names it lacks
+    let renamed = text.replacen("t,u,angle,y", "t,cmd,a,b", 1);
+    std::fs::write(dir.join("renamed.csv"), renamed).expect("renamed");
+    let o = improve("renamed.csv", "p01-position.json");
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("(commands u; outputs angle, y)") && err.contains("--input and --output"),
+        "{err}"
+    );
+    // the simulator's log columns are as many as the plant's signals: matched by position,
+    // which the warning spells out, to the same next policy
+    let sim = text.replacen("t,u,angle,y", "t,command,meas_theta,meas_x", 1);
+    std::fs::write(dir.join("sim.csv"), sim).expect("sim");
+    let o = improve("sim.csv", "p01-position.json");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("commands command as u; outputs meas_theta as angle, meas_x as y"),
+        "{err}"
+    );
+    assert_eq!(policy("p01.json"), policy("p01-position.json"));
     // bad input: a width that is no number, a target of the wrong size, a missing plant
     let o = init(&["--target", "0,0.5", "--widths", "0.5,wide"]);
     assert!(!o.status.success());

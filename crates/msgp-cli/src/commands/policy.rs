@@ -8,7 +8,7 @@ use std::ops::ControlFlow;
 use std::path::Path;
 
 use anyhow::{Context, bail};
-use msgp_core::data::dataset::{Dataset, Part};
+use msgp_core::data::dataset::{Dataset, Part, Selection};
 use msgp_core::learner::{
     Episode, LearnEvent, Learner, LearnerSettings, PolicyFamily, SearchModel, TargetTask,
 };
@@ -18,7 +18,9 @@ use msgp_core::plant::PlantSpec;
 use msgp_core::policy_file::{PolicyFile, Prediction, TaskRecord};
 use serde_json::json;
 
-use crate::args::{ImproveArgs, PolicyCommand, PolicyEvalArgs, PolicyFamilyArg, PolicyInitArgs};
+use crate::args::{
+    DataArgs, ImproveArgs, PolicyCommand, PolicyEvalArgs, PolicyFamilyArg, PolicyInitArgs,
+};
 use crate::render::output::{out, out_json};
 
 /// Runs `msgp policy …`.
@@ -167,6 +169,56 @@ fn episode(
     })
 }
 
+/// The logged episodes: the columns `--output`/`--input` name; without either, the plant's own
+/// signal names when the logs have them all (in any column order), else the logs' default
+/// columns (`msgp fit`'s) matched to the plant's signals by position when they are as many,
+/// which a warning spells out.
+fn logged_episodes(data: &DataArgs, plant: &PlantSpec) -> anyhow::Result<Dataset> {
+    let chosen = data.selection();
+    if !data.output.is_empty() || !data.input.is_empty() {
+        return Ok(Dataset::load(&data.data, &chosen)?);
+    }
+    let outputs: Vec<String> = plant.outputs.iter().map(|o| o.name.clone()).collect();
+    let inputs: Vec<String> = plant.commands.iter().map(|c| c.name.clone()).collect();
+    let by_name = Selection {
+        inputs: &inputs,
+        outputs: &outputs,
+        ..chosen
+    };
+    if let Ok(named) = Dataset::load(&data.data, &by_name) {
+        return Ok(named);
+    }
+    let loaded = Dataset::load(&data.data, &chosen)?;
+    if loaded.outputs.len() != outputs.len() || loaded.inputs.len() != inputs.len() {
+        bail!(
+            "the logs do not have the plant's signals as columns (commands {}; outputs {}), \
+             and their default columns are {} commands and {} outputs: name the columns with \
+             --input and --output",
+            inputs.join(", "),
+            outputs.join(", "),
+            loaded.inputs.len(),
+            loaded.outputs.len()
+        );
+    }
+    if loaded.outputs != outputs || loaded.inputs != inputs {
+        let pairs = |logged: &[String], signals: &[String]| -> String {
+            logged
+                .iter()
+                .zip(signals)
+                .map(|(l, s)| format!("{l} as {s}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        eprintln!(
+            "warning: the logs do not name every signal of the plant; matched by position: \
+             commands {}; outputs {} (name them with --input and --output)",
+            pairs(&loaded.inputs, &inputs),
+            pairs(&loaded.outputs, &outputs)
+        );
+    }
+    Ok(loaded)
+}
+
 fn improve(args: &ImproveArgs) -> anyhow::Result<()> {
     let Some((first_path, _)) = args.policies.split_first() else {
         bail!("--policy: at least the loop's first policy file");
@@ -189,7 +241,7 @@ fn improve(args: &ImproveArgs) -> anyhow::Result<()> {
             })?;
         ran.push(policy);
     }
-    let data = Dataset::load(&args.data.data, &args.data.selection())?;
+    let data = logged_episodes(&args.data, &first.plant)?;
     for w in &data.warnings {
         eprintln!("warning: {w}");
     }
