@@ -834,7 +834,7 @@ fn plant_task_reproduction_writes_records_plots_and_its_section() {
     .expect("JSON");
     assert_eq!(linear["settings"]["fit"]["method"], "LinearKf");
     assert_eq!(linear["settings"]["prequential_choice"], false);
-    for png in ["pt/scores.png", "pt/costs.png"] {
+    for png in ["pt/scores.png", "pt/costs.png", "pt/swing-up.png"] {
         assert!(dir.join(png).is_file(), "{png}");
     }
     let again = run(&dir, &args);

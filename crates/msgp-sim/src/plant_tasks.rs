@@ -16,6 +16,7 @@
 //! solver); linear-kf (the linear-Gaussian window model alone). Every other setting is the
 //! task's preset.
 
+use std::f64::consts::TAU;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
@@ -27,6 +28,7 @@ use msgp_core::learner::{
 use msgp_core::loss::Likelihood;
 use msgp_core::plant::Plant;
 use msgp_core::policy::Policy;
+use msgp_core::policy_file::PolicyRecord;
 use msgp_core::reproduce::results::Provenance;
 use serde::{Deserialize, Serialize};
 
@@ -34,7 +36,7 @@ use crate::atomic::write_atomically;
 use crate::error::SimError;
 use crate::figure4::{Figure4Model, Unit};
 use crate::gym_pendulum::{GymPendulum, GymPendulumParams, pendulum_v1_settings, pendulum_v1_task};
-use crate::plot::{CostPoint, plot_cost_bands, plot_score_bands};
+use crate::plot::{CostPoint, SignalPanel, plot_cost_bands, plot_score_bands, plot_signals};
 use crate::swing_up::{
     SwingUp, held_upright, success_seed, swing_up_params, swing_up_settings, swing_up_task,
 };
@@ -248,6 +250,9 @@ pub struct TaskRun {
     /// Why the loop stopped before its last iteration, if it did.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+    /// The policy of the last iteration (what a user gets).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub last_policy: Option<PolicyRecord>,
     /// Wall-clock seconds.
     pub seconds: f64,
 }
@@ -418,6 +423,7 @@ pub fn run_unit(
         iterations: learner.reports().to_vec(),
         scores: scores.scores,
         error: outcome.err().map(|e| e.to_string()),
+        last_policy: Some(PolicyRecord::from(learner.policy())),
         seconds: clock.elapsed().as_secs_f64(),
     };
     std::fs::create_dir_all(&plan.dir).map_err(|source| SimError::Io {
@@ -471,7 +477,109 @@ pub fn report(
         })
         .collect();
     plot_cost_bands(&costs_png, &bands)?;
-    Ok(render(plan, runs, provenance, &scores_png, &costs_png))
+    let shown = match plan.task {
+        PlantTask::SwingUp => shown_swing_up(runs),
+        PlantTask::PendulumV1 => None,
+    };
+    let swing = match shown {
+        Some((run, policy)) => {
+            let path = plan.dir.join("swing-up.png");
+            plot_swing_up(&path, run, &policy)?;
+            Some((path, run))
+        }
+        None => None,
+    };
+    let mut markdown = render(plan, runs, provenance, &scores_png, &costs_png);
+    if let Some((path, run)) = swing {
+        let _ = writeln!(
+            markdown,
+            "\n{} seed {}'s last policy from the success test's {SWING_UP_STARTS} starts near \
+             hanging (the pole's angle from upright and the end effector's position; shaded: \
+             what success asks of the angle): `{}`.",
+            run.unit.model.name(),
+            run.unit.seed,
+            path.display()
+        );
+    }
+    Ok(markdown)
+}
+
+/// The swing-up run whose last policy the report draws: the first whose last policy solves the
+/// task, else the one whose last policy held the most starts, then the lowest last episode
+/// cost; only runs that kept their policy.
+fn shown_swing_up(runs: &[TaskRun]) -> Option<(&TaskRun, Policy)> {
+    let key = |r: &TaskRun| {
+        (
+            r.solved(),
+            r.scores.last().copied().unwrap_or(0.0),
+            -r.iterations.last().map_or(f64::INFINITY, |i| i.actual_cost),
+        )
+    };
+    let best = runs
+        .iter()
+        .filter(|r| r.last_policy.is_some())
+        .reduce(|a, b| if key(b) > key(a) { b } else { a })?;
+    let policy = best.last_policy.as_ref()?.to_policy().ok()?;
+    Some((best, policy))
+}
+
+/// Draws `policy`'s episodes from the swing-up's success-test starts.
+fn plot_swing_up(path: &Path, run: &TaskRun, policy: &Policy) -> Result<(), SimError> {
+    let mut plant = SwingUp::new(&swing_up_params())?;
+    let rest = plant.spec().bounds()?.mid();
+    let actor = Actor::Policy {
+        policy,
+        rest: &rest,
+    };
+    let period = plant.spec().period;
+    let steps = run.target.episode_steps;
+    let mut angle = Vec::new();
+    let mut position = Vec::new();
+    for k in 0..SWING_UP_STARTS {
+        let ep = run_episode(&mut plant, &actor, success_seed(k), steps)?;
+        let at = |i: usize| i as f64 * period;
+        let label = format!("start {k}");
+        // the angle unwrapped, from the upright position the episode ends nearest to
+        let turns = ep.outputs.last().map_or(0.0, |y| (y[0] / TAU).round());
+        angle.push((
+            label.clone(),
+            ep.outputs
+                .iter()
+                .enumerate()
+                .map(|(i, y)| (at(i), y[0] - TAU * turns))
+                .collect(),
+        ));
+        position.push((
+            label,
+            ep.outputs
+                .iter()
+                .enumerate()
+                .map(|(i, y)| (at(i), y[2]))
+                .collect(),
+        ));
+    }
+    let end = steps as f64 * period;
+    let hold = crate::swing_up::HOLD_SECONDS;
+    let tolerance = crate::swing_up::HOLD_TOLERANCE;
+    let panels = [
+        SignalPanel {
+            label: "angle from the upright it ends at [rad]".to_string(),
+            lines: angle,
+            band: Some((end - hold, end, -tolerance, tolerance)),
+        },
+        SignalPanel {
+            label: "end effector x [m]".to_string(),
+            lines: position,
+            band: None,
+        },
+    ];
+    let title = format!(
+        "swing-up: {} seed {}, last policy ({} iterations)",
+        run.unit.model.name(),
+        run.unit.seed,
+        run.iterations.len()
+    );
+    plot_signals(path, &title, &panels)
 }
 
 fn cost_point(r: &IterationReport) -> CostPoint {
@@ -689,6 +797,7 @@ mod tests {
             iterations: vec![report(1, lin), report(2, lin), report(3, gp), report(4, gp)],
             scores: vec![0.0, 0.0, 5.0, 4.0],
             error: None,
+            last_policy: None,
             seconds: 1.0,
         };
         assert_eq!(run.gp_searches(), (2, 3));

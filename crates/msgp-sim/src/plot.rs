@@ -395,6 +395,89 @@ fn draw_score_bands(
     Ok(())
 }
 
+/// One panel of [`plot_signals`]: a signal of several episodes over time.
+#[derive(Clone, Debug)]
+pub struct SignalPanel {
+    /// The y axis' label.
+    pub label: String,
+    /// Per episode: legend label and `(t, value)` points.
+    pub lines: Vec<(String, Vec<(f64, f64)>)>,
+    /// A band drawn behind the lines (`t₀, t₁, low, high`): what success asks of the signal.
+    pub band: Option<(f64, f64, f64, f64)>,
+}
+
+/// Episodes over time, one panel per signal stacked vertically (a learned swing-up: the pole's
+/// angle from upright and the end effector's position).
+pub fn plot_signals(path: &Path, title: &str, panels: &[SignalPanel]) -> Result<(), SimError> {
+    font()?;
+    draw_signals(path, title, panels).map_err(|m| failed(path, m))
+}
+
+fn draw_signals(path: &Path, title: &str, panels: &[SignalPanel]) -> Result<(), String> {
+    let e = |e: DrawingAreaErrorKind<_>| e.to_string();
+    let points = || {
+        panels
+            .iter()
+            .flat_map(|p| p.lines.iter().flat_map(|l| &l.1))
+    };
+    if points().next().is_none() {
+        return Err("nothing to plot".to_string());
+    }
+    let t_end = points().map(|p| p.0).fold(0.0_f64, f64::max).max(1e-9);
+    let root =
+        BitMapBackend::new(path, (WIDTH, 300 * panels.len() as u32 + 40)).into_drawing_area();
+    root.fill(&WHITE).map_err(e)?;
+    let (top, rest) = root.split_vertically(40);
+    top.titled(title, ("sans-serif", 20)).map_err(e)?;
+    for (panel, area) in panels.iter().zip(rest.split_evenly((panels.len(), 1))) {
+        let values = panel.lines.iter().flat_map(|l| l.1.iter().map(|p| p.1));
+        let (lo, hi) = values
+            .filter(|v| v.is_finite())
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v), b.max(v))
+            });
+        let pad = 0.05 * (hi - lo).max(0.1);
+        let mut chart = ChartBuilder::on(&area)
+            .margin(12)
+            .x_label_area_size(36)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..t_end, (lo - pad)..(hi + pad))
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .x_desc("time [s]")
+            .y_desc(panel.label.as_str())
+            .label_style(("sans-serif", 13))
+            .light_line_style(WHITE.mix(0.0))
+            .draw()
+            .map_err(e)?;
+        if let Some((t0, t1, low, high)) = panel.band {
+            chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [(t0, low), (t1, high)],
+                    RGBColor(44, 160, 44).mix(0.15).filled(),
+                )))
+                .map_err(e)?;
+        }
+        for (k, (label, line)) in panel.lines.iter().enumerate() {
+            let colour = PALETTE[k % PALETTE.len()];
+            chart
+                .draw_series(LineSeries::new(
+                    line.iter().copied(),
+                    colour.stroke_width(2),
+                ))
+                .map_err(e)?
+                .label(label.as_str())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
+                });
+        }
+        legend(&mut chart)?;
+    }
+    root.present().map_err(e)?;
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -429,7 +512,26 @@ mod tests {
         let none = plot_score_bands(&dir.join("none.png"), "x", &[("m".to_string(), vec![])])
             .expect_err("no scores");
         assert!(none.to_string().contains("nothing to plot"), "{none}");
-        for path in [&one, &bands, &scores] {
+        let signals = dir.join("signals.png");
+        let panel = SignalPanel {
+            label: "angle".to_string(),
+            lines: vec![(
+                "start 0".to_string(),
+                (0..50)
+                    .map(|k| (0.1 * k as f64, (0.1 * k as f64).cos()))
+                    .collect(),
+            )],
+            band: Some((3.0, 5.0, -0.1, 0.1)),
+        };
+        plot_signals(&signals, "a swing", &[panel.clone(), panel]).expect("signals");
+        let empty_panel = SignalPanel {
+            label: "x".to_string(),
+            lines: vec![],
+            band: None,
+        };
+        let e = plot_signals(&dir.join("s.png"), "none", &[empty_panel]).expect_err("empty");
+        assert!(e.to_string().contains("nothing to plot"), "{e}");
+        for path in [&one, &bands, &scores, &signals] {
             let bytes = std::fs::read(path).expect("written");
             assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{}", path.display());
             assert!(bytes.len() > 10_000, "{} is nearly empty", path.display());
