@@ -22,8 +22,8 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 use msgp_core::learner::{
-    Actor, IterationReport, LearnEvent, Learner, LearnerSettings, SearchModel, SuccessTest,
-    TargetTask, run_episode,
+    Actor, Episode, IterationReport, LearnEvent, Learner, LearnerSettings, SearchModel,
+    SuccessTest, TargetTask, run_episode,
 };
 use msgp_core::loss::Likelihood;
 use msgp_core::plant::Plant;
@@ -194,25 +194,29 @@ pub fn pendulum_v1_return(policy: &Policy, params: GymPendulumParams) -> Result<
 /// The swing-up's score of `policy`: of [`SWING_UP_STARTS`] seeded starts near hanging
 /// ([`success_seed`]), how many whole episodes end held upright ([`held_upright`]).
 pub fn swing_up_held(policy: &Policy) -> Result<usize, SimError> {
+    let period = swing_up_params().control_period();
+    let held = success_episodes(policy, swing_up_task().episode_steps)?
+        .iter()
+        .filter(|ep| {
+            let thetas: Vec<f64> = ep.outputs.iter().map(|y| y[0]).collect();
+            !ep.ended_early && held_upright(&thetas, period)
+        })
+        .count();
+    Ok(held)
+}
+
+/// `policy`'s episodes of `steps` control steps from the swing-up's [`SWING_UP_STARTS`]
+/// success-test starts ([`success_seed`]).
+fn success_episodes(policy: &Policy, steps: usize) -> Result<Vec<Episode>, SimError> {
     let mut plant = SwingUp::new(&swing_up_params())?;
     let rest = plant.spec().bounds()?.mid();
     let actor = Actor::Policy {
         policy,
         rest: &rest,
     };
-    let period = plant.spec().period;
-    let mut held = 0;
-    for k in 0..SWING_UP_STARTS {
-        let ep = run_episode(
-            &mut plant,
-            &actor,
-            success_seed(k),
-            swing_up_task().episode_steps,
-        )?;
-        let thetas: Vec<f64> = ep.outputs.iter().map(|y| y[0]).collect();
-        held += usize::from(!ep.ended_early && held_upright(&thetas, period));
-    }
-    Ok(held)
+    (0..SWING_UP_STARTS)
+        .map(|k| Ok(run_episode(&mut plant, &actor, success_seed(k), steps)?))
+        .collect()
 }
 
 /// The task's score of every iteration's policy, kept as the loop's success test runs.
@@ -525,19 +529,12 @@ fn shown_swing_up(runs: &[TaskRun]) -> Option<(&TaskRun, Policy)> {
 
 /// Draws `policy`'s episodes from the swing-up's success-test starts.
 fn plot_swing_up(path: &Path, run: &TaskRun, policy: &Policy) -> Result<(), SimError> {
-    let mut plant = SwingUp::new(&swing_up_params())?;
-    let rest = plant.spec().bounds()?.mid();
-    let actor = Actor::Policy {
-        policy,
-        rest: &rest,
-    };
-    let period = plant.spec().period;
+    let period = swing_up_params().control_period();
     let steps = run.target.episode_steps;
+    let at = |i: usize| i as f64 * period;
     let mut angle = Vec::new();
     let mut position = Vec::new();
-    for k in 0..SWING_UP_STARTS {
-        let ep = run_episode(&mut plant, &actor, success_seed(k), steps)?;
-        let at = |i: usize| i as f64 * period;
+    for (k, ep) in success_episodes(policy, steps)?.iter().enumerate() {
         let label = format!("start {k}");
         // the angle unwrapped, from the upright position the episode ends nearest to
         let turns = ep.outputs.last().map_or(0.0, |y| (y[0] / TAU).round());

@@ -10,6 +10,7 @@
 use std::path::Path;
 use std::sync::OnceLock;
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
@@ -239,6 +240,37 @@ fn band_of(runs: &[Vec<f64>]) -> Vec<(f64, f64, f64)> {
         .collect()
 }
 
+/// One model's band on `chart`: the mean ± 1 standard deviation per iteration (`band`, from
+/// [`band_of`]) shaded, its lower edge cut at `floor` when given, the mean as a line labelled
+/// `label`.
+fn draw_band<'a, DB: DrawingBackend + 'a>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    colour: RGBColor,
+    band: &[(f64, f64, f64)],
+    label: &str,
+    floor: Option<f64>,
+) -> Result<(), String> {
+    let e = |e: DrawingAreaErrorKind<_>| e.to_string();
+    let low = |v: f64| floor.map_or(v, |f| v.max(f));
+    let mut poly: Vec<(f64, f64)> = band.iter().map(|p| (p.0, p.1 + p.2)).collect();
+    poly.extend(band.iter().rev().map(|p| (p.0, low(p.1 - p.2))));
+    chart
+        .draw_series(std::iter::once(Polygon::new(
+            poly,
+            colour.mix(0.18).filled(),
+        )))
+        .map_err(e)?;
+    chart
+        .draw_series(LineSeries::new(
+            band.iter().map(|p| (p.0, p.1)),
+            colour.stroke_width(2),
+        ))
+        .map_err(e)?
+        .label(label)
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2)));
+    Ok(())
+}
+
 /// Figure 4 of the paper: per model, the mean ± 1 standard deviation over seeds of the predicted
 /// (left panel) and the actual (right panel) cost per iteration.
 pub fn plot_cost_bands(
@@ -290,26 +322,14 @@ fn draw_bands(path: &Path, models: &[(String, Vec<Vec<CostPoint>>)]) -> Result<(
             .draw()
             .map_err(e)?;
         for (j, ((label, runs), b)) in models.iter().zip(&bands).enumerate() {
-            let colour = PALETTE[j % PALETTE.len()];
-            let s = &b[k];
-            let mut poly: Vec<(f64, f64)> = s.iter().map(|p| (p.0, p.1 + p.2)).collect();
-            poly.extend(s.iter().rev().map(|p| (p.0, (p.1 - p.2).max(0.0))));
-            chart
-                .draw_series(std::iter::once(Polygon::new(
-                    poly,
-                    colour.mix(0.18).filled(),
-                )))
-                .map_err(e)?;
-            chart
-                .draw_series(LineSeries::new(
-                    s.iter().map(|p| (p.0, p.1)),
-                    colour.stroke_width(2),
-                ))
-                .map_err(e)?
-                .label(format!("{label} ({} runs)", runs.len()))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
-                });
+            let name = format!("{label} ({} runs)", runs.len());
+            draw_band(
+                &mut chart,
+                PALETTE[j % PALETTE.len()],
+                &b[k],
+                &name,
+                Some(0.0),
+            )?;
         }
         legend(&mut chart)?;
     }
@@ -370,25 +390,8 @@ fn draw_score_bands(
         .draw()
         .map_err(e)?;
     for (j, ((label, runs), b)) in models.iter().zip(&bands).enumerate() {
-        let colour = PALETTE[j % PALETTE.len()];
-        let mut poly: Vec<(f64, f64)> = b.iter().map(|p| (p.0, p.1 + p.2)).collect();
-        poly.extend(b.iter().rev().map(|p| (p.0, p.1 - p.2)));
-        chart
-            .draw_series(std::iter::once(Polygon::new(
-                poly,
-                colour.mix(0.15).filled(),
-            )))
-            .map_err(e)?;
-        chart
-            .draw_series(LineSeries::new(
-                b.iter().map(|p| (p.0, p.1)),
-                colour.stroke_width(2),
-            ))
-            .map_err(e)?
-            .label(format!("{label} ({} runs)", runs.len()))
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
-            });
+        let name = format!("{label} ({} runs)", runs.len());
+        draw_band(&mut chart, PALETTE[j % PALETTE.len()], b, &name, None)?;
     }
     legend(&mut chart)?;
     root.present().map_err(e)?;

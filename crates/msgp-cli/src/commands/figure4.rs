@@ -29,26 +29,18 @@ pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
         args.dir.clone(),
     )
     .map_err(flagged)?;
-    let mut done: Vec<Option<Run>> = Vec::new();
-    let mut todo = Vec::new();
-    for (k, unit) in plan.units().into_iter().enumerate() {
-        match plan.finished(&unit)? {
-            Some(run) => {
-                if !args.quiet {
-                    eprintln!(
-                        "== {}: reusing {}",
-                        unit.name(),
-                        plan.run_dir(&unit).join("summary.json").display()
-                    );
-                }
-                done.push(Some(Run { unit, run }));
-            }
-            None => {
-                done.push(None);
-                todo.push((k, unit));
-            }
-        }
-    }
+    let (mut done, todo) = side_by_side::reuse(
+        plan.units(),
+        args.quiet,
+        |unit| Ok(plan.finished(unit)?.map(|run| Run { unit: *unit, run })),
+        |unit| {
+            format!(
+                "{}: reusing {}",
+                unit.name(),
+                plan.run_dir(unit).join("summary.json").display()
+            )
+        },
+    )?;
     let (jobs, per_run) = side_by_side::share(args.jobs, Threads::from_env()?.get(), todo.len())?;
     for (k, run) in run_side_by_side(&plan, todo, jobs, per_run, args.quiet)? {
         done[k] = Some(run);

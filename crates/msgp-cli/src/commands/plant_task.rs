@@ -26,26 +26,18 @@ pub fn run(args: &PlantTaskArgs) -> anyhow::Result<()> {
         args.dir.clone(),
     )
     .map_err(flagged)?;
-    let mut done: Vec<Option<TaskRun>> = Vec::new();
-    let mut todo = Vec::new();
-    for (k, unit) in plan.units().into_iter().enumerate() {
-        match plan.finished(&unit)? {
-            Some(run) => {
-                if !args.quiet {
-                    eprintln!(
-                        "== {}: reusing {}",
-                        unit.name(),
-                        plan.record_path(&unit).display()
-                    );
-                }
-                done.push(Some(run));
-            }
-            None => {
-                done.push(None);
-                todo.push((k, unit));
-            }
-        }
-    }
+    let (mut done, todo) = side_by_side::reuse(
+        plan.units(),
+        args.quiet,
+        |unit| Ok(plan.finished(unit)?),
+        |unit| {
+            format!(
+                "{}: reusing {}",
+                unit.name(),
+                plan.record_path(unit).display()
+            )
+        },
+    )?;
     let (jobs, per_run) = side_by_side::share(args.jobs, Threads::from_env()?.get(), todo.len())?;
     let clock = Instant::now();
     let finished = side_by_side::run(todo, jobs, |(k, unit): (usize, Unit)| {

@@ -8,6 +8,36 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::anyhow;
 use msgp_core::numeric::parallel::Threads;
 
+/// The units whose results are already on disk, and the rest to run: `finished` reads a
+/// unit's result (`None`: not there), `record` names where it was read from, printed as
+/// `== <record>` unless `quiet`. The results come back in the units' order, `None` where the
+/// unit is still to run; the units to run with their places.
+#[allow(clippy::type_complexity)]
+pub fn reuse<U, R>(
+    units: Vec<U>,
+    quiet: bool,
+    finished: impl Fn(&U) -> anyhow::Result<Option<R>>,
+    record: impl Fn(&U) -> String,
+) -> anyhow::Result<(Vec<Option<R>>, Vec<(usize, U)>)> {
+    let mut done = Vec::new();
+    let mut todo = Vec::new();
+    for (k, unit) in units.into_iter().enumerate() {
+        match finished(&unit)? {
+            Some(result) => {
+                if !quiet {
+                    eprintln!("== {}", record(&unit));
+                }
+                done.push(Some(result));
+            }
+            None => {
+                done.push(None);
+                todo.push((k, unit));
+            }
+        }
+    }
+    Ok((done, todo))
+}
+
 /// How many units run at a time and on how many threads each: `jobs` (default: the threads)
 /// at most the units' number, each on `threads / jobs` threads; one job keeps the caller's own
 /// threads (`None`).
