@@ -640,70 +640,7 @@ fn render(
     s.push_str("|---|---|---|---|---|---|---|---|---|\n");
     for &m in &plan.models {
         let of: Vec<&TaskRun> = runs.iter().filter(|r| r.unit.model == m).collect();
-        let solved = of.iter().filter(|r| r.solved()).count();
-        let first: Vec<String> = of
-            .iter()
-            .map(|r| match r.first_success() {
-                Some(it) => format!("{} ({:.0} s)", it.iteration, it.interaction_seconds),
-                None => "—".to_string(),
-            })
-            .collect();
-        let score = |v: f64| match task {
-            PlantTask::PendulumV1 => format!("{v:.1}"),
-            PlantTask::SwingUp => format!("{v:.0}"),
-        };
-        let last: Vec<String> = of
-            .iter()
-            .map(|r| r.scores.last().map_or("—".to_string(), |&v| score(v)))
-            .collect();
-        let best: Vec<String> = of
-            .iter()
-            .map(|r| {
-                r.scores
-                    .iter()
-                    .copied()
-                    .reduce(f64::max)
-                    .map_or("—".to_string(), score)
-            })
-            .collect();
-        let lowest: Vec<String> = of
-            .iter()
-            .map(|r| {
-                r.iterations
-                    .iter()
-                    .map(|i| i.actual_cost)
-                    .reduce(f64::min)
-                    .map_or("—".to_string(), |c| format!("{c:.1}"))
-            })
-            .collect();
-        let (gp, n) = of
-            .iter()
-            .map(|r| r.gp_searches())
-            .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-        let failures: usize = of
-            .iter()
-            .map(|r| {
-                r.iterations
-                    .iter()
-                    .filter(|i| i.search_failure.is_some() || i.linear_search_failure.is_some())
-                    .count()
-            })
-            .sum();
-        let errors = of.iter().filter(|r| r.error.is_some()).count();
-        let _ = writeln!(
-            s,
-            "| {} | {solved}/{} | {} | {} | {} | {} | {} | {failures} | {errors} |",
-            m.name(),
-            of.len(),
-            first.join(", "),
-            last.join(", "),
-            best.join(", "),
-            lowest.join(", "),
-            match n {
-                0 => "—".to_string(),
-                n => format!("{gp}/{n} ({:.0} %)", 100.0 * gp as f64 / n as f64),
-            },
-        );
+        s.push_str(&model_row(task, m, &of));
     }
     for r in runs.iter().filter(|r| r.error.is_some()) {
         let _ = writeln!(
@@ -725,6 +662,54 @@ fn render(
         plan.dir.display()
     );
     s
+}
+
+/// The table's row of `model` over its runs `of` (seeds in order).
+fn model_row(task: PlantTask, model: Figure4Model, of: &[&TaskRun]) -> String {
+    let per_seed = |f: &dyn Fn(&TaskRun) -> Option<String>| -> String {
+        of.iter()
+            .map(|r| f(r).unwrap_or_else(|| "—".to_string()))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let score = |v: f64| match task {
+        PlantTask::PendulumV1 => format!("{v:.1}"),
+        PlantTask::SwingUp => format!("{v:.0}"),
+    };
+    let first = per_seed(&|r| {
+        r.first_success()
+            .map(|it| format!("{} ({:.0} s)", it.iteration, it.interaction_seconds))
+    });
+    let last = per_seed(&|r| r.scores.last().map(|&v| score(v)));
+    let best = per_seed(&|r| r.scores.iter().copied().reduce(f64::max).map(score));
+    let lowest = per_seed(&|r| {
+        r.iterations
+            .iter()
+            .map(|i| i.actual_cost)
+            .reduce(f64::min)
+            .map(|c| format!("{c:.1}"))
+    });
+    let (gp, n) = of
+        .iter()
+        .map(|r| r.gp_searches())
+        .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    let searches = match n {
+        0 => "—".to_string(),
+        n => format!("{gp}/{n} ({:.0} %)", 100.0 * gp as f64 / n as f64),
+    };
+    let failures: usize = of
+        .iter()
+        .flat_map(|r| &r.iterations)
+        .filter(|i| i.search_failure.is_some() || i.linear_search_failure.is_some())
+        .count();
+    let solved = of.iter().filter(|r| r.solved()).count();
+    let errors = of.iter().filter(|r| r.error.is_some()).count();
+    format!(
+        "| {} | {solved}/{} | {first} | {last} | {best} | {lowest} | {searches} | {failures} | \
+         {errors} |\n",
+        model.name(),
+        of.len(),
+    )
 }
 
 #[cfg(test)]

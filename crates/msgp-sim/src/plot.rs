@@ -10,6 +10,7 @@
 use std::path::Path;
 use std::sync::OnceLock;
 
+use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
@@ -240,6 +241,36 @@ fn band_of(runs: &[Vec<f64>]) -> Vec<(f64, f64, f64)> {
         .collect()
 }
 
+/// A captioned panel of `area` with iterations 1 to `last` along x and `y` up, its mesh drawn
+/// in the style of the band plots.
+fn iteration_chart<'a, DB: DrawingBackend + 'a>(
+    area: &DrawingArea<DB, Shift>,
+    caption: &str,
+    last: f64,
+    y: std::ops::Range<f64>,
+    y_desc: &str,
+) -> Result<ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>, String> {
+    let e = |e: DrawingAreaErrorKind<_>| e.to_string();
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(64)
+        .build_cartesian_2d(0.8_f64..(last + 0.2), y)
+        .map_err(e)?;
+    chart
+        .configure_mesh()
+        .x_desc("iteration")
+        .y_desc(y_desc)
+        .x_labels(last as usize)
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .label_style(("sans-serif", 13))
+        .light_line_style(WHITE.mix(0.0))
+        .draw()
+        .map_err(e)?;
+    Ok(chart)
+}
+
 /// One model's band on `chart`: the mean ± 1 standard deviation per iteration (`band`, from
 /// [`band_of`]) shaded, its lower edge cut at `floor` when given, the mean as a line labelled
 /// `label`.
@@ -304,23 +335,13 @@ fn draw_bands(path: &Path, models: &[(String, Vec<Vec<CostPoint>>)]) -> Result<(
         .filter(|v| v.is_finite())
         .fold(1.0_f64, f64::max);
     for (k, area) in panels.iter().enumerate() {
-        let mut chart = ChartBuilder::on(area)
-            .caption(pick[k].0, ("sans-serif", 18))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(56)
-            .build_cartesian_2d(0.8_f64..(last + 0.2), 0.0..(1.05 * ymax))
-            .map_err(e)?;
-        chart
-            .configure_mesh()
-            .x_desc("iteration")
-            .y_desc("cost per episode")
-            .x_labels(last as usize)
-            .x_label_formatter(&|x| format!("{x:.0}"))
-            .label_style(("sans-serif", 13))
-            .light_line_style(WHITE.mix(0.0))
-            .draw()
-            .map_err(e)?;
+        let mut chart = iteration_chart(
+            area,
+            pick[k].0,
+            last,
+            0.0..(1.05 * ymax),
+            "cost per episode",
+        )?;
         for (j, ((label, runs), b)) in models.iter().zip(&bands).enumerate() {
             let name = format!("{label} ({} runs)", runs.len());
             draw_band(
@@ -372,23 +393,13 @@ fn draw_score_bands(
     let pad = 0.05 * (hi - lo).max(1.0);
     let root = BitMapBackend::new(path, (WIDTH, HEIGHT)).into_drawing_area();
     root.fill(&WHITE).map_err(e)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(score, ("sans-serif", 18))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(64)
-        .build_cartesian_2d(0.8_f64..(last + 0.2), (lo - pad)..(hi + pad))
-        .map_err(e)?;
-    chart
-        .configure_mesh()
-        .x_desc("iteration")
-        .y_desc("score of the iteration's policy")
-        .x_labels(last as usize)
-        .x_label_formatter(&|x| format!("{x:.0}"))
-        .label_style(("sans-serif", 13))
-        .light_line_style(WHITE.mix(0.0))
-        .draw()
-        .map_err(e)?;
+    let mut chart = iteration_chart(
+        &root,
+        score,
+        last,
+        (lo - pad)..(hi + pad),
+        "score of the iteration's policy",
+    )?;
     for (j, ((label, runs), b)) in models.iter().zip(&bands).enumerate() {
         let name = format!("{label} ({} runs)", runs.len());
         draw_band(&mut chart, PALETTE[j % PALETTE.len()], b, &name, None)?;
