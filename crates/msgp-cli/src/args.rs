@@ -706,6 +706,18 @@ pub enum ReproduceCommand {
     PlantTask(PlantTaskArgs),
 }
 
+/// How the runs of a reproduction over learning runs go: how many at a time, how quietly.
+#[derive(Debug, Args)]
+pub struct RunsArgs {
+    /// Runs at a time, the threads (`MSGP_THREADS`, else the machine's cores) shared between
+    /// them; results do not depend on it [default: the threads].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
+    pub jobs: Option<u16>,
+    /// No progress lines on stderr.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
 /// Options of `msgp reproduce plant-task`.
 #[derive(Debug, Args)]
 pub struct PlantTaskArgs {
@@ -731,13 +743,8 @@ pub struct PlantTaskArgs {
     #[arg(long, value_name = "MODEL,...", value_delimiter = ',', value_parser = model4,
           default_values = ["msgp-filter", "msgp", "gp-narx", "linear-kf"])]
     pub models: Vec<Figure4Model>,
-    /// Runs at a time, the threads (`MSGP_THREADS`, else the machine's cores) shared between
-    /// them; results do not depend on it [default: the threads].
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
-    pub jobs: Option<u16>,
-    /// No progress lines on stderr.
-    #[arg(long)]
-    pub quiet: bool,
+    #[command(flatten)]
+    pub runs: RunsArgs,
 }
 
 fn plant_task(s: &str) -> Result<PlantTask, String> {
@@ -844,13 +851,8 @@ pub struct Figure4Args {
     #[arg(long, value_name = "MODEL,...", value_delimiter = ',', value_parser = model4,
           default_values = ["msgp", "msgp-filter", "gp-narx", "linear-kf"])]
     pub models: Vec<Figure4Model>,
-    /// Runs at a time, the threads (`MSGP_THREADS`, else the machine's cores) shared between
-    /// them; results do not depend on it [default: the threads].
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
-    pub jobs: Option<u16>,
-    /// No progress lines on stderr.
-    #[arg(long)]
-    pub quiet: bool,
+    #[command(flatten)]
+    pub runs: RunsArgs,
     #[command(flatten)]
     pub budget: BudgetArgs,
     #[command(flatten)]

@@ -493,7 +493,21 @@ pub fn report(
         }
         None => None,
     };
-    let mut markdown = render(plan, runs, provenance, &scores_png, &costs_png);
+    // every run's loop has the first unit's episodes and iterations (only the model and
+    // seed differ), and the task's control period
+    let settings = plan.settings(&Unit {
+        model: plan.models[0],
+        seed: plan.seeds[0],
+    })?;
+    let period = plan.task.plant()?.spec().period;
+    let mut markdown = render(
+        plan,
+        runs,
+        provenance,
+        &scores_png,
+        &costs_png,
+        (&settings, period),
+    );
     if let Some((path, run)) = swing {
         let _ = writeln!(
             markdown,
@@ -596,6 +610,7 @@ fn render(
     provenance: &Provenance,
     scores_png: &Path,
     costs_png: &Path,
+    layout: (&LearnerSettings, f64),
 ) -> String {
     let task = plan.task;
     let target = task.target();
@@ -610,14 +625,8 @@ fn render(
         "{} · {} · {:.0} s of learning runs, summed · {}\n",
         provenance.command, provenance.machine, provenance.seconds, provenance.date
     );
-    let settings = plan.settings(&Unit {
-        model: plan.models[0],
-        seed: plan.seeds[0],
-    });
-    let (iterations, period) = match (&settings, task.plant()) {
-        (Ok(st), Ok(p)) => (st.iterations, p.spec().period),
-        _ => (0, 0.0),
-    };
+    let (settings, period) = layout;
+    let iterations = settings.iterations;
     let _ = writeln!(
         s,
         "Each run: {} random episode, then {iterations} policy iterations of {} steps \
@@ -627,7 +636,7 @@ fn render(
          seconds up to it (the random episode included). \"GP searches\" counts, from \
          iteration 2 on, the searches that ran on the GP model (msgp: the prequential choice \
          decides; gp-narx has no other; linear-kf has none).\n",
-        settings.as_ref().map_or(1, |s| s.random_rollouts),
+        settings.random_rollouts,
         target.episode_steps,
         target.episode_steps as f64 * period,
         task.score_name(),

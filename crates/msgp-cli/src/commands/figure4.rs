@@ -31,7 +31,7 @@ pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
     .map_err(flagged)?;
     let (mut done, todo) = side_by_side::reuse(
         plan.units(),
-        args.quiet,
+        args.runs.quiet,
         |unit| Ok(plan.finished(unit)?.map(|run| Run { unit: *unit, run })),
         |unit| {
             format!(
@@ -41,8 +41,9 @@ pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
             )
         },
     )?;
-    let (jobs, per_run) = side_by_side::share(args.jobs, Threads::from_env()?.get(), todo.len())?;
-    for (k, run) in run_side_by_side(&plan, todo, jobs, per_run, args.quiet)? {
+    let (jobs, per_run) =
+        side_by_side::share(args.runs.jobs, Threads::from_env()?.get(), todo.len())?;
+    for (k, run) in run_side_by_side(&plan, todo, jobs, per_run, args.runs.quiet)? {
         done[k] = Some(run);
     }
     let runs: Vec<Run> = done.into_iter().flatten().collect();

@@ -28,7 +28,7 @@ pub fn run(args: &PlantTaskArgs) -> anyhow::Result<()> {
     .map_err(flagged)?;
     let (mut done, todo) = side_by_side::reuse(
         plan.units(),
-        args.quiet,
+        args.runs.quiet,
         |unit| Ok(plan.finished(unit)?),
         |unit| {
             format!(
@@ -38,12 +38,13 @@ pub fn run(args: &PlantTaskArgs) -> anyhow::Result<()> {
             )
         },
     )?;
-    let (jobs, per_run) = side_by_side::share(args.jobs, Threads::from_env()?.get(), todo.len())?;
+    let (jobs, per_run) =
+        side_by_side::share(args.runs.jobs, Threads::from_env()?.get(), todo.len())?;
     let clock = Instant::now();
     let finished = side_by_side::run(todo, jobs, |(k, unit): (usize, Unit)| {
         let name = unit.name();
-        let progress = !args.quiet && jobs == 1;
-        if !args.quiet {
+        let progress = !args.runs.quiet && jobs == 1;
+        if !args.runs.quiet {
             eprintln!(
                 "== {name}: started ({:.0} s)",
                 clock.elapsed().as_secs_f64()
@@ -65,7 +66,7 @@ pub fn run(args: &PlantTaskArgs) -> anyhow::Result<()> {
             }
         })
         .with_context(|| format!("run {name}"))?;
-        if !args.quiet {
+        if !args.runs.quiet {
             eprintln!(
                 "== {name}: done in {:.0} s, last score {:?}, first success {}{} ({:.0} s)",
                 run.seconds,
