@@ -329,4 +329,56 @@ mod tests {
             check_vjp(&policy, &[1.0, 1.0, 1.0], &mut r, &blocks, true);
         }
     }
+
+    /// The same with the first and last observation entries angles: the network on
+    /// `(sin θ₀, cos θ₀, y₁, sin θ₂, cos θ₂)`, the features' moments and gain pulled back by
+    /// duals, the network's by its backward pass. At a point the network is periodic in the
+    /// angles and its moments' mean is the command.
+    #[test]
+    fn the_rbf_vjp_on_angles_matches_duals_through_the_whole_map() {
+        let mut rng = StdRng::seed_from_u64(12);
+        let mut r = |s: f64| {
+            let z: f64 = StandardNormal.sample(&mut rng);
+            s * z
+        };
+        let (n, du, dy, df) = (6, 1, 3, 5);
+        for _ in 0..3 {
+            let bounds = CommandBounds::new(vec![-1.5], vec![2.0]).expect("bounds");
+            let rbf = RbfPolicy::new(
+                DMatrix::from_fn(n, df, |_, _| r(0.7)),
+                DMatrix::from_fn(n, du, |_, _| r(2.0)),
+                DVector::from_fn(df, |_, _| r(0.3) - 0.5),
+                bounds,
+            )
+            .expect("rbf")
+            .with_angles(vec![true, false, true])
+            .expect("angles");
+            let y = [0.4, -0.2, 2.9];
+            let turned = [
+                0.4 + 2.0 * std::f64::consts::PI,
+                -0.2,
+                2.9 - 4.0 * std::f64::consts::PI,
+            ];
+            let (u, u_turned) = (rbf.act(&y).expect("act"), rbf.act(&turned).expect("act"));
+            assert!((u[0] - u_turned[0]).abs() < 1e-12, "{u:?} vs {u_turned:?}");
+            let point = FeedbackPolicy::<f64>::moments(
+                &rbf,
+                &DVector::from_column_slice(&y),
+                &DMatrix::zeros(dy, dy),
+            )
+            .expect("moments");
+            assert!(
+                (point.mean[0] - u[0]).abs() < 1e-12,
+                "{} vs {}",
+                point.mean[0],
+                u[0]
+            );
+            let policy = Normalized {
+                inner: Policy::Rbf(rbf),
+                normalizer: normalizer(&mut r, du, dy),
+            };
+            let blocks = [("centres", n * df), ("weights", n * du), ("widths", df)];
+            check_vjp(&policy, &[1.0, 1.0, 1.0], &mut r, &blocks, true);
+        }
+    }
 }

@@ -104,6 +104,7 @@ impl Policy {
                 weights: p.weights.map(c::<T>),
                 log_widths: p.log_widths.map(c::<T>),
                 bounds: p.bounds.clone(),
+                angles: p.angles.clone(),
             }),
         }
     }
@@ -126,7 +127,7 @@ impl Policy {
         match self {
             Policy::Pid(p) => p.kp.ncols(),
             Policy::StateFeedback(p) => p.dy(),
-            Policy::Rbf(p) => p.centres.ncols(),
+            Policy::Rbf(p) => p.observation_dim(),
         }
     }
 
