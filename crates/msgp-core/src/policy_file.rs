@@ -66,19 +66,16 @@ pub enum PolicyRecord {
     },
     /// PILCO's RBF network, saturated.
     Rbf {
-        /// Centres (n × d_φ: the observation's size plus one per angle).
+        /// Centres (n × d_y).
         centres: Vec<Vec<f64>>,
         /// Weights (n × d_u).
         weights: Vec<Vec<f64>>,
-        /// Log length scales (d_φ).
+        /// Log length scales (d_y).
         log_widths: Vec<f64>,
         /// Lower command bounds.
         low: Vec<f64>,
         /// Upper command bounds.
         high: Vec<f64>,
-        /// Per observation entry: an angle, seen as its sine and cosine (absent: none).
-        #[serde(default, skip_serializing_if = "Vec::is_empty")]
-        angles: Vec<bool>,
     },
 }
 
@@ -129,7 +126,6 @@ impl From<&Policy> for PolicyRecord {
                 log_widths: p.log_widths.iter().copied().collect(),
                 low: p.bounds.low().to_vec(),
                 high: p.bounds.high().to_vec(),
-                angles: p.angles.clone(),
             },
         }
     }
@@ -189,18 +185,14 @@ impl PolicyRecord {
                 log_widths,
                 low,
                 high,
-                angles,
             } => {
                 finite("log_widths", log_widths)?;
-                Policy::Rbf(
-                    RbfPolicy::new(
-                        matrix("centres", centres)?,
-                        matrix("weights", weights)?,
-                        DVector::from_column_slice(log_widths),
-                        CommandBounds::new(low.clone(), high.clone())?,
-                    )?
-                    .with_angles(angles.clone())?,
-                )
+                Policy::Rbf(RbfPolicy::new(
+                    matrix("centres", centres)?,
+                    matrix("weights", weights)?,
+                    DVector::from_column_slice(log_widths),
+                    CommandBounds::new(low.clone(), high.clone())?,
+                )?)
             }
         })
     }
@@ -535,21 +527,9 @@ mod tests {
                     DMatrix::from_fn(4, 3, |i, j| (i as f64 - j as f64) / 7.0),
                     DMatrix::from_fn(4, 2, |i, j| 1.0 / (1.0 + i as f64 + j as f64)),
                     DVector::from_column_slice(&[0.1, -0.4, 0.3]),
-                    bounds.clone(),
-                )
-                .expect("valid"),
-            ),
-            // on an angle and a velocity: features (sin θ, cos θ, θ̇)
-            Policy::Rbf(
-                RbfPolicy::new(
-                    DMatrix::from_fn(4, 3, |i, j| (i as f64 + j as f64) / 5.0 - 0.4),
-                    DMatrix::from_fn(4, 2, |i, j| 0.5 - (i * j) as f64 / 3.0),
-                    DVector::from_column_slice(&[-0.2, 0.1, 0.3]),
                     bounds,
                 )
-                .expect("valid")
-                .with_angles(vec![true, false])
-                .expect("angles"),
+                .expect("valid"),
             ),
         ]
     }
@@ -566,7 +546,7 @@ mod tests {
             let dy = match &p {
                 Policy::Pid(p) => p.kp.ncols(),
                 Policy::StateFeedback(p) => p.dy(),
-                Policy::Rbf(p) => p.observation_dim(),
+                Policy::Rbf(p) => p.centres.ncols(),
             };
             let y: Vec<f64> = (0..dy).map(|j| 0.1 * j as f64 - 0.05).collect();
             let state = vec![0.0; p.lift::<f64>().state_dim()];
@@ -609,15 +589,6 @@ mod tests {
             .expect_err("ragged")
             .to_string();
         assert!(e.contains("`weights`: row 1"), "{e}");
-        // angles that do not fit the centres (two angles of three entries: 5 features, not 3)
-        let mut file = PolicyFile::new(&policies()[3]);
-        if let PolicyRecord::Rbf { angles, .. } = &mut file.policy {
-            *angles = vec![true, true];
-        }
-        let e = PolicyFile::from_json(file.to_json().expect("json").as_bytes(), path)
-            .expect_err("angles")
-            .to_string();
-        assert!(e.contains("dir/p.json") && e.contains("4 features"), "{e}");
         // a task that does not fit the policy (without a plant: the policy's own signals)
         let policy = &policies()[1];
         let mut file = PolicyFile::new(policy);

@@ -10,7 +10,6 @@ use serde::{Deserialize, Serialize};
 
 use super::task::{StartDistribution, Task, target_cost};
 use crate::error::{MsgpError, Result};
-use crate::moments::trig::{Feature, features};
 use crate::numeric::seed::derive;
 use crate::plant::PlantSpec;
 use crate::policy::{Policy, RbfPolicy, StateFeedback};
@@ -124,33 +123,22 @@ impl TargetTask {
                         reason: "an RBF network needs at least one basis function".into(),
                     });
                 }
-                // the network sees an angle output as its sine and cosine (PILCO's); centres
-                // uniform over the features' ranges (a sine's and cosine's: ±1), widths a
-                // quarter of each range, small random weights (PILCO's start)
-                let angles = spec.angles();
-                let scales: Vec<(f64, f64)> = features(&angles)
-                    .into_iter()
-                    .map(|f| match f {
-                        Feature::Plain(j) => output_scale(spec, j),
-                        Feature::Sin(_) | Feature::Cos(_) => (0.0, 1.0),
-                    })
-                    .collect();
-                let df = scales.len();
-                let centres = DMatrix::from_fn(basis, df, |_, f| {
-                    let (mid, h) = scales[f];
+                // centres uniform over the outputs' ranges, widths a quarter of each range,
+                // small random weights (PILCO's start)
+                let centres = DMatrix::from_fn(basis, dy, |_, j| {
+                    let (mid, h) = output_scale(spec, j);
                     mid + h * rng.random_range(-1.0..1.0)
                 });
                 let weights = DMatrix::from_fn(basis, du, |_, i| {
                     let n: f64 = StandardNormal.sample(&mut rng);
                     0.1 * half[i] * n
                 });
-                let log_widths = DVector::from_fn(df, |f, _| (0.5 * scales[f].1).ln());
-                let policy =
-                    RbfPolicy::new(centres, weights, log_widths, bounds)?.with_angles(angles)?;
-                let typical = (0..df)
-                    .flat_map(|f| std::iter::repeat_n(scales[f].1, basis))
+                let log_widths = DVector::from_fn(dy, |j, _| (0.5 * output_scale(spec, j).1).ln());
+                let policy = RbfPolicy::new(centres, weights, log_widths, bounds)?;
+                let typical = (0..dy)
+                    .flat_map(|j| std::iter::repeat_n(output_scale(spec, j).1, basis))
                     .chain((0..du).flat_map(|i| std::iter::repeat_n(half[i], basis)))
-                    .chain(std::iter::repeat_n(1.0, df))
+                    .chain(std::iter::repeat_n(1.0, dy))
                     .collect();
                 Ok((Policy::Rbf(policy), typical))
             }

@@ -18,7 +18,7 @@
 //! Modules: [`generic`] (the reference, any scalar), `fast` (the vectorised f64 kernel behind
 //! [`MomentMatch`]), `vjp` (its hand-derived vector–Jacobian product, for the adjoint sweeps),
 //! [`mean`] (the linear prior mean's exact contribution), [`saturation`] (PILCO's sine
-//! saturation of a Gaussian), [`trig`] (the sine and cosine of Gaussian angles).
+//! saturation of a Gaussian).
 
 use nalgebra::{DMatrix, DVector};
 use num_dual::DualSVec64;
@@ -32,7 +32,6 @@ pub(crate) mod fast;
 pub mod generic;
 pub mod mean;
 pub mod saturation;
-pub mod trig;
 pub(crate) mod vjp;
 
 pub use generic::moment_match_generic;

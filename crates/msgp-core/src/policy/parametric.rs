@@ -104,7 +104,6 @@ impl Policy {
                 weights: p.weights.map(c::<T>),
                 log_widths: p.log_widths.map(c::<T>),
                 bounds: p.bounds.clone(),
-                angles: p.angles.clone(),
             }),
         }
     }
@@ -127,7 +126,7 @@ impl Policy {
         match self {
             Policy::Pid(p) => p.kp.ncols(),
             Policy::StateFeedback(p) => p.dy(),
-            Policy::Rbf(p) => p.observation_dim(),
+            Policy::Rbf(p) => p.centres.ncols(),
         }
     }
 

@@ -1,11 +1,6 @@
 //! PILCO's radial-basis-function network policy: `ũ_a(y) = Σ_i w_ia exp(−½ (y − c_i)ᵀ Λ⁻¹
 //! (y − c_i))`, `Λ = diag(ℓ²)`, squashed into the command bounds by the sine saturation
-//! ([`super::bounds`]). It acts on the current observation and keeps no state. An observation
-//! entry flagged as an angle enters as its sine and cosine (PILCO's trigonometric
-//! augmentation, [`crate::moments::trig`]): the network is then periodic in it, so a pole held
-//! at `θ* + 2π` is held as at `θ*`. Under a Gaussian observation the features' moments are
-//! exact, the network's are matched on them as on a Gaussian, and `Cov(y, u) = Cov(y) C_φ C`
-//! (PILCO's chaining of the two maps' input–output gains).
+//! ([`super::bounds`]). It acts on the current observation and keeps no state.
 //!
 //! The network is the mean of a GP whose pseudo-inputs are the centres and whose weights are
 //! given (no `K̃⁻¹`), so its moments under a Gaussian observation are exactly the GP moment
@@ -22,33 +17,23 @@ use super::{FeedbackPolicy, PolicyMoments};
 use crate::error::{MsgpError, Result};
 use crate::gp::{KernelScalar, OutputGp, PreparedGp};
 use crate::moments::fast::MmState;
-use crate::moments::trig::{Feature, features, trig_gain, trig_moments};
 use crate::moments::vjp::{BackWork, Backward, GpAdjoint};
 use crate::moments::{MomentMatch, moment_match};
 use crate::narx::start_window::StartWindow;
-use crate::numeric::dual::{Dual, moments_gradient};
 use crate::numeric::linalg::{Cholesky, JitterLog, JitterPolicy};
 use crate::numeric::scalar::{Scalar, c};
 
 /// A radial-basis-function network policy (see the module docs), in the observation's units.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RbfPolicy<T: nalgebra::Scalar> {
-    /// Centres `c_i` (n × d_φ, the features' size: d_y plus one per angle).
+    /// Centres `c_i` (n × d_y).
     pub centres: DMatrix<T>,
     /// Weights `w_ia` (n × d_u).
     pub weights: DMatrix<T>,
-    /// `log ℓ_d` of the basis functions' widths (d_φ), shared by every centre.
+    /// `log ℓ_d` of the basis functions' widths (d_y), shared by every centre.
     pub log_widths: DVector<T>,
     /// The command bounds.
     pub bounds: CommandBounds,
-    /// Per observation entry: an angle, seen as its sine and cosine; empty: no angle (the
-    /// features are the observation).
-    pub angles: Vec<bool>,
-}
-
-/// The identity units of [`trig_moments`]: the policy sees angles in radians.
-fn radians(n: usize) -> (Vec<f64>, Vec<f64>) {
-    (vec![0.0; n], vec![1.0; n])
 }
 
 impl<T: Scalar> RbfPolicy<T> {
@@ -76,55 +61,7 @@ impl<T: Scalar> RbfPolicy<T> {
             weights,
             log_widths,
             bounds,
-            angles: Vec::new(),
         })
-    }
-
-    /// The same network on an observation whose entries flagged in `angles` are angles: the
-    /// centres and widths then have one entry per feature (`d_y` plus one per angle). No
-    /// angle flagged: the network as it is.
-    pub fn with_angles(self, angles: Vec<bool>) -> Result<Self> {
-        let needed = features(&angles).len();
-        if !angles.is_empty() && needed != self.centres.ncols() {
-            return Err(MsgpError::Shape(format!(
-                "RBF policy: {} observation entries with {} angles have {needed} features, but \
-                 the centres have {}",
-                angles.len(),
-                angles.iter().filter(|a| **a).count(),
-                self.centres.ncols()
-            )));
-        }
-        let angles = if angles.iter().any(|a| *a) {
-            angles
-        } else {
-            Vec::new()
-        };
-        Ok(Self { angles, ..self })
-    }
-
-    /// The observation's size.
-    pub fn observation_dim(&self) -> usize {
-        if self.angles.is_empty() {
-            self.centres.ncols()
-        } else {
-            self.angles.len()
-        }
-    }
-
-    /// The features the network sees, when an observation entry is an angle.
-    fn angle_features(&self) -> Option<Vec<Feature>> {
-        self.angles
-            .iter()
-            .any(|a| *a)
-            .then(|| features(&self.angles))
-    }
-
-    /// The network without angles: the same parameters on the features.
-    fn on_features(&self) -> Self {
-        Self {
-            angles: Vec::new(),
-            ..self.clone()
-        }
     }
 
     /// Number of parameters: centres, weights, widths.
@@ -157,21 +94,12 @@ impl<T: Scalar> RbfPolicy<T> {
             weights: DMatrix::from_column_slice(n, du, &theta[a..b]),
             log_widths: DVector::from_column_slice(&theta[b..]),
             bounds: self.bounds.clone(),
-            angles: self.angles.clone(),
         })
     }
 
-    /// The network before the saturation at a point (entries of `y` beyond the observation's
-    /// size are ignored).
+    /// The network before the saturation at a point (entries of `y` beyond the centres' size
+    /// are ignored).
     pub fn network(&self, y: &[T]) -> Vec<T> {
-        if let Some(features) = self.angle_features() {
-            let units = radians(self.angles.len());
-            let phi: Vec<T> = features
-                .iter()
-                .map(|f| f.at(y, (&units.0, &units.1)))
-                .collect();
-            return self.on_features().network(&phi);
-        }
         let inv_l2: Vec<T> = self.inv_l2();
         let half = c::<T>(0.5);
         (0..self.weights.ncols())
@@ -237,7 +165,7 @@ impl<T: KernelScalar> RbfPolicy<T> {
 impl RbfPolicy<f64> {
     /// The command at observation `y`; an error for an observation of the wrong size.
     pub fn act(&self, y: &[f64]) -> Result<Vec<f64>> {
-        let dy = self.observation_dim();
+        let dy = self.centres.ncols();
         if y.len() != dy {
             return Err(MsgpError::Shape(format!(
                 "RBF policy expects an observation of size {dy}, got {}",
@@ -259,9 +187,6 @@ impl RbfPolicy<f64> {
         cov_bar: &DMatrix<f64>,
         c_bar: &DMatrix<f64>,
     ) -> Result<(DVector<f64>, DMatrix<f64>, Vec<f64>)> {
-        if let Some(features) = self.angle_features() {
-            return self.angles_vjp(&features, mean, cov, (mean_bar, cov_bar, c_bar));
-        }
         let (n, dy) = self.centres.shape();
         let du = self.weights.ncols();
         if mean.len() != dy || cov.shape() != (dy, dy) {
@@ -303,53 +228,6 @@ impl RbfPolicy<f64> {
     }
 }
 
-impl RbfPolicy<f64> {
-    /// [`Self::moments_vjp`] through the angles' features: the network's own backward pass on
-    /// the features' moments (with `C`'s adjoint carried through `C = C_φ C_net`), then the
-    /// features' exact moments and gain `C_φ` pulled back by duals over the observation's
-    /// mean and covariance (`d_y + d_y²` directions of a small map).
-    fn angles_vjp(
-        &self,
-        features: &[Feature],
-        mean: &DVector<f64>,
-        cov: &DMatrix<f64>,
-        (mean_bar, cov_bar, c_bar): (&DVector<f64>, &DMatrix<f64>, &DMatrix<f64>),
-    ) -> Result<(DVector<f64>, DMatrix<f64>, Vec<f64>)> {
-        let dy = self.observation_dim();
-        if mean.len() != dy || cov.shape() != (dy, dy) {
-            return Err(MsgpError::Shape(format!(
-                "RBF policy expects an observation of size {dy}, got {}",
-                mean.len()
-            )));
-        }
-        let units = radians(dy);
-        let units = (units.0.as_slice(), units.1.as_slice());
-        let phi = trig_moments(features, mean, cov, units);
-        let gain = trig_gain(features, mean, cov, units);
-        let net = self.on_features();
-        let inner = FeedbackPolicy::<f64>::moments(&net, &phi.mean, &phi.cov)?;
-        let (phi_mean_bar, phi_cov_bar, theta) = net.moments_vjp(
-            &phi.mean,
-            &phi.cov,
-            mean_bar,
-            cov_bar,
-            &(gain.transpose() * c_bar),
-        )?;
-        let gain_bar = c_bar * inner.c.transpose();
-        let pairs = |m: &DVector<Dual>, s: &DMatrix<Dual>| {
-            let phi = trig_moments(features, m, s, units);
-            let gain = trig_gain(features, m, s, units);
-            Ok(crate::numeric::dual::weighted_sum(&[
-                (phi.mean.as_slice(), phi_mean_bar.as_slice()),
-                (phi.cov.as_slice(), phi_cov_bar.as_slice()),
-                (gain.as_slice(), gain_bar.as_slice()),
-            ]))
-        };
-        let (m_bar, s_bar) = moments_gradient(mean, cov, pairs)?;
-        Ok((m_bar, s_bar, theta))
-    }
-}
-
 /// The network's covariance from the GP moment matching's: without the unit signal variance
 /// the GP adds on each output's diagonal (a variance that rounding takes below zero, for a
 /// near-deterministic input, is zero).
@@ -370,23 +248,12 @@ impl<T: MomentMatch> FeedbackPolicy<T> for RbfPolicy<T> {
     }
 
     fn moments(&self, mean: &DVector<T>, cov: &DMatrix<T>) -> Result<PolicyMoments<T>> {
-        let dy = self.observation_dim();
+        let dy = self.centres.ncols();
         if mean.len() != dy || cov.shape() != (dy, dy) {
             return Err(MsgpError::Shape(format!(
                 "RBF policy expects an observation of size {dy}, got {}",
                 mean.len()
             )));
-        }
-        if let Some(features) = self.angle_features() {
-            let units = radians(dy);
-            let units = (units.0.as_slice(), units.1.as_slice());
-            let phi = trig_moments(&features, mean, cov, units);
-            let gain = trig_gain(&features, mean, cov, units);
-            let inner = self.on_features().moments(&phi.mean, &phi.cov)?;
-            return Ok(PolicyMoments {
-                c: gain * inner.c,
-                ..inner
-            });
         }
         let mm = moment_match(&self.as_gp(), mean, cov, &mut JitterLog::default())?;
         let (mean, cov, c) = self

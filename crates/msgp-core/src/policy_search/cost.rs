@@ -15,7 +15,6 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::{MsgpError, Result};
-use crate::moments::trig::{Feature, FeatureMoments, trig_moments};
 use crate::numeric::linalg::{JitterLog, JitterPolicy, cholesky};
 use crate::numeric::scalar::{Scalar, c};
 
@@ -41,6 +40,31 @@ pub struct CostMoments<T: Scalar> {
     pub mean: T,
     /// `Var[c(y)]`.
     pub var: T,
+}
+
+/// One feature of the cost: an output, or the sine or cosine of an angle output.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Feature {
+    Plain(usize),
+    Sin(usize),
+    Cos(usize),
+}
+
+impl Feature {
+    fn output(self) -> usize {
+        match self {
+            Feature::Plain(j) | Feature::Sin(j) | Feature::Cos(j) => j,
+        }
+    }
+}
+
+/// Mean and covariance of features of a Gaussian.
+#[derive(Clone, Debug)]
+pub struct FeatureMoments<T: Scalar> {
+    /// Mean per feature.
+    pub mean: DVector<T>,
+    /// Covariance of the features.
+    pub cov: DMatrix<T>,
 }
 
 impl SaturatingCost {
@@ -191,6 +215,58 @@ impl SaturatingCost {
             var: e2 - e1 * e1,
         })
     }
+}
+
+/// Exact mean and covariance of `features` of `y ~ N(m, s)`, a plain feature in the units of
+/// `y`, an angle's sine and cosine of `θ_j = shift_j + scale_j y_j` (radians).
+fn trig_moments<T: Scalar>(
+    features: &[Feature],
+    m: &DVector<T>,
+    s: &DMatrix<T>,
+    (shift, scale): (&[f64], &[f64]),
+) -> FeatureMoments<T> {
+    let half = c::<T>(0.5);
+    // the angles' mean and covariance in radians
+    let am = |j: usize| c::<T>(shift[j]) + m[j] * c::<T>(scale[j]);
+    let ac = |i: usize, j: usize| s[(i, j)] * c::<T>(scale[i] * scale[j]);
+    // E[sin θ], E[cos θ] of output j
+    let es = |j: usize| (-ac(j, j) * half).exp() * am(j).sin();
+    let ec = |j: usize| (-ac(j, j) * half).exp() * am(j).cos();
+    let mean = DVector::from_fn(features.len(), |f, _| match features[f] {
+        Feature::Plain(j) => m[j],
+        Feature::Sin(j) => es(j),
+        Feature::Cos(j) => ec(j),
+    });
+    // E[cos(θ_i ± θ_j)] and E[sin(θ_i ± θ_j)]: θ_i ± θ_j is Gaussian
+    let pair = |i: usize, j: usize, sign: f64| {
+        let v = ac(i, i) + ac(j, j) + ac(i, j) * c::<T>(2.0 * sign);
+        let a = am(i) + am(j) * c::<T>(sign);
+        let damp = (-v * half).exp();
+        (damp * a.cos(), damp * a.sin())
+    };
+    let second = |f: Feature, g: Feature| -> T {
+        use Feature::{Cos, Plain, Sin};
+        match (f, g) {
+            (Plain(i), Plain(j)) => s[(i, j)],
+            (Plain(i), Sin(j)) | (Sin(j), Plain(i)) => s[(i, j)] * c::<T>(scale[j]) * ec(j),
+            (Plain(i), Cos(j)) | (Cos(j), Plain(i)) => -s[(i, j)] * c::<T>(scale[j]) * es(j),
+            (Sin(i), Sin(j)) => {
+                let ((cm, _), (cp, _)) = (pair(i, j, -1.0), pair(i, j, 1.0));
+                (cm - cp) * half - es(i) * es(j)
+            }
+            (Cos(i), Cos(j)) => {
+                let ((cm, _), (cp, _)) = (pair(i, j, -1.0), pair(i, j, 1.0));
+                (cm + cp) * half - ec(i) * ec(j)
+            }
+            (Sin(i), Cos(j)) | (Cos(j), Sin(i)) => {
+                let ((_, sm), (_, sp)) = (pair(i, j, -1.0), pair(i, j, 1.0));
+                (sp + sm) * half - es(i) * ec(j)
+            }
+        }
+    };
+    let n = features.len();
+    let cov = DMatrix::from_fn(n, n, |a, b| second(features[a], features[b]));
+    FeatureMoments { mean, cov }
 }
 
 #[cfg(test)]
