@@ -16,6 +16,9 @@
 //!   300-iteration run" and docs/design.md "Guarding against noise collapse and overfitting".
 //! - `stable_region`: how much of a box of PID + PD gains passes the stability test;
 //!   docs/design.md "Exploration: how much of the gain box balances, …".
+//! - `history_choice`: the history `msgp_core::fit::history` chooses on each Table 1
+//!   benchmark, and the default MSGP fit's test RMSE with it; docs/design.md ("Table 1 against
+//!   all six columns, and the history chosen from the data").
 //! - `swing_up`: the learning loop on the arm swing-up, iteration by iteration; docs/design.md
 //!   "Angles on the pole's tip, and the arm swing-up plant".
 //! - `swing_up_models`: MSGP and GP-NARX fitted to the same swing-up episodes, each model's

@@ -824,6 +824,21 @@ fn bad_inputs_fail_with_clear_messages() {
         &["--data", "text.csv"],
         &["text.csv:3:2:", "`abc` in column `u` is not a number"],
     );
+    // a file without a header line: its first sample is not taken for column names
+    let headless: String = system_csv(120, None)
+        .lines()
+        .skip(1)
+        .map(|l| l.to_string() + "\n")
+        .collect();
+    dir.write("headless.csv", &headless);
+    fit(
+        &["--data", "headless.csv"],
+        &[
+            "headless.csv:1:1:",
+            "is all numbers, not a header",
+            "`t,u,y`",
+        ],
+    );
     dir.write("nan.csv", "t,u,y\n0,1,2\n1,2,NaN\n");
     fit(
         &["--data", "nan.csv"],

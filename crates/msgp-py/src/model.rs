@@ -499,7 +499,13 @@ impl Msgp {
         if let Some(n) = inputs.iter().find(|n| outputs.contains(n)) {
             return Err(input(format!("{n:?} is both an input and an output name")).into());
         }
-        if let Some(note) = options.inducing_warning(&train) {
+        for note in [
+            options.history_warning(&train),
+            options.inducing_warning(&train),
+        ]
+        .into_iter()
+        .flatten()
+        {
             // what `msgp fit` prints as a warning: the fit goes on with what it says
             let warning = py.get_type::<pyo3::exceptions::PyUserWarning>();
             PyErr::warn(

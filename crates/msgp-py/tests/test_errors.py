@@ -253,6 +253,8 @@ def test_warnings_about_the_data_do_not_stop_a_fit(tmp_path):
         msgp.Msgp(iterations=2).fit(U[:6], Y[:6])
     with pytest.warns(UserWarning, match="100 pseudo-inputs requested but .* 58 windows"):
         msgp.Msgp(inducing=100, iterations=1, method="gp-narx").fit(U, Y)
+    with pytest.warns(UserWarning, match="l_y=40, l_u=40 makes 80 GP inputs but .* only 20 windows"):
+        msgp.Msgp(history=(40, 40), iterations=1, method="gp-narx").fit(U, Y)
     t = np.arange(60) * 0.02
     t[30:] += 0.02  # one dropped sample
     path = tmp_path / "gap.csv"

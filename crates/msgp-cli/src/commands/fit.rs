@@ -135,6 +135,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             ),
         }
     }
+    warnings.extend(options.history_warning(&trajs));
     warnings.extend(options.inducing_warning(&trajs));
     for w in &warnings {
         eprintln!("warning: {w}");

@@ -3,7 +3,9 @@
 //! cell, its line and column.
 //!
 //! Rules of the CSV reader:
-//! - the first line is the header; names are trimmed, must be non-empty and unique;
+//! - the first line is the header; names are trimmed, must be non-empty and unique, and not
+//!   all numbers (a file without a header line is refused rather than read with its first
+//!   sample as names);
 //! - every data cell must parse as a finite `f64` (`NaN`, `inf` and empty cells are errors);
 //! - every line has as many fields as the header;
 //! - blank lines are skipped; a file without data lines is an error;
@@ -88,6 +90,19 @@ impl Table {
             .headers()
             .map_err(|e| csv_err(path, &e, "header", &mut LineCounter::new(bytes)))?;
         let columns: Vec<String> = header.iter().map(str::to_string).collect();
+        if columns.iter().all(|name| name.parse::<f64>().is_ok()) {
+            return Err(at(
+                path,
+                1,
+                1,
+                format!(
+                    "the first line `{}` is all numbers, not a header: the file needs a first \
+                     line naming its columns (e.g. `t,u,y`); otherwise its first sample would \
+                     be read as column names",
+                    columns.join(",")
+                ),
+            ));
+        }
         for (j, name) in columns.iter().enumerate() {
             if name.is_empty() {
                 return Err(at(path, 1, j + 1, "empty column name in the header".into()));
@@ -472,6 +487,16 @@ mod tests {
         assert!(message("t,u,y\n").contains("no data rows"));
         assert!(message("t,u,u\n1,2,3\n").contains("duplicate column name `u`"));
         assert!(message("t,,y\n1,2,3\n").contains("empty column name"));
+        assert_eq!(
+            message("0,6.41,4.7660989\n0.08,6.2,4.8\n"),
+            "x.csv:1:1: the first line `0,6.41,4.7660989` is all numbers, not a header: the \
+             file needs a first line naming its columns (e.g. `t,u,y`); otherwise its first \
+             sample would be read as column names"
+        );
+        assert!(
+            parse("t,1,y\n0,1,2\n").is_ok(),
+            "a name that is a number among names"
+        );
         let t = parse("t,u\n0,1\n").expect("valid");
         let e = t.column("y").expect_err("missing").to_string();
         assert!(e.contains("no column `y` (columns: t, u)"), "{e}");

@@ -1,7 +1,7 @@
 //! Fitting a model to trajectories: MSGP (`msgp`: the trajectory likelihood), the one-step
 //! baselines GP-NARX and PILCO GP-NARX ([`one_step`]: the marginal likelihood of one-step
 //! pairs) and linear-kf ([`linear_kf`]: the window model without a GP, by the exact
-//! Kalman-filter likelihood).
+//! Kalman-filter likelihood); [`history`] chooses the NARX history from the data.
 //!
 //! Data path: trajectories in original units → [`Normalizer`] (fitted on the training data) →
 //! the method's own fit → a [`Model`] in normalised units that carries its normaliser. The
@@ -11,6 +11,7 @@
 
 pub mod calibration;
 mod divergence;
+pub mod history;
 mod hyper;
 pub mod linear_kf;
 mod msgp;
@@ -19,11 +20,13 @@ mod settings;
 mod vfe;
 
 pub use divergence::{DIVERGENCE_RANGES, OutputRange, check_divergence};
+pub use history::{HistoryChoice, HistoryScore, HistorySearch, choose_history};
 pub use settings::{
     CLEARLY_BETTER, DEFAULT_FULL_DATA_BLOW_UP, DEFAULT_FULL_DATA_ITERATIONS, DEFAULT_MAX_INDUCING,
     DEFAULT_ONE_STEP_ITERATIONS, FIT_LBFGS, FitOptimizer, FitOptions, FitSettings, LINEAR_RECIPE,
-    LinearKfSettings, MethodSettings, MsgpSettings, MsgpStart, NoiseStart, OneStepFitSettings,
-    OneStepObjective, OneStepSolver, Recipe, SHORTEST_FINAL_BUDGET, final_budgets,
+    LinearKfSettings, MANY_GP_INPUTS, MethodSettings, MsgpSettings, MsgpStart, NoiseStart,
+    OneStepFitSettings, OneStepObjective, OneStepSolver, Recipe, SHORTEST_FINAL_BUDGET,
+    final_budgets,
 };
 
 use std::ops::ControlFlow;

@@ -705,6 +705,11 @@ pub struct FitOptions {
     pub threads: Threads,
 }
 
+/// More GP inputs (`l_y·d_y + l_u·d_u`) than this make [`FitOptions::history_warning`] say
+/// the fit will be slow: every predicted step moment-matches a Gaussian over the whole window,
+/// whose work grows with the square of its size (Table 1's longest histories have 20).
+pub const MANY_GP_INPUTS: usize = 64;
+
 /// Fewer default pseudo-inputs than this make [`FitOptions::inducing_warning`] speak up.
 pub const FEW_INDUCING: usize = 10;
 
@@ -750,6 +755,38 @@ impl FitOptions {
                 if m == 1 { "" } else { "s" }
             )),
             _ => None,
+        }
+    }
+
+    /// A warning, given before the work starts, when the history is long for the data: more
+    /// GP inputs than training windows (a lengthscale per input, fewer windows to set them),
+    /// or more than [`MANY_GP_INPUTS`] inputs (a slow fit).
+    pub fn history_warning(&self, train: &[Trajectory]) -> Option<String> {
+        let first = train.first()?;
+        if self.method == Method::LinearKf {
+            return None;
+        }
+        let inputs = self.ly * first.y.ncols() + self.lu * first.u.ncols();
+        let windows = self.windows(train);
+        if windows == 0 {
+            // nothing to fit: the fit's own error says so
+            return None;
+        }
+        let history = format!("the history l_y={}, l_u={}", self.ly, self.lu);
+        if inputs > windows {
+            Some(format!(
+                "{history} makes {inputs} GP inputs but the training part has only {windows} \
+                 windows to fit their lengthscales: expect an overfitted model and a slow fit; \
+                 give a shorter history"
+            ))
+        } else if inputs > MANY_GP_INPUTS {
+            Some(format!(
+                "{history} makes {inputs} GP inputs (more than {MANY_GP_INPUTS}): every \
+                 predicted step moment-matches a Gaussian over the whole window, so expect a \
+                 slow fit (minutes or more); a shorter history is much faster"
+            ))
+        } else {
+            None
         }
     }
 

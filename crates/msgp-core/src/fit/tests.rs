@@ -1647,3 +1647,40 @@ fn sampled_free_runs_are_seeded_and_in_original_units() {
     let refused = linear.sample_free_runs(&traj, 10, 0).expect_err("refused");
     assert!(refused.to_string().contains("linear-kf"), "{refused}");
 }
+
+/// A history long for the data is named before the fit starts: more GP inputs than training
+/// windows (the dryer's 500 samples with `--history 400,400`), or more than
+/// [`MANY_GP_INPUTS`] inputs; the paper's histories and linear-kf get no warning.
+#[test]
+fn a_long_history_is_warned_about_before_the_fit() {
+    let data = [traj(500)];
+    let with = |ly, lu, method| {
+        FitOptions {
+            ly,
+            lu,
+            ..options(method, None, None)
+        }
+        .history_warning(&data)
+    };
+    let many = with(400, 400, Method::Msgp).expect("a warning");
+    assert!(
+        many.starts_with(
+            "the history l_y=400, l_u=400 makes 800 GP inputs but the training part has only \
+             100 windows"
+        ),
+        "{many}"
+    );
+    let slow = with(40, 40, Method::GpNarx).expect("a warning");
+    assert!(
+        slow.starts_with("the history l_y=40, l_u=40 makes 80 GP inputs (more than 64)"),
+        "{slow}"
+    );
+    assert_eq!(with(32, 32, Method::Msgp), None, "64 inputs: no warning");
+    assert_eq!(with(10, 10, Method::Msgp), None);
+    assert_eq!(with(400, 400, Method::LinearKf), None);
+    assert_eq!(
+        with(600, 600, Method::Msgp),
+        None,
+        "no windows: the fit's error says it"
+    );
+}

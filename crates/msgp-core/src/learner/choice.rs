@@ -44,31 +44,13 @@ pub enum SearchModel {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HeldOut {
     /// The GP model's negative log-likelihood of the episode.
-    #[serde(with = "infinite_as_null")]
+    #[serde(with = "crate::numeric::infinite_as_null")]
     pub gp_nll: f64,
     /// The linear model's.
-    #[serde(with = "infinite_as_null")]
+    #[serde(with = "crate::numeric::infinite_as_null")]
     pub linear_nll: f64,
     /// Scored steps.
     pub steps: usize,
-}
-
-/// A held-out NLL in JSON: infinite (the model's filter failed on the episode) as `null`, and
-/// `null` read back as infinite, so a record with one reads back as it was written.
-mod infinite_as_null {
-    use serde::{Deserialize, Deserializer, Serializer};
-
-    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
-        if v.is_finite() {
-            s.serialize_f64(*v)
-        } else {
-            s.serialize_none()
-        }
-    }
-
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
-        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::INFINITY))
-    }
 }
 
 /// What a model that cannot predict a held-out episode (its filter fails numerically) loses

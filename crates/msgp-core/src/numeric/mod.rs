@@ -3,12 +3,13 @@
 //! jitter policy ([`linalg`], and [`dense`] for the large one-step matrices), the dual-number
 //! gradient machinery ([`dual`]), the f64 SIMD building blocks of the fast kernels (`simd`,
 //! crate-private), deterministic fan-out over threads ([`parallel`]) and independent seeded
-//! random streams ([`seed`]).
+//! random streams ([`seed`]), and infinity in JSON ([`infinite_as_null`]).
 //!
 //! Nothing here knows about GPs, windows or trajectories.
 
 pub mod dense;
 pub mod dual;
+pub mod infinite_as_null;
 pub mod linalg;
 pub mod parallel;
 pub mod scalar;
