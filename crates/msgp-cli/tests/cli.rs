@@ -1455,9 +1455,10 @@ fn reproductions_run_over_seeds_and_unseen_excitations() {
     };
     let g = ok_json(&dir, &generalisation(&["--json", "--quiet"]));
     let rows = g["rows"].as_array().expect("rows");
-    // (Table 2 test + 3 excitations) × 2 methods
-    assert_eq!(rows.len(), 8, "{g}");
-    assert_eq!(rows.iter().filter(|r| r["alternate"] == true).count(), 6);
+    // (Table 2 test + 3 excitations in range + 2 beyond it) × 2 methods
+    assert_eq!(rows.len(), 12, "{g}");
+    assert_eq!(rows.iter().filter(|r| r["alternate"] == true).count(), 10);
+    assert_eq!(rows.iter().filter(|r| r["beyond_range"] == true).count(), 4);
     for r in rows {
         let m = r["mean_predictor_rmse"].as_f64().expect("mean predictor");
         assert!(
@@ -1467,11 +1468,14 @@ fn reproductions_run_over_seeds_and_unseen_excitations() {
     }
     let md = std::fs::read_to_string(dir.path("g.md")).expect("markdown");
     assert!(
-        md.contains("msgp:generalisation:begin") && md.contains("chirp"),
+        md.contains("msgp:generalisation:begin")
+            && md.contains("chirp")
+            && md.contains("- beyond the training amplitude")
+            && md.contains("test input ×1.5"),
         "{md}"
     );
     // `--plots` draws the same simulations: the figures are unchanged, and one PNG of the
-    // benchmark's four tests (rows) by two methods (columns) is written into a new folder
+    // benchmark's six tests (rows) by two methods (columns) is written into a new folder
     let p = ok_json(
         &dir,
         &generalisation(&["--plots", "plots/new", "--json", "--quiet"]),
@@ -1483,7 +1487,7 @@ fn reproductions_run_over_seeds_and_unseen_excitations() {
         "{p}"
     );
     let png = dir.path("plots/new/synthetic5-seed0.png");
-    assert_eq!(png_size(&png), (2 * 800, 4 * 340));
+    assert_eq!(png_size(&png), (2 * 800, 6 * 340));
     let md = std::fs::read_to_string(dir.path("g.md")).expect("markdown");
     assert!(md.contains("plots/new/<benchmark>-seed<k>.png"), "{md}");
     // a plots' folder that cannot be made: a clear error before any fit, for both reproductions

@@ -52,6 +52,8 @@ struct Case {
     metrics: Vec<Metrics>,
     /// Whether the test is an excitation the model was not trained on (not Table 2's own).
     alternate: bool,
+    /// Whether the test's input leaves the training input's range.
+    beyond: bool,
 }
 
 /// RMSE of always predicting `level` on `traj` from `start` on.
@@ -137,12 +139,23 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
     let quiet = args.common.quiet || jobs > 1;
     let per_unit_cases = side_by_side::run(units, jobs, |(source, seed)| {
         let key = source.key();
-        let (bench, tests): (Benchmark, Vec<(String, Trajectory, bool)>) = match source {
+        // (name, trajectory, alternate, beyond the training range)
+        type Test = (String, Trajectory, bool, bool);
+        let (bench, tests): (Benchmark, Vec<Test>) = match source {
             Source::Synthetic(s) => {
                 let bench = s.generate(seed, NoiseScale::StdDev)?;
-                let mut tests = vec![("Table 2 test input".to_string(), bench.test.clone(), false)];
-                for (e, t) in s.alternate_tests(seed)? {
-                    tests.push((e.name().to_string(), t, true));
+                let mut tests = vec![(
+                    "Table 2 test input".to_string(),
+                    bench.test.clone(),
+                    false,
+                    false,
+                )];
+                for (e, t) in s
+                    .alternate_tests(seed)?
+                    .into_iter()
+                    .chain(s.beyond_tests(seed)?)
+                {
+                    tests.push((e.name().to_string(), t, true, e.beyond_range()));
                 }
                 (bench, tests)
             }
@@ -154,7 +167,10 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
                     )
                 })?;
                 let test = bench.test.clone();
-                (bench, vec![("swapped split".to_string(), test, true)])
+                (
+                    bench,
+                    vec![("swapped split".to_string(), test, true, false)],
+                )
             }
         };
         let label = format!("{key} (seed {seed})");
@@ -163,7 +179,7 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
         let mut cases = Vec::new();
         // the plot's rows: each test that both methods simulated
         let mut drawn: Vec<Vec<(String, Simulated)>> = Vec::new();
-        for (name, traj, alternate) in tests {
+        for (name, traj, alternate, beyond) in tests {
             let mut metrics = Vec::new();
             let mut row = Vec::new();
             for (m, method) in models.iter().zip(METHODS) {
@@ -201,6 +217,7 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
                 mean_rmse: constant_rmse(&traj, bench.ly.max(bench.lu), level),
                 metrics,
                 alternate,
+                beyond,
             });
         }
         // (a benchmark whose every test failed to simulate has no plot)
@@ -250,6 +267,7 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
                         "coverage_2sigma": x.coverage_2sigma,
                         "mean_predictor_rmse": c.mean_rmse,
                         "alternate": c.alternate,
+                        "beyond_range": c.beyond,
                     })
                 })
             })
@@ -280,7 +298,7 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
 fn summary(cases: &[Case]) -> Vec<String> {
     let alt: Vec<&Case> = cases
         .iter()
-        .filter(|c| c.alternate && c.key.starts_with("synthetic"))
+        .filter(|c| c.alternate && !c.beyond && c.key.starts_with("synthetic"))
         .collect();
     let pass = alt
         .iter()
@@ -292,7 +310,21 @@ fn summary(cases: &[Case]) -> Vec<String> {
             .sum::<f64>()
             / set.len().max(1) as f64
     };
-    let all: Vec<&Case> = cases.iter().filter(|c| c.alternate).collect();
+    let all: Vec<&Case> = cases.iter().filter(|c| c.alternate && !c.beyond).collect();
+    let beyond: Vec<&Case> = cases.iter().filter(|c| c.beyond).collect();
+    let covered = |k: usize| {
+        beyond
+            .iter()
+            .filter(|c| c.metrics[k].coverage_2sigma >= 0.9)
+            .count()
+    };
+    let mean_coverage = |k: usize| {
+        beyond
+            .iter()
+            .map(|c| c.metrics[k].coverage_2sigma)
+            .sum::<f64>()
+            / beyond.len().max(1) as f64
+    };
     vec![
         format!(
             "- synthetic systems, alternate excitations: MSGP RMSE ≤ 0.5 × the training-mean \
@@ -304,6 +336,19 @@ fn summary(cases: &[Case]) -> Vec<String> {
              swapped real): MSGP {:.3}, GP-NARX {:.3}",
             ratio(0, &all),
             ratio(1, &all)
+        ),
+        format!(
+            "- beyond the training amplitude (synthetic systems; steps and the test input up to \
+             1.5 × the training bound): 2σ coverage ≥ 0.9 on {}/{n} for MSGP (mean coverage \
+             {:.2}, RMSE / training-mean predictor's {:.3}) and {}/{n} for GP-NARX ({:.2}, \
+             {:.3})",
+            covered(0),
+            mean_coverage(0),
+            ratio(0, &beyond),
+            covered(1),
+            mean_coverage(1),
+            ratio(1, &beyond),
+            n = beyond.len()
         ),
     ]
 }
@@ -323,8 +368,10 @@ fn render(args: &GeneralisationArgs, cases: &[Case], plots: &[String], seconds: 
          training input's range: **steps** (ten levels drawn uniformly from the training range, \
          each held for a tenth of the test), a **chirp** (amplitude 0.9 × the training bound, from \
          one period per test to 0.2 cycles per sample) and the **half test input** (Table 2's \
-         test input at half amplitude); the random parts are seeded with the run's seed \
-         (`msgp_core::data::synthetic::Excitation`). Each real series is split the other way \
+         test input at half amplitude); and on two beyond it: **steps ×1.5** (levels drawn from \
+         1.5 × the training range) and the **test input ×1.5** (Table 2's test input scaled to \
+         peak at 1.5 × the training bound), counted on their own line; the random parts are \
+         seeded with the run's seed (`msgp_core::data::synthetic::Excitation`). Each real series is split the other way \
          round: its last `n_train` samples (Table 3's training length) train, the samples \
          before them test. Every method with its default settings (MSGP: the default protocol). \
          *mean*: RMSE of always predicting the training outputs' mean; *ratio*: RMSE / mean's. \

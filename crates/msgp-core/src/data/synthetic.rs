@@ -173,11 +173,20 @@ pub enum Excitation {
     /// Table 2's test input at half its amplitude (system 5: its seeded random test input,
     /// halved).
     HalfTest,
+    /// Ten steps as [`Excitation::Steps`], levels drawn from 1.5 × the training input's range:
+    /// half the time outside it.
+    BeyondSteps,
+    /// Table 2's test input (system 5: its seeded random test input) scaled so that its peak
+    /// is 1.5 × the training input's bound: beyond the training range wherever it is large.
+    BeyondTest,
 }
 
 impl Excitation {
-    /// All three, in report order.
+    /// The three inside the training input's range, in report order.
     pub const ALL: [Excitation; 3] = [Excitation::Steps, Excitation::Chirp, Excitation::HalfTest];
+
+    /// The two beyond the training input's amplitude, in report order.
+    pub const BEYOND: [Excitation; 2] = [Excitation::BeyondSteps, Excitation::BeyondTest];
 
     /// Name in reports.
     pub fn name(&self) -> &'static str {
@@ -185,9 +194,20 @@ impl Excitation {
             Excitation::Steps => "steps",
             Excitation::Chirp => "chirp",
             Excitation::HalfTest => "half test input",
+            Excitation::BeyondSteps => "steps ×1.5",
+            Excitation::BeyondTest => "test input ×1.5",
         }
     }
+
+    /// Whether it leaves the training input's range.
+    pub fn beyond_range(&self) -> bool {
+        matches!(self, Excitation::BeyondSteps | Excitation::BeyondTest)
+    }
 }
+
+/// How far [`Excitation::BeyondSteps`] and [`Excitation::BeyondTest`] scale the training
+/// input's amplitude.
+pub const BEYOND_SCALE: f64 = 1.5;
 
 impl SyntheticSystem {
     /// The bound `b` of the training input (`U(−b, b)`; system 5's clipped normal: 1).
@@ -208,7 +228,12 @@ impl SyntheticSystem {
         );
         let b = self.input_bound();
         let u: Vec<f64> = match excitation {
-            Excitation::Steps => {
+            Excitation::Steps | Excitation::BeyondSteps => {
+                let b = if excitation.beyond_range() {
+                    BEYOND_SCALE * b
+                } else {
+                    b
+                };
                 let hold = (n / 10).max(1);
                 let mut level = 0.0;
                 (0..n)
@@ -230,16 +255,24 @@ impl SyntheticSystem {
                     })
                     .collect()
             }
-            Excitation::HalfTest => {
+            Excitation::HalfTest | Excitation::BeyondTest => {
                 // system 5's test input is drawn after its training data: draw both, as
-                // `generate` does, so the halved signal is Table 2's own
+                // `generate` does, so the scaled signal is Table 2's own
                 let test = if self.0 == 5 {
                     let bench = self.generate(seed, NoiseScale::StdDev)?;
                     bench.test.u.iter().copied().collect()
                 } else {
                     self.test_input(n, &mut rng)
                 };
-                test.into_iter().map(|v| 0.5 * v).collect()
+                let scale = if excitation.beyond_range() {
+                    // its peak at 1.5 × the training bound (systems 1 and 2 test well inside
+                    // their training range)
+                    let peak = test.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                    BEYOND_SCALE * b / peak.max(f64::MIN_POSITIVE)
+                } else {
+                    0.5
+                };
+                test.into_iter().map(|v| scale * v).collect()
             }
         };
         let y = self.respond(&u);
@@ -249,6 +282,14 @@ impl SyntheticSystem {
     /// The three [`Excitation`]s' test trajectories, in [`Excitation::ALL`] order.
     pub fn alternate_tests(&self, seed: u64) -> Result<Vec<(Excitation, Trajectory)>> {
         Excitation::ALL
+            .into_iter()
+            .map(|e| Ok((e, self.alternate_test(e, seed)?)))
+            .collect()
+    }
+
+    /// The test trajectories beyond the training amplitude, in [`Excitation::BEYOND`] order.
+    pub fn beyond_tests(&self, seed: u64) -> Result<Vec<(Excitation, Trajectory)>> {
+        Excitation::BEYOND
             .into_iter()
             .map(|e| Ok((e, self.alternate_test(e, seed)?)))
             .collect()
@@ -326,6 +367,45 @@ mod tests {
             let mut levels: Vec<f64> = steps.iter().step_by(n / 10).copied().collect();
             levels.dedup();
             assert_eq!(levels.len(), 10);
+        }
+    }
+
+    /// The excitations beyond the training amplitude: seeded, noise-free responses, Table 2's
+    /// test input scaled to peak at 1.5 × the training bound, and steps that leave the
+    /// training range (and stay within 1.5 × it).
+    #[test]
+    fn beyond_range_excitations_leave_the_training_range() {
+        for s in SyntheticSystem::all() {
+            let beyond = s.beyond_tests(3).expect("beyond");
+            assert_eq!(beyond, s.beyond_tests(3).expect("beyond"));
+            let b = s.input_bound();
+            for (e, t) in &beyond {
+                assert!(e.beyond_range());
+                let u: Vec<f64> = t.u.iter().copied().collect();
+                let y: Vec<f64> = t.y.iter().copied().collect();
+                assert_eq!(s.respond(&u), y, "{e:?}: noise-free response");
+                let top = u.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                assert!(
+                    top > b && top <= BEYOND_SCALE * b,
+                    "{e:?}: peak {top}, bound {b}"
+                );
+            }
+            let test = s.generate(3, NoiseScale::StdDev).expect("gen").test;
+            let got: Vec<f64> = beyond[1].1.u.iter().copied().collect();
+            let peak = got.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            assert!(
+                (peak - BEYOND_SCALE * b).abs() < 1e-12,
+                "system {}: peak {peak}",
+                s.number()
+            );
+            let k = peak / test.u.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for (g, t) in got.iter().zip(test.u.iter()) {
+                assert!(
+                    (g - k * t).abs() < 1e-12,
+                    "system {}: a scaled test input",
+                    s.number()
+                );
+            }
         }
     }
 
