@@ -10,23 +10,9 @@ use msgp_core::data::Benchmark;
 use msgp_core::data::real::RealSeries;
 use msgp_core::fit::{FitOptions, HistorySearch, choose_history, fit};
 use msgp_core::model::{Method, Rollout};
-use msgp_core::numeric::parallel::Threads;
 
 fn options(method: Method, ly: usize, lu: usize) -> FitOptions {
-    FitOptions {
-        method,
-        ly,
-        lu,
-        inducing: None,
-        iterations: None,
-        seed: 0,
-        mean: None,
-        integrators: Vec::new(),
-        optimizer: Default::default(),
-        likelihood: Default::default(),
-        start: Default::default(),
-        threads: Threads::default(),
-    }
+    FitOptions::new(method, ly, lu)
 }
 
 /// The validation RMSE (mean feedback and moment matching) of `method` fitted on the first

@@ -491,20 +491,7 @@ mod tests {
     /// ((3, 2) scored 36 % above it).
     #[test]
     fn the_search_chooses_the_true_orders() {
-        let judge = FitOptions {
-            method: Method::LinearKf,
-            ly: 1,
-            lu: 1,
-            inducing: None,
-            iterations: None,
-            seed: 0,
-            mean: None,
-            integrators: Vec::new(),
-            optimizer: Default::default(),
-            likelihood: Default::default(),
-            start: Default::default(),
-            threads: Default::default(),
-        };
+        let judge = FitOptions::new(Method::LinearKf, 1, 1);
         for seed in 0..1 {
             let choice = choose_history(
                 &[arx_system(600, 0.02, seed)],

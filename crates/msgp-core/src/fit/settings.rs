@@ -714,6 +714,25 @@ pub const MANY_GP_INPUTS: usize = 64;
 pub const FEW_INDUCING: usize = 10;
 
 impl FitOptions {
+    /// `method` with history `(ly, lu)` and every other choice at its default (seed 0, the
+    /// default threads).
+    pub fn new(method: Method, ly: usize, lu: usize) -> Self {
+        Self {
+            method,
+            ly,
+            lu,
+            inducing: None,
+            iterations: None,
+            seed: 0,
+            mean: None,
+            integrators: Vec::new(),
+            optimizer: FitOptimizer::default(),
+            likelihood: Likelihood::default(),
+            start: MsgpStart::default(),
+            threads: Threads::default(),
+        }
+    }
+
     /// Training windows of `train`: per trajectory, the samples after the history.
     fn windows(&self, train: &[Trajectory]) -> usize {
         let warmup = self.ly.max(self.lu);

@@ -936,6 +936,22 @@ mod tests {
         assert!((m - 2.0).abs() < 1e-15 && (sd - 1.0).abs() < 1e-15);
     }
 
+    /// A plan of MSGP on the free-run likelihood alone over `seeds` and `benchmarks`.
+    fn free_run_msgp_plan(seeds: &[u64], benchmarks: &[&str]) -> Plan {
+        let only: Vec<String> = benchmarks.iter().map(|b| b.to_string()).collect();
+        Plan::new(
+            seeds,
+            &only,
+            &[Method::Msgp],
+            &[Likelihood::FreeRun],
+            10,
+            None,
+            FitOptimizer::Adam,
+            Path::new("nowhere"),
+        )
+        .expect("plan")
+    }
+
     fn cell(x: f64) -> Cell {
         let m = Metrics {
             rmse: x,
@@ -1038,18 +1054,7 @@ mod tests {
     /// fallback head's, or the next recipe's after the first diverged.
     #[test]
     fn the_iteration_column_marks_fallback_heads_and_set_aside_recipes() {
-        let only = ["synthetic4".to_string()];
-        let plan = Plan::new(
-            &[0, 1, 2],
-            &only,
-            &[Method::Msgp],
-            &[Likelihood::FreeRun],
-            10,
-            None,
-            FitOptimizer::Adam,
-            Path::new("nowhere"),
-        )
-        .expect("plan");
+        let plan = free_run_msgp_plan(&[0, 1, 2], &["synthetic4"]);
         let marked = |k: usize| {
             let mut c = cell(k as f64);
             c.iterations_run = 1000 + k;
@@ -1096,18 +1101,7 @@ mod tests {
     /// MSGP but behind REVARB 2 (0.1717); synthetic system 2 at 0.29 is below all six.
     #[test]
     fn the_best_column_is_the_best_of_all_six() {
-        let only = ["synthetic1".to_string(), "synthetic2".to_string()];
-        let plan = Plan::new(
-            &[0],
-            &only,
-            &[Method::Msgp],
-            &[Likelihood::FreeRun],
-            10,
-            None,
-            FitOptimizer::Adam,
-            Path::new("nowhere"),
-        )
-        .expect("plan");
+        let plan = free_run_msgp_plan(&[0], &["synthetic1", "synthetic2"]);
         let results = plan
             .units()
             .iter()
