@@ -1,9 +1,12 @@
-//! The history `--history auto` chooses on each Table 1 benchmark (training part only), beside
+//! The history `msgp_core::fit::history` chooses on each Table 1 benchmark (training part only), beside
 //! the paper's, with the linear scores of the best few; `fit` also fits the default MSGP on the
 //! whole training part with the chosen history and reports its test RMSE (and with the
 //! paper's, for comparison).
 //!
-//! `cargo run --release -p msgp-diagnostics --bin history_choice -- [fit] [only=name,...]`
+//! `cargo run --release -p msgp-diagnostics --bin history_choice -- [kf|msgp-judge] [narx|msgp]
+//! [fit] [only=name,...] [name=ly,lu ...]`: the judge of the search's second stage (default
+//! one-step GP-NARX), `narx`/`msgp` also print each equal history's validation RMSE, `fit`
+//! fits the default MSGP with the chosen (or given) history on the whole training part.
 use std::path::PathBuf;
 
 use msgp_core::data::Benchmark;
@@ -78,6 +81,8 @@ fn main() {
         let clock = std::time::Instant::now();
         let judge_method = if args.iter().any(|a| a == "kf") {
             Method::LinearKf
+        } else if args.iter().any(|a| a == "msgp-judge") {
+            Method::Msgp
         } else {
             Method::GpNarx
         };
