@@ -27,7 +27,7 @@
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
-use crate::data::Trajectory;
+use crate::data::{Normalizer, Trajectory};
 use crate::error::{MsgpError, Result};
 use crate::fit::{FitOptions, fit};
 use crate::model::Model;
@@ -139,8 +139,8 @@ struct Split {
     lag: usize,
     dy: usize,
     du: usize,
-    /// Each output's training mean and standard deviation.
-    scale: Vec<(f64, f64)>,
+    /// Each output's training standard deviation (the model's normaliser's).
+    y_std: Vec<f64>,
 }
 
 impl Split {
@@ -170,7 +170,7 @@ impl Split {
             lag,
             dy,
             du,
-            scale: output_scale(train, dy),
+            y_std: Normalizer::fit(&train.iter().collect::<Vec<_>>())?.y_std,
         })
     }
 
@@ -216,7 +216,7 @@ impl Split {
     /// `lag`-th) against judged part `t`'s, accumulated into `sq` (per output) and `n`.
     fn accumulate(&self, t: &Trajectory, y: &DMatrix<f64>, sq: &mut [f64], n: &mut usize) {
         for s in self.lag..t.len() {
-            for (j, (_, sd)) in self.scale.iter().enumerate() {
+            for (j, sd) in self.y_std.iter().enumerate() {
                 sq[j] += ((y[(s - self.lag, j)] - t.y[(s, j)]) / sd).powi(2);
             }
             *n += 1;
@@ -317,22 +317,6 @@ fn check(train: &[Trajectory], search: &HistorySearch) -> Result<()> {
         ));
     }
     Ok(())
-}
-
-/// Each output's mean and standard deviation over the training data (a constant output: 1).
-fn output_scale(train: &[Trajectory], dy: usize) -> Vec<(f64, f64)> {
-    (0..dy)
-        .map(|j| {
-            let v: Vec<f64> = train
-                .iter()
-                .flat_map(|t| t.y.column(j).iter().copied().collect::<Vec<_>>())
-                .collect();
-            let n = v.len() as f64;
-            let mean = v.iter().sum::<f64>() / n;
-            let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
-            (mean, if var > 0.0 { var.sqrt() } else { 1.0 })
-        })
-        .collect()
 }
 
 /// The window at `t` with a constant appended.
