@@ -135,6 +135,7 @@ fn a_model_fitted_on_a_simulator_log_predicts_another_excitation() {
         likelihood: Default::default(),
         start: Default::default(),
         threads: Threads::available(),
+        segment_length: None,
     }
     .settings(&train)
     .expect("settings");

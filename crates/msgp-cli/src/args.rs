@@ -391,6 +391,11 @@ pub struct FitArgs {
     /// Number of pseudo-inputs [default: min(100, training windows / 2)].
     #[arg(long, value_name = "M")]
     pub inducing: Option<usize>,
+    /// MSGP on a long log: train on segments of N predicted steps, each started from the data,
+    /// 2 of them per Adam step; 0: every trajectory whole [default: 1000 when the training part
+    /// has more than 4000 windows, else whole].
+    #[arg(long, value_name = "N")]
+    pub segment_length: Option<usize>,
     /// Training method.
     #[arg(long, value_enum, default_value_t = MethodArg::Msgp)]
     pub method: MethodArg,
@@ -604,9 +609,10 @@ pub struct BudgetArgs {
     #[arg(long, value_name = "N")]
     pub fit_iters: Option<usize>,
     /// From the second iteration on, continue the previous MSGP or linear-kf model for N solver
-    /// iterations (same normaliser and pseudo-inputs) instead of fitting from scratch; 0: always
-    /// from scratch [default: 40 for msgp on the filter likelihood, 0 for msgp on the free-run
-    /// one and for gp-narx, 300 for linear-kf].
+    /// iterations (same normaliser and hyperparameters; pseudo-inputs re-placed over all the
+    /// data, up to `--inducing`, while the first episodes capped their count) instead of
+    /// fitting from scratch; 0: always from scratch [default: 40 for msgp on the filter
+    /// likelihood, 0 for msgp on the free-run one and for gp-narx, 300 for linear-kf].
     #[arg(long, value_name = "N")]
     pub warm_start: Option<usize>,
     /// Pseudo-inputs of the model [default: 30 for msgp on the filter likelihood, 50 for the

@@ -1133,6 +1133,38 @@ fn the_msgp_likelihood_is_an_option_of_fit() {
     );
 }
 
+/// `--segment-length N` trains MSGP on segments of the training part, says so and records it
+/// in the model file; 0 trains whole; another method refuses the option.
+#[test]
+fn segments_are_an_option_of_fit() {
+    let dir = Scratch::new("segments");
+    dir.write("s.csv", &system_csv(120, None));
+    let base = [
+        &["fit", "--data", "s.csv", "--segment-length", "20"][..],
+        &FAST[..4],
+    ]
+    .concat();
+    let text = ok(&dir, &base);
+    // 60 training samples, a window of 2: 58 predicted steps in segments of 20
+    assert!(
+        text.contains("trained by segments (a long log): 3 segments of up to 20"),
+        "{text}"
+    );
+    let cut = fitted_model(&dir, &["--segment-length", "20"], "c.json");
+    assert_eq!(
+        cut["training"]["settings"]["segments"],
+        serde_json::json!({"length": 20, "batch": 2})
+    );
+    let whole = fitted_model(&dir, &["--segment-length", "0"], "w.json");
+    assert_eq!(whole["training"]["settings"]["segments"], Value::Null);
+    refused_by(
+        &dir,
+        "gp-narx",
+        &["--segment-length", "20"],
+        &["--segment-length", "gp-narx"],
+    );
+}
+
 /// `--start linear-kf` starts MSGP from the linear-kf model of the data (as the filtered
 /// policy-learning loop does): the model file records the start and the linear mean it implies,
 /// and the model differs from the one-step start's; a zero mean and another method are refused.

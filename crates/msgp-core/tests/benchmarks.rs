@@ -462,6 +462,7 @@ fn a_linear_mean_on_drives_does_not_diverge() {
         likelihood: Default::default(),
         start: Default::default(),
         threads: Default::default(),
+        segment_length: None,
     }
     .settings(std::slice::from_ref(&bench.train))
     .expect("settings");

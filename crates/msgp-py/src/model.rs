@@ -221,6 +221,7 @@ impl Msgp {
                     .and_then(|v| serde_json::from_value(v.clone()).ok())
                     .unwrap_or_default(),
                 threads: Threads::default(),
+                segment_length: None,
             },
             overrides: recorded_overrides(model.method, &file.training.settings),
             fitted: Some(Arc::new(Fitted {
@@ -357,8 +358,8 @@ fn metrics_dict<'py>(py: Python<'py>, m: &Metrics) -> PyResult<Bound<'py, PyDict
 impl Msgp {
     #[new]
     #[pyo3(
-        signature = (history = None, inducing = None, method = "msgp", seed = 0, iterations = None, settings = None, likelihood = None, start = None),
-        text_signature = "(history=(2, 2), inducing=None, method='msgp', seed=0, iterations=None, settings=None, likelihood=None, start=None)"
+        signature = (history = None, inducing = None, method = "msgp", seed = 0, iterations = None, settings = None, likelihood = None, start = None, segment_length = None),
+        text_signature = "(history=(2, 2), inducing=None, method='msgp', seed=0, iterations=None, settings=None, likelihood=None, start=None, segment_length=None)"
     )]
     fn new(
         history: Option<&Bound<'_, PyAny>>,
@@ -369,8 +370,19 @@ impl Msgp {
         settings: Option<&Bound<'_, PyAny>>,
         likelihood: Option<&str>,
         start: Option<&str>,
+        segment_length: Option<i128>,
     ) -> PyResult<Self> {
         let m = crate::model::method(method)?;
+        let segment_length = segment_length
+            .map(|x| count(x, "segment_length"))
+            .transpose()?;
+        if segment_length.is_some() && m != Method::Msgp {
+            return Err(input(format!(
+                "segment_length: segments of the trajectory likelihood, an MSGP fit's; \
+                 method {method:?} has its own fit"
+            ))
+            .into());
+        }
         let likelihood = crate::model::likelihood(m, likelihood)?.unwrap_or_default();
         let start = crate::model::start(m, start)?;
         let (ly, lu) = match history.filter(|h| !h.is_none()) {
@@ -413,6 +425,7 @@ impl Msgp {
             likelihood,
             start,
             threads: Threads::default(),
+            segment_length,
         };
         let overrides = match settings.filter(|s| !s.is_none()) {
             None => None,

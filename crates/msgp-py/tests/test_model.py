@@ -255,3 +255,16 @@ def test_the_divergence_check_reaches_python(fitted, tmp_path):
     path = tmp_path / "wide.json"
     wide.save(str(path))
     assert msgp.Msgp.load(str(path)).diverged == wide.diverged
+
+
+def test_segment_length_trains_by_segments_and_says_so():
+    data = msgp.synthetic_system(3, seed=3)
+    kw = dict(history=data["history"], inducing=10, iterations=5, seed=0)
+    cut = msgp.Msgp(segment_length=50, **kw).fit(data["u_train"], data["y_train"])
+    # 300 samples, a window of 1: 299 predicted steps in segments of 50
+    (segments, count) = cut.report["segments"]
+    assert segments == {"length": 50, "batch": 2} and count == 6
+    whole = msgp.Msgp(segment_length=0, **kw).fit(data["u_train"], data["y_train"])
+    assert whole.report["segments"] is None
+    with pytest.raises(ValueError, match="segment_length"):
+        msgp.Msgp(method="gp-narx", segment_length=50)

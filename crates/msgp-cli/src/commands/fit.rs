@@ -66,6 +66,13 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             method.name()
         );
     }
+    if let (Some(_), false) = (args.segment_length, method == Method::Msgp) {
+        bail!(
+            "--segment-length: segments of the trajectory likelihood, an MSGP fit's; \
+             --method {} has its own fit",
+            method.name()
+        );
+    }
     if let (Some(_), false) = (args.start, method == Method::Msgp) {
         bail!(
             "--start: where an MSGP fit starts; --method {} has its own fit",
@@ -87,6 +94,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         likelihood: args.likelihood.map_or(Likelihood::default(), Into::into),
         start: args.start.map_or(MsgpStart::default(), Into::into),
         threads: Threads::from_env()?,
+        segment_length: args.segment_length,
     };
     let mut settings = options.settings(&trajs)?;
     if let Some(o) = args.one_step {
@@ -224,6 +232,9 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             "chosen_recipe": report.chosen_recipe,
             "recipes": report.recipes,
             "calibration": report.calibration,
+            "segments": report.segments.map(|(s, count)| json!({
+                "length": s.length, "batch": s.batch, "count": count
+            })),
             "diverged": report.diverged.is_some(),
             "divergence": report.diverged,
             "model": model_path.display().to_string(),
@@ -258,6 +269,13 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         ));
     }
     text.push('\n');
+    if let Some((s, count)) = report.segments {
+        text.push_str(&format!(
+            "trained by segments (a long log): {count} segments of up to {} predicted steps, \
+             each started from the data, {} per Adam step (--segment-length 0: whole)\n",
+            s.length, s.batch
+        ));
+    }
     if let Some(line) = calibrated(&report, &data.outputs) {
         text.push_str(&line);
         text.push('\n');

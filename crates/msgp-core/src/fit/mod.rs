@@ -10,17 +10,20 @@
 //! [`FitOptions`].
 
 pub mod calibration;
+mod continuation;
 mod divergence;
 pub mod history;
 mod hyper;
 pub mod linear_kf;
 mod msgp;
 pub mod one_step;
+pub mod segments;
 mod settings;
 mod vfe;
 
 pub use divergence::{DIVERGENCE_RANGES, OutputRange, check_divergence};
 pub use history::{HistoryChoice, HistoryScore, HistorySearch, choose_history};
+pub use segments::{LONG_LOG_WINDOWS, Segments};
 pub use settings::{
     CLEARLY_BETTER, DEFAULT_FULL_DATA_BLOW_UP, DEFAULT_FULL_DATA_ITERATIONS, DEFAULT_MAX_INDUCING,
     DEFAULT_ONE_STEP_ITERATIONS, FIT_LBFGS, FitOptimizer, FitOptions, FitSettings, LINEAR_RECIPE,
@@ -38,7 +41,7 @@ use crate::data::{Normalizer, Trajectory};
 use crate::error::{MsgpError, Result};
 use crate::gp::integrator::Structure;
 use crate::gp::{GpConfig, MeanFunction};
-use crate::model::{Method, Model};
+use crate::model::Model;
 use crate::numeric::linalg::JitterLog;
 use crate::policy::PolicySpec;
 use one_step::{OneStepSettings, fit_one_step, one_step_pairs};
@@ -117,6 +120,9 @@ pub struct FitReport {
     /// calibration of the returned model ([`calibration`]).
     #[serde(default)]
     pub calibration: Option<calibration::CalibrationReport>,
+    /// MSGP with [`MsgpSettings::segments`]: the segments and how many the training data made.
+    #[serde(default)]
+    pub segments: Option<(Segments, usize)>,
 }
 
 impl FitReport {
@@ -245,7 +251,7 @@ pub fn fit_episodes_observed(
     observe: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
 ) -> Result<(Model, FitReport)> {
     if let Some(previous) = previous {
-        check_continuation(settings, previous)?;
+        continuation::check(settings, previous)?;
     }
     fit_episodes_from(episodes, settings, previous, observe)
 }
@@ -256,8 +262,9 @@ pub fn fit_episodes_observed(
 /// and with its pseudo-inputs, instead of a new normaliser, one-step fit and k-means. The
 /// settings must describe the same model (method MSGP, history, outputs and inputs, prior mean,
 /// and at least the previous model's pseudo-inputs: a first fit on few windows has fewer than
-/// asked, and the continuation keeps them). A linear-kf fit continues likewise: L-BFGS from the previous `A` and
-/// noise levels alone, instead of its two cold starts.
+/// asked, and a continuation on more windows places up to the count asked afresh, their targets
+/// the previous GP's mean there: see `continuation`). A linear-kf fit continues likewise:
+/// L-BFGS from the previous `A` and noise levels alone, instead of its two cold starts.
 pub fn refit_episodes(
     episodes: &[TrainingEpisode],
     settings: &FitSettings,
@@ -268,55 +275,6 @@ pub fn refit_episodes(
         progress(p);
         ControlFlow::Continue(())
     })
-}
-
-/// Whether `settings` describe a model that can continue `previous` ([`refit_episodes`]).
-fn check_continuation(settings: &FitSettings, previous: &Model) -> Result<()> {
-    let refuse = |what: String| {
-        Err(MsgpError::InvalidSetting {
-            name: "warm start",
-            reason: what,
-        })
-    };
-    let method = settings.method();
-    if method != previous.method || !matches!(method, Method::Msgp | Method::LinearKf) {
-        return refuse(format!(
-            "only MSGP and linear-kf fits continue from a previous model of their own method \
-             (settings: {}, model: {})",
-            method.name(),
-            previous.method.name()
-        ));
-    }
-    let history = (settings.ly, settings.lu) == (previous.spec.ly, previous.spec.lu);
-    let Some(msgp) = settings.msgp() else {
-        if !history {
-            return refuse(format!(
-                "the previous model has history ({}, {}); the settings ask for ({}, {})",
-                previous.spec.ly, previous.spec.lu, settings.ly, settings.lu
-            ));
-        }
-        return Ok(());
-    };
-    if !history
-        // fewer pseudo-inputs than asked: the first fit's data had fewer windows, which capped
-        // them; the continuation keeps the previous model's
-        || previous.params.pseudo_inputs.nrows() > msgp.inducing
-        || msgp.mean != previous.config.mean
-    {
-        return refuse(format!(
-            "the previous model has history ({}, {}), {} pseudo-inputs and a {:?} mean; the \
-             settings ask for ({}, {}), at most {} and {:?}",
-            previous.spec.ly,
-            previous.spec.lu,
-            previous.params.pseudo_inputs.nrows(),
-            previous.config.mean,
-            settings.ly,
-            settings.lu,
-            msgp.inducing,
-            msgp.mean
-        ));
-    }
-    Ok(())
 }
 
 /// The fit, then the divergence check on its feed-forward training trajectories.

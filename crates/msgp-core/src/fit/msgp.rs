@@ -28,9 +28,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use super::calibration::{CalibrationReport, Judge, tail_calibration};
+use super::continuation;
 use super::divergence::check_divergence;
 use super::linear_kf::{KF_NOISE_FLOOR, fit_linear_kf};
 use super::one_step::{OneStepSettings, column_std, fit_one_step, one_step_pairs};
+use super::segments::Batches;
 use super::{
     CLEARLY_BETTER, FIT_LBFGS, FitOptimizer, FitProgress, FitReport, FitSettings, MsgpSettings,
     MsgpStart, NoiseStart, RecipeOutcome, TrainingEpisode, final_budgets,
@@ -42,7 +44,8 @@ use crate::gp::integrator::{IGNORED_LENGTHSCALE, NO_GP_SIGNAL_VAR};
 use crate::gp::kmeans::kmeans;
 use crate::gp::{GpConfig, GpParams, GpShape, MeanFunction, ParamGroup, PreparedGp};
 use crate::loss::{
-    Complexity, Likelihood, filter_loss, filter_loss_and_gradient, loss_and_gradient, msgp_loss,
+    Complexity, Likelihood, LossValue, filter_loss, filter_loss_and_gradient, loss_and_gradient,
+    msgp_loss,
 };
 use crate::model::{Method, Model};
 use crate::narx::NarxSpec;
@@ -82,6 +85,35 @@ pub(super) fn fit_msgp(
         });
     }
     let (head_eps, tails) = split_tails(&all_eps, msgp.validation_fraction, w);
+    // a long log trains by segments; its validation tails stay whole
+    let (head_eps, all_eps) = match &msgp.segments {
+        Some(s) => {
+            let all = s.split(&all_eps, w)?;
+            report.segments = Some((*s, all.len()));
+            (s.split(&head_eps, w)?, all)
+        }
+        None => (head_eps, all_eps),
+    };
+    // a continuation on data that have outgrown the previous model's pseudo-inputs adds some
+    let grown = match previous {
+        Some(p) => {
+            let structure = Structure::new(&settings.integrators, &spec);
+            continuation::grown_pseudo_inputs(
+                p,
+                norm,
+                spec,
+                &structure,
+                msgp.inducing,
+                settings.seed,
+            )?
+            .map(|params| Model {
+                params,
+                ..p.clone()
+            })
+        }
+        None => None,
+    };
+    let previous = grown.as_ref().or(previous);
     // the settings' own recipe, then the alternative (only where a validation tail can judge)
     let mut recipes = vec![msgp.clone()];
     if let (Some(r), false, None) = (msgp.alternative, tails.is_empty(), previous) {
@@ -1084,43 +1116,83 @@ struct MsgpObjective<'a> {
     /// The numerical failure of the latest evaluation, if it failed (the loss is then reported
     /// as NaN).
     failure: Option<MsgpError>,
+    /// With segments and Adam: the batch of `episodes` each step evaluates.
+    batches: Option<Batches>,
+    /// Predicted steps of all of `episodes` (the batches' weight).
+    all_steps: usize,
+}
+
+impl MsgpObjective<'_> {
+    /// The loss (NLL and complexity) and its gradient on `episodes`.
+    fn evaluate(
+        &mut self,
+        params: &GpParams<f64>,
+        episodes: &[Episode],
+        complexity: Complexity,
+    ) -> Result<(LossValue<f64>, Vec<f64>)> {
+        let evaluate = match self.likelihood {
+            Likelihood::FreeRun => loss_and_gradient,
+            Likelihood::Filter => filter_loss_and_gradient,
+        };
+        evaluate(
+            params,
+            &self.config,
+            &self.spec,
+            episodes,
+            complexity,
+            self.threads,
+            &mut self.log,
+        )
+    }
+
+    /// The loss per predicted step and its gradient: of every episode, or with batches an
+    /// unbiased estimate from the next batch (its NLL per step, plus the complexity term over
+    /// all the steps).
+    fn per_step(&mut self, params: &GpParams<f64>) -> Result<(f64, Vec<f64>)> {
+        let Some(batches) = self.batches.as_mut() else {
+            let (v, mut g) = self.evaluate(params, self.episodes, self.complexity)?;
+            let scale = 1.0 / v.steps.max(1) as f64;
+            g.iter_mut().for_each(|gi| *gi *= scale);
+            return Ok((v.total() * scale, g));
+        };
+        let picked = batches.draw();
+        self.on_batch(params, &picked)
+    }
+
+    /// The estimate of the loss per predicted step and its gradient from the episodes
+    /// `picked`: their NLL per step plus the complexity term over all the steps.
+    fn on_batch(&mut self, params: &GpParams<f64>, picked: &[usize]) -> Result<(f64, Vec<f64>)> {
+        let batch: Vec<Episode> = picked.iter().map(|&k| self.episodes[k].clone()).collect();
+        let (v, g) = self.evaluate(params, &batch, Complexity::None)?;
+        let (c, gc) = self.evaluate(params, &[], self.complexity)?;
+        let (b, n) = (
+            1.0 / v.steps.max(1) as f64,
+            1.0 / self.all_steps.max(1) as f64,
+        );
+        let value = v.nll * b + c.complexity * n;
+        Ok((
+            value,
+            g.iter().zip(&gc).map(|(g, c)| g * b + c * n).collect(),
+        ))
+    }
 }
 
 impl Objective for MsgpObjective<'_> {
     fn value_and_gradient(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>)> {
         let params = GpParams::from_flat(self.shape, x)?;
-        let evaluated = match self.likelihood {
-            Likelihood::FreeRun => loss_and_gradient(
-                &params,
-                &self.config,
-                &self.spec,
-                self.episodes,
-                self.complexity,
-                self.threads,
-                &mut self.log,
-            ),
-            Likelihood::Filter => filter_loss_and_gradient(
-                &params,
-                &self.config,
-                &self.spec,
-                self.episodes,
-                self.complexity,
-                self.threads,
-                &mut self.log,
-            ),
-        };
-        let (v, mut g) = match evaluated {
+        match self.per_step(&params) {
             Err(e @ (MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_))) => {
                 self.failure = Some(e);
-                return Ok((f64::NAN, vec![0.0; x.len()]));
+                Ok((f64::NAN, vec![0.0; x.len()]))
             }
-            other => other?,
-        };
-        // a line search may step back from a failed trial: only a failure at the end counts
-        self.failure = None;
-        let scale = 1.0 / v.steps.max(1) as f64;
-        g.iter_mut().for_each(|gi| *gi *= scale);
-        Ok((v.total() * scale, g))
+            Err(e) => Err(e),
+            Ok(evaluated) => {
+                // a line search may step back from a failed trial: only a failure at the end
+                // counts
+                self.failure = None;
+                Ok(evaluated)
+            }
+        }
     }
 }
 
@@ -1339,7 +1411,20 @@ impl Stage<'_, '_> {
             threads: self.settings.threads,
             log: JitterLog::default(),
             failure: None,
+            batches: match (self.msgp.segments, self.msgp.optimizer) {
+                (Some(s), FitOptimizer::Adam) => Batches::new(
+                    episodes.len(),
+                    s.batch,
+                    self.settings.seed ^ (u64::from(stage) << 32),
+                ),
+                _ => None,
+            },
+            all_steps: episodes
+                .iter()
+                .map(|e| e.traj.len().saturating_sub(self.spec.warmup()))
+                .sum(),
         };
+        let batched = objective.batches.is_some();
         let solver = match self.msgp.optimizer {
             FitOptimizer::Adam => Solver::Adam(Adam {
                 learning_rate: self.msgp.learning_rate,
@@ -1378,7 +1463,8 @@ impl Stage<'_, '_> {
                 // without a validation tail, the best iterate is the one of lowest training loss:
                 // Adam's steps at the loop's step size throw the loss up now and then (by up to
                 // 2.7 nats per step on the loop's data), for tens of iterations, also at the last
-                if tails.is_empty() && loss < best.0 {
+                // (a batch's loss is too noisy for that: batched trainings keep their last)
+                if tails.is_empty() && !batched && loss < best.0 {
                     best = (loss, x.to_vec(), it);
                 }
                 if tails.is_empty() && best.0.is_finite() && checkpoints.contains(&it) {
@@ -1636,5 +1722,85 @@ mod split_tests {
         // no fraction: nothing split
         let (heads, tails) = split_tails(&[Episode::feed_forward(traj(100))], 0.0, 3);
         assert!(tails.is_empty() && heads[0].traj.len() == 100);
+    }
+}
+
+#[cfg(test)]
+mod batch_tests {
+    use super::*;
+    use crate::fit::{FitSettings, TrainingEpisode, fit_episodes};
+
+    /// The batched loss is an unbiased estimate of the whole one: over three segments of equal
+    /// length, the mean of the three single-segment estimates is the loss per step of all of
+    /// them, value and gradient (the complexity term weighted by all the steps, the NLL by the
+    /// batch's), for both likelihoods.
+    #[test]
+    fn batches_estimate_the_whole_loss_without_bias() {
+        // `y_t = 0.9 y_{t−1} + 0.5 u_{t−1} + 0.2 sin(3 y_{t−1})` under a sine input
+        let n = 3 * 20 + 2;
+        let u: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
+        let mut y = vec![0.0; n];
+        for t in 1..n {
+            y[t] = 0.9 * y[t - 1] + 0.5 * u[t - 1] + 0.2 * (y[t - 1] * 3.0).sin();
+        }
+        let traj = Trajectory::siso(&u, &y).expect("finite");
+        let settings = FitSettings {
+            ly: 2,
+            lu: 2,
+            method: MsgpSettings {
+                inducing: 8,
+                iterations: 30,
+                validation_fraction: 0.0,
+                ..MsgpSettings::default()
+            }
+            .into(),
+            ..FitSettings::default()
+        };
+        let whole = [TrainingEpisode {
+            traj: traj.clone(),
+            policy: None,
+        }];
+        let (model, _) = fit_episodes(&whole, &settings, &mut |_| {}).expect("fit");
+        let episodes = crate::fit::Segments {
+            length: 20,
+            batch: 1,
+        }
+        .split(&[Episode::feed_forward(model.normalizer.apply(&traj))], 2)
+        .expect("split");
+        assert_eq!(episodes.len(), 3);
+        for likelihood in [Likelihood::FreeRun, Likelihood::Filter] {
+            let mut objective = MsgpObjective {
+                shape: model.params.shape().expect("shape"),
+                spec: model.spec,
+                config: model.config,
+                episodes: &episodes,
+                likelihood,
+                complexity: Complexity::HalfLogDet,
+                threads: Threads::default(),
+                log: JitterLog::default(),
+                failure: None,
+                batches: None,
+                all_steps: 60,
+            };
+            let (value, gradient) = objective.per_step(&model.params).expect("whole");
+            let mut mean = (0.0, vec![0.0; gradient.len()]);
+            for k in 0..3 {
+                let (v, g) = objective.on_batch(&model.params, &[k]).expect("batch");
+                mean.0 += v / 3.0;
+                mean.1.iter_mut().zip(&g).for_each(|(m, g)| *m += g / 3.0);
+            }
+            assert!(
+                (mean.0 - value).abs() < 1e-12 * value.abs().max(1.0),
+                "{mean:?} {value}"
+            );
+            let size = gradient.iter().fold(0.0_f64, |a, g| a.max(g.abs()));
+            for (m, g) in mean.1.iter().zip(&gradient) {
+                // (each rollout's jitter is its own: the sums agree to about 1e-8)
+                assert!((m - g).abs() < 1e-6 * size, "{m} vs {g}");
+            }
+            // one segment alone is not the whole: the test could tell a wrong weighting
+            let (v0, _) = objective.on_batch(&model.params, &[0]).expect("batch");
+            assert!((v0 - value).abs() > 1e-6, "{v0} {value}");
+        }
     }
 }

@@ -7,6 +7,7 @@
 //! Serialised (the model file's training record, the Python `settings=` keys) as one flat
 //! object: the shared keys, `"method"` and the method's own keys.
 
+use super::segments::{LONG_LOG_WINDOWS, Segments};
 use serde::{Deserialize, Serialize};
 
 use crate::data::Trajectory;
@@ -158,6 +159,10 @@ pub struct MsgpSettings {
     /// final training is").
     #[serde(default)]
     pub choose_final_budget: bool,
+    /// Train on segments of the training trajectories, a random batch of them per Adam step
+    /// ([`super::segments`]); `None`: every trajectory whole (records before 2026-12-06).
+    #[serde(default)]
+    pub segments: Option<Segments>,
 }
 
 /// The lengths of the final training [`MsgpSettings::choose_final_budget`] chooses among:
@@ -348,6 +353,7 @@ impl Default for MsgpSettings {
             blow_up_fallback: true,
             full_data_blow_up: DEFAULT_FULL_DATA_BLOW_UP,
             choose_final_budget: false,
+            segments: None,
         }
     }
 }
@@ -575,6 +581,9 @@ impl FitSettings {
         let warmup = spec.warmup();
         if let Some(s) = self.msgp() {
             s.start_window.validate(warmup)?;
+            if let Some(segments) = &s.segments {
+                segments.validate()?;
+            }
             if !s.full_data_blow_up.is_finite() {
                 return Err(MsgpError::InvalidSetting {
                     name: "full_data_blow_up",
@@ -703,6 +712,11 @@ pub struct FitOptions {
     /// Threads of the fit ([`FitSettings::threads`]); front ends take it from
     /// [`Threads::from_env`].
     pub threads: Threads,
+    /// Train MSGP on segments of this many predicted steps ([`super::segments`]), a batch of
+    /// [`Segments::DEFAULT`]'s size per Adam step; `Some(0)`: every trajectory whole; `None`:
+    /// segments of [`Segments::DEFAULT`] when the training part has more than
+    /// [`LONG_LOG_WINDOWS`] windows, whole trajectories otherwise.
+    pub segment_length: Option<usize>,
 }
 
 /// More GP inputs (`l_y·d_y + l_u·d_u`) than this make [`FitOptions::history_warning`] say
@@ -730,6 +744,7 @@ impl FitOptions {
             likelihood: Likelihood::default(),
             start: MsgpStart::default(),
             threads: Threads::default(),
+            segment_length: None,
         }
     }
 
@@ -809,6 +824,20 @@ impl FitOptions {
         }
     }
 
+    /// The segments an MSGP fit of `train` trains on ([`FitOptions::segment_length`]).
+    pub fn segments(&self, train: &[Trajectory]) -> Option<Segments> {
+        let length = match self.segment_length {
+            Some(0) => return None,
+            Some(length) => length,
+            None if self.windows(train) > LONG_LOG_WINDOWS => Segments::DEFAULT.length,
+            None => return None,
+        };
+        Some(Segments {
+            length,
+            ..Segments::DEFAULT
+        })
+    }
+
     /// The full settings for fitting `train`, every other field at the method's default,
     /// checked against the data ([`FitSettings::validate`]).
     pub fn settings(&self, train: &[Trajectory]) -> Result<FitSettings> {
@@ -844,6 +873,7 @@ impl FitOptions {
         let method = match self.method {
             Method::Msgp => MethodSettings::Msgp(MsgpSettings {
                 inducing,
+                segments: self.segments(train),
                 optimizer: self.optimizer,
                 likelihood: self.likelihood,
                 start: self.start,

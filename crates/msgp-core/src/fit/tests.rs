@@ -4,6 +4,7 @@ use super::*;
 use crate::gp::integrator::Structure;
 use crate::gp::{MeanFunction, PreparedGp};
 use crate::loss::{Complexity, Likelihood};
+use crate::model::Method;
 use crate::numeric::parallel::Threads;
 use crate::rollout::{Control, rollout};
 use nalgebra::DMatrix;
@@ -28,13 +29,14 @@ fn options(method: Method, inducing: Option<usize>, iterations: Option<usize>) -
         likelihood: Likelihood::FreeRun,
         start: MsgpStart::OneStep,
         threads: Threads::default(),
+        segment_length: None,
     }
 }
 
 /// A warm start continues the previous model: zero iterations give it back unchanged (same
 /// parameters and normaliser, although the new data would normalise differently), more
-/// iterations lower the loss on the new data from there, settings with more pseudo-inputs keep
-/// the model's, and a model of another shape (more pseudo-inputs than asked, another history,
+/// iterations lower the loss on the new data from there, settings with more pseudo-inputs grow
+/// the model's (see the test's comments), and a model of another shape (more pseudo-inputs than asked, another history,
 /// another method) is refused.
 #[test]
 fn a_warm_start_continues_the_previous_model() {
@@ -86,11 +88,27 @@ fn a_warm_start_continues_the_previous_model() {
     fit_episodes(&more, &zero, &mut |p| scratch.push(p.loss)).expect("scratch");
     assert_ne!(scratch[0], losses[0]);
     // settings asking for more pseudo-inputs than the previous model has (its first data had
-    // fewer windows, say) continue it with its own
+    // fewer windows, say) place that many afresh over the new data's windows, their targets
+    // the previous function's: the grown model predicts what the previous one did
     let mut wider = zero.clone();
     wider.msgp_mut().expect("msgp").inducing = 50;
-    let (kept, _) = refit_episodes(&more, &wider, &previous, &mut |_| {}).expect("refit wider");
-    assert_eq!(kept.params, previous.params);
+    let (grown, _) = refit_episodes(&more, &wider, &previous, &mut |_| {}).expect("refit wider");
+    assert_eq!(grown.params.pseudo_inputs.nrows(), 50);
+    assert_eq!(
+        grown.params.log_lengthscales,
+        previous.params.log_lengthscales
+    );
+    assert_eq!(grown.params.log_signal_var, previous.params.log_signal_var);
+    let (gap, size) = residual_means_gap(&previous, &grown, &more);
+    assert!(
+        gap < 0.05 * size,
+        "the grown model's mean moved by {gap} (GP part up to {size})"
+    );
+    // without targets (zero) the same placement would move it by the whole GP part
+    let mut untargeted = grown.clone();
+    untargeted.params.pseudo_targets.fill(0.0);
+    let (gap0, _) = residual_means_gap(&previous, &untargeted, &more);
+    assert!(gap0 > 0.5 * size, "{gap0} vs {size}");
     for (bad, needle) in [
         (
             {
@@ -112,6 +130,35 @@ fn a_warm_start_continues_the_previous_model() {
         let e = refit_episodes(&more, &bad, &previous, &mut |_| {}).expect_err("refused");
         assert!(e.to_string().contains(needle), "{e}");
     }
+}
+
+/// The largest difference between two models' latent means over the windows of `episodes`
+/// (normalised by `a`'s normaliser), and the largest GP part (the mean over the linear mean)
+/// of `a` there.
+fn residual_means_gap(a: &Model, b: &Model, episodes: &[TrainingEpisode]) -> (f64, f64) {
+    let norm: Vec<Trajectory> = episodes
+        .iter()
+        .map(|e| a.normalizer.apply(&e.traj))
+        .collect();
+    let refs: Vec<&Trajectory> = norm.iter().collect();
+    let data = one_step_pairs(&a.spec, &refs).expect("pairs");
+    let prepare = |m: &Model| {
+        PreparedGp::new(&m.params, &m.config, &mut JitterLog::default()).expect("prepared")
+    };
+    let (ga, gb) = (prepare(a), prepare(b));
+    let mut bare = ga.clone();
+    bare.linear_mean = None;
+    let (mut gap, mut size) = (0.0_f64, 0.0_f64);
+    for i in 0..data.x.nrows() {
+        let x: Vec<f64> = data.x.row(i).iter().copied().collect();
+        for ((ma, _), (mb, _)) in ga.predict(&x).into_iter().zip(gb.predict(&x)) {
+            gap = gap.max((ma - mb).abs());
+        }
+        for (m, _) in bare.predict(&x) {
+            size = size.max(m.abs());
+        }
+    }
+    (gap, size)
 }
 
 /// 80 samples of `y_t = 0.9 y_{t−1} + 0.5 u_{t−1} + a sin(3 y_{t−1})` under a sine input.
@@ -596,6 +643,7 @@ fn settings_serialise_with_the_methods_own_keys() {
     msgp_1_2.push("blow_up_fallback");
     msgp_1_2.push("full_data_blow_up");
     msgp_1_2.push("choose_final_budget");
+    msgp_1_2.push("segments");
     assert_eq!(keys(&FitSettings::new(Method::Msgp)), with(&msgp_1_2));
     for m in [Method::GpNarx, Method::PilcoNarx] {
         assert_eq!(
@@ -1683,4 +1731,45 @@ fn a_long_history_is_warned_about_before_the_fit() {
         None,
         "no windows: the fit's error says it"
     );
+}
+
+/// A fit by segments whose one segment is the whole trajectory is the whole fit bit for bit;
+/// shorter segments make another fit and say so in the report; the default trains by
+/// segments exactly when the training part has more than `LONG_LOG_WINDOWS` windows, and
+/// `segment_length: Some(0)` never does.
+#[test]
+fn segments_fit_long_logs_and_one_segment_is_the_whole_fit() {
+    let train = vec![traj(80)];
+    let fit_with = |segment_length: Option<usize>| {
+        let options = FitOptions {
+            segment_length,
+            ..options(Method::Msgp, Some(12), Some(10))
+        };
+        fit(
+            &train,
+            &options.settings(&train).expect("settings"),
+            &mut |_| {},
+        )
+        .expect("fit")
+    };
+    let (whole, whole_report) = fit_with(Some(0));
+    let (one, one_report) = fit_with(Some(200));
+    assert_eq!(whole.params, one.params);
+    assert_eq!(whole_report.segments, None);
+    assert_eq!(one_report.segments.map(|(_, k)| k), Some(1));
+    let (cut, cut_report) = fit_with(Some(20));
+    assert_eq!(cut_report.segments.map(|(_, k)| k), Some(4));
+    assert_ne!(cut.params, whole.params);
+    let defaults = FitOptions::new(Method::Msgp, 2, 2);
+    let long = |windows: usize| vec![traj(windows + 2)];
+    assert_eq!(defaults.segments(&long(LONG_LOG_WINDOWS)), None);
+    assert_eq!(
+        defaults.segments(&long(LONG_LOG_WINDOWS + 1)),
+        Some(Segments::DEFAULT)
+    );
+    let off = FitOptions {
+        segment_length: Some(0),
+        ..defaults
+    };
+    assert_eq!(off.segments(&long(LONG_LOG_WINDOWS + 1)), None);
 }

@@ -55,6 +55,9 @@ class Msgp:
         from the spread start and with a linear mean), "spread" (the one-step fit's starting
         point, not optimised) or "linear-kf" (the linear Kalman-filter
         model under a GP that starts at zero; implies the linear mean) — `msgp fit --start`.
+    segment_length: an MSGP fit on a long log trains on segments of this many predicted steps,
+        each started from the data, 2 per Adam step; 0: every trajectory whole; None: 1000
+        when the training part has more than 4000 windows — `msgp fit --segment-length`.
     """
 
     def __init__(
@@ -67,6 +70,7 @@ class Msgp:
         settings: Optional[Dict[str, Any]] = None,
         likelihood: Optional[str] = None,
         start: Optional[str] = None,
+        segment_length: Optional[int] = None,
     ) -> None: ...
     def fit(
         self,
