@@ -1150,6 +1150,11 @@ fn segments_are_an_option_of_fit() {
         text.contains("trained by segments (a long log): 3 segments of up to 20"),
         "{text}"
     );
+    // the final training on batches returns the mean of its second half's iterates
+    assert!(
+        text.contains("kept the mean of iterations 3–5 of the final training"),
+        "{text}"
+    );
     let cut = fitted_model(&dir, &["--segment-length", "20"], "c.json");
     assert_eq!(
         cut["training"]["settings"]["segments"],

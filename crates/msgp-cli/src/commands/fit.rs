@@ -328,19 +328,27 @@ pub fn kept(report: &FitReport) -> String {
              over the training inputs: {why}"
         )
     });
+    // a final training on batches of segments returns the mean of its second half's iterates
+    let batched = report.segments.is_some_and(|(s, count)| count > s.batch);
+    let iterate = |j: usize| match batched {
+        true => format!("the mean of iterations {}–{j}", j.div_ceil(2)),
+        false => format!("iteration {j}"),
+    };
     let kept = match (
         report.full_data_iteration,
         &report.full_data_failed,
         fallback,
     ) {
         (Some(j), _, Some((head, why))) => format!(
-            "kept iteration {j} of the final training on all the data of {head} (the zero-mean \
+            "kept {} of the final training on all the data of {head} (the zero-mean \
              recipe's from the one-step start failed: {why}); the validation tail chose the \
              zero-mean recipe, then ordered its fallback heads, this one best at its iteration {}",
+            iterate(j),
             report.best_iteration
         ),
         (Some(j), _, None) => format!(
-            "kept iteration {j} of the final training on all the data; the validation tail chose{recipe} best at its iteration {}",
+            "kept {} of the final training on all the data; the validation tail chose{recipe} best at its iteration {}",
+            iterate(j),
             report.best_iteration
         ),
         (None, Some(why), _) => format!(

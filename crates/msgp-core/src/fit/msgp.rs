@@ -1443,6 +1443,9 @@ impl Stage<'_, '_> {
         let mut blow_up = blow_up.map(BlowUp::new);
         let mut since_best = 0usize;
         let mut good: Option<(Vec<f64>, usize)> = None;
+        // a batched training without a tail returns the mean of its iterates over its second
+        // half (Polyak–Ruppert averaging: the batches' noise averages out)
+        let mut average: Option<(Vec<f64>, usize)> = None;
         let report = &mut *self.report;
         let progress = &mut *self.progress;
         let mut last_it = iterations;
@@ -1460,10 +1463,15 @@ impl Stage<'_, '_> {
                 }
                 good = Some((x.to_vec(), it));
                 last_it = it;
+                if batched && tails.is_empty() && 2 * it >= iterations {
+                    let (sum, count) = average.get_or_insert_with(|| (vec![0.0; x.len()], 0));
+                    sum.iter_mut().zip(x).for_each(|(s, x)| *s += x);
+                    *count += 1;
+                }
                 // without a validation tail, the best iterate is the one of lowest training loss:
                 // Adam's steps at the loop's step size throw the loss up now and then (by up to
                 // 2.7 nats per step on the loop's data), for tens of iterations, also at the last
-                // (a batch's loss is too noisy for that: batched trainings keep their last)
+                // (a batch's loss is too noisy for that: batched trainings return their mean)
                 if tails.is_empty() && !batched && loss < best.0 {
                     best = (loss, x.to_vec(), it);
                 }
@@ -1533,7 +1541,12 @@ impl Stage<'_, '_> {
                     (x, it)
                 }
             }
-            (None, _) if tails.is_empty() && !best.0.is_finite() => (last_x, last_it),
+            (None, _) if tails.is_empty() && !best.0.is_finite() => match average {
+                Some((sum, count)) if count > 0 => {
+                    (sum.iter().map(|s| s / count as f64).collect(), last_it)
+                }
+                _ => (last_x, last_it),
+            },
             (None, _) => (best.1, best.2),
         };
         Ok((GpParams::from_flat(shape, &x)?, it, validation))
