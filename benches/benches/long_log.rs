@@ -38,13 +38,7 @@ fn system4_log(n: usize, seed: u64) -> Trajectory {
 
 fn bench_long_fit(c: &mut Criterion) {
     let log = system4_log(60_000, 0);
-    let train = vec![
-        Trajectory::new(
-            log.u.rows(0, 30_000).into_owned(),
-            log.y.rows(0, 30_000).into_owned(),
-        )
-        .expect("train"),
-    ];
+    let train = vec![log.slice(0, 30_000)];
     let options = FitOptions {
         threads: Threads::available(),
         ..FitOptions::new(Method::Msgp, 2, 1)
@@ -65,13 +59,7 @@ fn bench_long_fit(c: &mut Criterion) {
 fn bench_step(c: &mut Criterion) {
     let log = system4_log(30_000, 1);
     let (model, _) = {
-        let head = vec![
-            Trajectory::new(
-                log.u.rows(0, 600).into_owned(),
-                log.y.rows(0, 600).into_owned(),
-            )
-            .expect("head"),
-        ];
+        let head = vec![log.slice(0, 600)];
         let options = FitOptions {
             inducing: Some(100),
             iterations: Some(20),
@@ -86,15 +74,7 @@ fn bench_step(c: &mut Criterion) {
         .expect("fit")
     };
     let norm = model.normalizer.apply(&log);
-    let piece = |start: usize, len: usize| {
-        Episode::feed_forward(
-            Trajectory::new(
-                norm.u.rows(start, len).into_owned(),
-                norm.y.rows(start, len).into_owned(),
-            )
-            .expect("piece"),
-        )
-    };
+    let piece = |start: usize, len: usize| Episode::feed_forward(norm.slice(start, start + len));
     let mut group = c.benchmark_group("long_log_adam_step");
     group
         .sample_size(10)

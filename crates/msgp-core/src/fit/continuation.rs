@@ -19,14 +19,11 @@ use crate::data::Trajectory;
 use crate::error::{MsgpError, Result};
 use crate::gp::GpParams;
 use crate::gp::integrator::Structure;
-use crate::gp::kmeans::kmeans;
+use crate::gp::kmeans::{gp_inputs, place_pseudo_inputs};
 use crate::gp::prepared::PreparedGp;
 use crate::model::{Method, Model};
 use crate::narx::NarxSpec;
 use crate::numeric::linalg::JitterLog;
-
-/// k-means iterations of the placement (as a first fit's).
-const KMEANS_ITERATIONS: usize = 30;
 
 /// Whether `settings` describe a model that can continue `previous` ([`refit_episodes`]).
 pub(super) fn check(settings: &FitSettings, previous: &Model) -> Result<()> {
@@ -89,21 +86,17 @@ pub(super) fn grown_pseudo_inputs(
     inducing: usize,
     seed: u64,
 ) -> Result<Option<GpParams<f64>>> {
+    let had = previous.params.pseudo_inputs.nrows();
+    if inducing <= had {
+        return Ok(None);
+    }
     let refs: Vec<&Trajectory> = norm.iter().collect();
     let data = one_step_pairs(&spec, &refs)?;
-    let had = previous.params.pseudo_inputs.nrows();
     let m = inducing.min(data.x.nrows());
     if m <= had {
         return Ok(None);
     }
-    let mut gx = data.x;
-    for &k in &structure.ignored {
-        gx.column_mut(k).fill(0.0);
-    }
-    let pseudo = match m == gx.nrows() {
-        true => gx,
-        false => kmeans(&gx, m, KMEANS_ITERATIONS, seed)?,
-    };
+    let pseudo = place_pseudo_inputs(&gp_inputs(&data.x, &structure.ignored), m, seed)?;
     let mut gp = PreparedGp::new(
         &previous.params,
         &previous.config,

@@ -41,11 +41,11 @@ use crate::data::{Normalizer, Trajectory};
 use crate::error::{MsgpError, Result};
 use crate::gp::integrator::Structure;
 use crate::gp::integrator::{IGNORED_LENGTHSCALE, NO_GP_SIGNAL_VAR};
-use crate::gp::kmeans::kmeans;
+use crate::gp::kmeans::{gp_inputs, place_pseudo_inputs};
 use crate::gp::{GpConfig, GpParams, GpShape, MeanFunction, ParamGroup, PreparedGp};
 use crate::loss::{
-    Complexity, Likelihood, LossValue, filter_loss, filter_loss_and_gradient, loss_and_gradient,
-    msgp_loss,
+    Complexity, Likelihood, LossValue, filter_loss, msgp_loss, weighted_filter_loss_and_gradient,
+    weighted_loss_and_gradient,
 };
 use crate::model::{Method, Model};
 use crate::narx::NarxSpec;
@@ -1128,11 +1128,11 @@ impl MsgpObjective<'_> {
         &mut self,
         params: &GpParams<f64>,
         episodes: &[Episode],
-        complexity: Complexity,
+        complexity: (Complexity, f64),
     ) -> Result<(LossValue<f64>, Vec<f64>)> {
         let evaluate = match self.likelihood {
-            Likelihood::FreeRun => loss_and_gradient,
-            Likelihood::Filter => filter_loss_and_gradient,
+            Likelihood::FreeRun => weighted_loss_and_gradient,
+            Likelihood::Filter => weighted_filter_loss_and_gradient,
         };
         evaluate(
             params,
@@ -1150,7 +1150,7 @@ impl MsgpObjective<'_> {
     /// all the steps).
     fn per_step(&mut self, params: &GpParams<f64>) -> Result<(f64, Vec<f64>)> {
         let Some(batches) = self.batches.as_mut() else {
-            let (v, mut g) = self.evaluate(params, self.episodes, self.complexity)?;
+            let (v, mut g) = self.evaluate(params, self.episodes, (self.complexity, 1.0))?;
             let scale = 1.0 / v.steps.max(1) as f64;
             g.iter_mut().for_each(|gi| *gi *= scale);
             return Ok((v.total() * scale, g));
@@ -1163,17 +1163,13 @@ impl MsgpObjective<'_> {
     /// `picked`: their NLL per step plus the complexity term over all the steps.
     fn on_batch(&mut self, params: &GpParams<f64>, picked: &[usize]) -> Result<(f64, Vec<f64>)> {
         let batch: Vec<Episode> = picked.iter().map(|&k| self.episodes[k].clone()).collect();
-        let (v, g) = self.evaluate(params, &batch, Complexity::None)?;
-        let (c, gc) = self.evaluate(params, &[], self.complexity)?;
-        let (b, n) = (
-            1.0 / v.steps.max(1) as f64,
-            1.0 / self.all_steps.max(1) as f64,
-        );
-        let value = v.nll * b + c.complexity * n;
-        Ok((
-            value,
-            g.iter().zip(&gc).map(|(g, c)| g * b + c * n).collect(),
-        ))
+        let steps = predicted_steps(&batch, &self.spec);
+        // (NLL_batch + w · complexity) / steps_batch with w = steps_batch / steps_all
+        let b = 1.0 / steps.max(1) as f64;
+        let weight = steps as f64 / self.all_steps.max(1) as f64;
+        let (v, mut g) = self.evaluate(params, &batch, (self.complexity, weight))?;
+        g.iter_mut().for_each(|gi| *gi *= b);
+        Ok((v.total() * b, g))
     }
 }
 
@@ -1194,6 +1190,14 @@ impl Objective for MsgpObjective<'_> {
             }
         }
     }
+}
+
+/// The steps a loss predicts over `episodes`: every sample after each one's first window.
+fn predicted_steps(episodes: &[Episode], spec: &NarxSpec) -> usize {
+    episodes
+        .iter()
+        .map(|e| e.traj.len().saturating_sub(spec.warmup()))
+        .sum()
 }
 
 /// Mean NLL per step of `episodes` (normalised units) under `likelihood`: the MSGP loss
@@ -1321,16 +1325,9 @@ impl Stage<'_, '_> {
         self.report.jitter.merge(&kf.jitter);
         let refs: Vec<&Trajectory> = trajs.iter().collect();
         let data = one_step_pairs(&self.spec, &refs)?;
-        let (n, d) = data.x.shape();
-        let mut gx = data.x.clone();
-        for &k in &structure.ignored {
-            gx.column_mut(k).fill(0.0);
-        }
-        let pseudo = if self.msgp.inducing >= n {
-            gx.clone()
-        } else {
-            kmeans(&gx, self.msgp.inducing, 30, self.settings.seed)?
-        };
+        let d = data.x.ncols();
+        let gx = gp_inputs(&data.x, &structure.ignored);
+        let pseudo = place_pseudo_inputs(&gx, self.msgp.inducing, self.settings.seed)?;
         let e = self.spec.dy;
         let floor = self.config.noise_floor;
         // the filter's noise variances (its floor is far below any setting's) as `floor + e^θ`
@@ -1419,10 +1416,7 @@ impl Stage<'_, '_> {
                 ),
                 _ => None,
             },
-            all_steps: episodes
-                .iter()
-                .map(|e| e.traj.len().saturating_sub(self.spec.warmup()))
-                .sum(),
+            all_steps: predicted_steps(episodes, &self.spec),
         };
         let batched = objective.batches.is_some();
         let solver = match self.msgp.optimizer {

@@ -21,7 +21,7 @@ use crate::data::Trajectory;
 use crate::error::{MsgpError, Result};
 use crate::gp::integrator::{FixedCoefficient, IGNORED_LENGTHSCALE, NO_GP_SIGNAL_VAR, Structure};
 use crate::gp::kernel::kernel_matrix;
-use crate::gp::kmeans::kmeans;
+use crate::gp::kmeans::{gp_inputs, place_pseudo_inputs};
 use crate::gp::{GpConfig, GpParams, MeanFunction};
 use crate::narx::NarxSpec;
 use crate::numeric::dense::DenseChol;
@@ -446,11 +446,7 @@ pub fn fit_one_step(
     };
     // the targets the GP models: what the prior mean leaves over
     let targets = &data.y - &data.x * linear_mean.transpose();
-    // the GP's inputs: the windows with the coordinates it ignores at zero
-    let mut gx = data.x.clone();
-    for &k in &structure.ignored {
-        gx.column_mut(k).fill(0.0);
-    }
+    let gx = gp_inputs(&data.x, &structure.ignored);
     let stride = n.div_ceil(settings.max_pairs.max(1));
     let idx: Vec<usize> = (0..n).step_by(stride).collect();
     let xs = DMatrix::from_fn(idx.len(), d, |i, k| gx[(idx[i], k)]);
@@ -461,11 +457,7 @@ pub fn fit_one_step(
         })
         .collect();
 
-    let start = if m >= n {
-        gx.clone()
-    } else {
-        kmeans(&gx, m, 30, seed)?
-    };
+    let start = place_pseudo_inputs(&gx, m, seed)?;
     let mm = start.nrows();
     let solver = match settings.solver {
         OneStepSolver::Lbfgs => Solver::Lbfgs(ONE_STEP_LBFGS),

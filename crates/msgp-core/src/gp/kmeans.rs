@@ -1,9 +1,32 @@
-//! Seeded k-means (k-means++ initialisation, Lloyd iterations) to place pseudo-inputs.
+//! Seeded k-means (k-means++ initialisation, Lloyd iterations) to place pseudo-inputs, and the
+//! one placement every fit uses ([`place_pseudo_inputs`]).
 
 use nalgebra::DMatrix;
 use rand::{RngExt, SeedableRng, rngs::StdRng};
 
 use crate::error::{MsgpError, Result};
+
+/// Lloyd iterations of every pseudo-input placement.
+const PLACEMENT_ITERATIONS: usize = 30;
+
+/// The GP's inputs: the windows `x` (one per row) with the columns in `ignored` (coordinates
+/// the kernel leaves out, [`super::integrator::Structure`]) at zero.
+pub fn gp_inputs(x: &DMatrix<f64>, ignored: &[usize]) -> DMatrix<f64> {
+    let mut gx = x.clone();
+    for &k in ignored {
+        gx.column_mut(k).fill(0.0);
+    }
+    gx
+}
+
+/// `m` pseudo-inputs over the rows of `gx`: every row when there are no more than `m`, else
+/// the seeded k-means centres.
+pub fn place_pseudo_inputs(gx: &DMatrix<f64>, m: usize, seed: u64) -> Result<DMatrix<f64>> {
+    match m >= gx.nrows() {
+        true => Ok(gx.clone()),
+        false => kmeans(gx, m, PLACEMENT_ITERATIONS, seed),
+    }
+}
 
 fn dist2(x: &DMatrix<f64>, i: usize, c: &DMatrix<f64>, j: usize) -> f64 {
     (0..x.ncols())

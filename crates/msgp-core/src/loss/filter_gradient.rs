@@ -77,6 +77,28 @@ pub fn filter_loss_and_gradient(
     threads: Threads,
     log: &mut JitterLog,
 ) -> Result<(LossValue<f64>, Vec<f64>)> {
+    weighted_filter_loss_and_gradient(
+        params,
+        config,
+        spec,
+        episodes,
+        (complexity, 1.0),
+        threads,
+        log,
+    )
+}
+
+/// [`filter_loss_and_gradient`] with the complexity term weighted by `complexity.1`
+/// (as [`super::gradient::weighted_loss_and_gradient`]).
+pub(crate) fn weighted_filter_loss_and_gradient(
+    params: &GpParams<f64>,
+    config: &GpConfig,
+    spec: &NarxSpec,
+    episodes: &[Episode],
+    complexity: (Complexity, f64),
+    threads: Threads,
+    log: &mut JitterLog,
+) -> Result<(LossValue<f64>, Vec<f64>)> {
     gradient_over_episodes(
         params,
         config,

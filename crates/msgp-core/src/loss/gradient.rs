@@ -129,6 +129,29 @@ pub fn loss_and_gradient(
     threads: Threads,
     log: &mut JitterLog,
 ) -> Result<(LossValue<f64>, Vec<f64>)> {
+    weighted_loss_and_gradient(
+        params,
+        config,
+        spec,
+        episodes,
+        (complexity, 1.0),
+        threads,
+        log,
+    )
+}
+
+/// [`loss_and_gradient`] with the complexity term weighted: `complexity.1` times the term, in
+/// the value and the gradient (a batch's estimate of a loss per step weights the complexity
+/// of all the steps against the NLL of its own).
+pub(crate) fn weighted_loss_and_gradient(
+    params: &GpParams<f64>,
+    config: &GpConfig,
+    spec: &NarxSpec,
+    episodes: &[Episode],
+    complexity: (Complexity, f64),
+    threads: Threads,
+    log: &mut JitterLog,
+) -> Result<(LossValue<f64>, Vec<f64>)> {
     gradient_over_episodes(
         params,
         config,
@@ -151,14 +174,14 @@ pub fn loss_and_gradient(
 /// filter's [`super::filter_loss_and_gradient`]): prepares the GP, runs `episode` on every
 /// episode (up to `threads` at a time; each adds its GP adjoints to its own accumulator and
 /// returns its NLL and step count), sums the episodes in order (the result does not depend on
-/// `threads`), adds the complexity term and pulls the summed adjoints through the GP's
+/// `threads`), adds the complexity term `complexity.0` weighted by `complexity.1` and pulls the summed adjoints through the GP's
 /// preparation to the parameters ([`GpParams::to_flat`] layout).
 pub(crate) fn gradient_over_episodes(
     params: &GpParams<f64>,
     config: &GpConfig,
     spec: &NarxSpec,
     episodes: &[Episode],
-    complexity: Complexity,
+    (complexity, weight): (Complexity, f64),
     threads: Threads,
     log: &mut JitterLog,
     episode: impl Fn(&PreparedGp<f64>, &Episode, &mut GpAdjoint, &mut JitterLog) -> Result<(f64, usize)>
@@ -194,22 +217,23 @@ pub(crate) fn gradient_over_episodes(
         nll += out.nll;
         steps += out.steps;
     }
-    let comp = complexity_term(params, &gp, complexity);
+    let comp = weight * complexity_term(params, &gp, complexity);
+    let half = 0.5 * weight;
     let mut ybar = DMatrix::<f64>::zeros(m, e);
     let mut logdet_bar = vec![0.0; e];
     for a in 0..e {
         match complexity {
             Complexity::None => {}
-            Complexity::HalfLogDet => logdet_bar[a] = 0.5,
-            Complexity::NegHalfLogDet => logdet_bar[a] = -0.5,
+            Complexity::HalfLogDet => logdet_bar[a] = half,
+            Complexity::NegHalfLogDet => logdet_bar[a] = -half,
             Complexity::PseudoDataNll => {
-                logdet_bar[a] = 0.5;
+                logdet_bar[a] = half;
                 // ½ ȳᵀβ with β = K̃⁻¹ȳ: d/dȳ = β (symmetric K̃), routed as ȳ̄ += ½β, β̄ += ½ȳ
                 for i in 0..m {
-                    ybar[(i, a)] += 0.5 * gp.outputs[a].beta[i];
+                    ybar[(i, a)] += half * gp.outputs[a].beta[i];
                 }
                 let ycol = params.pseudo_targets.column(a).into_owned();
-                adj.beta[a] += ycol * 0.5;
+                adj.beta[a] += ycol * half;
             }
         }
     }

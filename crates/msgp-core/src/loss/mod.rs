@@ -41,7 +41,9 @@ mod gradient;
 
 pub use filter::{FilterNll, FilterStep, filter_loss, filter_nll, filter_steps};
 pub use filter_gradient::filter_loss_and_gradient;
+pub(crate) use filter_gradient::weighted_filter_loss_and_gradient;
 pub use gradient::loss_and_gradient;
+pub(crate) use gradient::weighted_loss_and_gradient;
 
 use crate::error::{MsgpError, Result};
 use crate::gp::{GpConfig, GpParams, PreparedGp};
