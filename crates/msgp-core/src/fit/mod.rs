@@ -17,6 +17,7 @@ mod hyper;
 pub mod linear_kf;
 mod msgp;
 pub mod one_step;
+mod proxy_watch;
 pub mod segments;
 mod settings;
 mod vfe;

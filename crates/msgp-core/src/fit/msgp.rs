@@ -32,6 +32,7 @@ use super::continuation;
 use super::divergence::check_divergence;
 use super::linear_kf::{KF_NOISE_FLOOR, fit_linear_kf};
 use super::one_step::{OneStepSettings, column_std, fit_one_step, one_step_pairs};
+use super::proxy_watch::{ProxyOutcome, ProxyWatch};
 use super::segments::Batches;
 use super::{
     CLEARLY_BETTER, FIT_LBFGS, FitOptimizer, FitProgress, FitReport, FitSettings, MsgpSettings,
@@ -160,6 +161,9 @@ pub(super) fn fit_msgp(
     let proxy_iterations = final_iterations.filter(|_| msgp.calibrate || msgp.choose_final_budget);
     // each recipe's start on the head (the proxy starts from it)
     let starts: Mutex<Vec<Option<GpParams<f64>>>> = Mutex::new(vec![None; recipes.len()]);
+    // each recipe's proxy, read off its training on the head (`super::proxy_watch`)
+    let proxies: Mutex<Vec<Option<FinalTraining>>> =
+        Mutex::new((0..recipes.len()).map(|_| None).collect());
     // set when the user stops the fit: stops whatever trains on another thread
     let stop = AtomicBool::new(false);
     let config_of = |recipe: &MsgpSettings| GpConfig {
@@ -185,6 +189,7 @@ pub(super) fn fit_msgp(
             report,
             checkpoints: Vec::new(),
             snapshots: Vec::new(),
+            proxy_watch: proxy_iterations.map(|n| proxy_watch(recipe, n)),
         };
         let stage_number = if k == 0 { 1 } else { 3 };
         let mut head_start = None;
@@ -198,6 +203,11 @@ pub(super) fn fit_msgp(
             stage_number,
             &mut head_start,
         );
+        let watched = stage.proxy_watch.take().filter(|w| w.done());
+        if let (Some(start), Some(watch)) = (&head_start, watched) {
+            let proxy = read_proxy(k, watch.finish(), start);
+            proxies.lock().unwrap_or_else(|e| e.into_inner())[k] = Some(proxy);
+        }
         if head_start.is_some() {
             starts.lock().unwrap_or_else(|e| e.into_inner())[k] = head_start;
         }
@@ -231,6 +241,7 @@ pub(super) fn fit_msgp(
             report: &mut own,
             checkpoints,
             snapshots: Vec::new(),
+            proxy_watch: None,
         };
         let init = match init {
             Some(init) => Ok(init),
@@ -290,6 +301,9 @@ pub(super) fn fit_msgp(
          iterations: usize,
          settings: &FitSettings,
          progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>| {
+            if let Some(read) = proxies.lock().unwrap_or_else(|e| e.into_inner())[k].take() {
+                return read;
+            }
             // (the lock is released before the training)
             let init = starts.lock().unwrap_or_else(|e| e.into_inner())[k].clone();
             match init {
@@ -326,8 +340,12 @@ pub(super) fn fit_msgp(
         };
         let race = Mutex::new(Race::default());
         let mut side = FitReport::default();
+        // the progress of a final training on the second thread, for the observer on this one
+        let (relay, relayed) = std::sync::mpsc::channel::<FitProgress>();
         let (first, second, proxy) = std::thread::scope(|scope| {
             let handle = scope.spawn(|| {
+                // (moved here: the channel closes when this thread ends)
+                let relay = relay;
                 let mut quiet = |p: &FitProgress| {
                     if let Some(v) = p.validation {
                         race.lock().unwrap_or_else(|e| e.into_inner()).saw(v);
@@ -335,25 +353,60 @@ pub(super) fn fit_msgp(
                     quiet_stop(p)
                 };
                 let second = run(1, &recipes[1], &half, &mut quiet, &mut side);
-                let chosen = {
-                    let mut race = race.lock().unwrap_or_else(|e| e.into_inner());
-                    race.finished(&second);
-                    race.chosen()
-                };
+                race.lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .finished(&second);
+                // the second head ended first: this thread trains the recipe that leads on all
+                // the data while the first head goes on (the mirror of the first thread's)
+                let state = || race.lock().unwrap_or_else(|e| e.into_inner());
+                let mut final_second = None;
+                loop {
+                    // (the guard is dropped at the end of this statement, not held in training)
+                    let leader = state().second_leader();
+                    let (Some(iterations), Some(k)) = (final_iterations, leader) else {
+                        break;
+                    };
+                    let mut aborted = false;
+                    let mut watched = |p: &FitProgress| {
+                        if !state().second_keeps(k) {
+                            aborted = true;
+                            return ControlFlow::Break(());
+                        }
+                        // (a closed channel: the observer has gone, the stop flag says why)
+                        let _ = relay.send(*p);
+                        quiet_stop(p)
+                    };
+                    let trained = final_stage(k, iterations, &half, &mut watched);
+                    if !(aborted && matches!(trained.outcome, Err(MsgpError::Stopped { .. }))) {
+                        final_second = Some(trained);
+                        break;
+                    }
+                }
+                let chosen = state().chosen();
                 // both heads have ended: this thread trains the chosen recipe's proxy while
                 // the other finishes its final training
                 let proxy = match (proxy_iterations, chosen) {
                     (Some(n), Some(k)) => Some(proxy_stage(k, n, &half, &mut quiet_stop.clone())),
                     _ => None,
                 };
-                (second, proxy)
+                (second, proxy, final_second)
             });
-            let mut observed = |p: &FitProgress| {
+            // the observer sees this thread's events and those relayed from the other
+            let mut show = |p: &FitProgress| {
                 let flow = progress(p);
                 if flow.is_break() {
                     stop.store(true, Ordering::Relaxed);
                 }
                 flow
+            };
+            let mut observed = |p: &FitProgress| {
+                if let Some(v) = p.validation {
+                    race.lock().unwrap_or_else(|e| e.into_inner()).saw_first(v);
+                }
+                for q in relayed.try_iter() {
+                    let _ = show(&q);
+                }
+                show(p)
             };
             let first = run(0, &recipes[0], &half, &mut observed, &mut report);
             // the first head's outcome as the choice sees it: its validation NLL, or `None`
@@ -378,11 +431,7 @@ pub(super) fn fit_msgp(
                             aborted = true;
                             return ControlFlow::Break(());
                         }
-                        let flow = progress(p);
-                        if flow.is_break() {
-                            stop.store(true, Ordering::Relaxed);
-                        }
-                        flow
+                        show(p)
                     };
                     let trained = final_stage(k, iterations, &half, &mut watched);
                     match (&trained.outcome, aborted) {
@@ -406,11 +455,18 @@ pub(super) fn fit_msgp(
             {
                 stop.store(true, Ordering::Relaxed);
             }
+            // the other thread's final training, shown as it goes
+            for q in relayed.iter() {
+                let _ = show(&q);
+            }
             let joined = handle.join().map_err(|_| {
                 MsgpError::NonFinite("the alternative recipe's training panicked".into())
             });
             match joined {
-                Ok((second, proxy)) => (first, Ok(second), proxy),
+                Ok((second, proxy, final_second)) => {
+                    early_final = early_final.take().or(final_second);
+                    (first, Ok(second), proxy)
+                }
                 Err(e) => (first, Err(e), None),
             }
         });
@@ -524,6 +580,9 @@ pub(super) fn fit_msgp(
             let (c, head, best_iteration) = candidates[i].clone();
             let early = early_final.take_if(|t| t.recipe == c);
             proxy = early_proxy.take_if(|p| p.recipe == c);
+            if proxy.is_none() {
+                proxy = proxies.lock().unwrap_or_else(|e| e.into_inner())[c].take();
+            }
             let proxy_needed = proxy_iterations.is_some() && proxy.is_none();
             let trained = match early {
                 Some(t) => {
@@ -743,6 +802,7 @@ pub(super) fn fit_msgp(
                     report: &mut own,
                     checkpoints: Vec::new(),
                     snapshots: Vec::new(),
+                    proxy_watch: None,
                 };
                 let trained = if inner_tails.is_empty() {
                     None
@@ -952,6 +1012,8 @@ struct FinalTraining {
 struct Race {
     /// The second head's lowest validation NLL so far.
     running: Option<f64>,
+    /// The first head's lowest validation NLL so far.
+    running_first: Option<f64>,
     /// The second head's outcome once it ended: its validation NLL, or `None` if it failed.
     ended: Option<Option<f64>>,
     /// The first head's outcome once it ended (as [`Race::ended`]; a stopped head never ends).
@@ -962,6 +1024,31 @@ impl Race {
     /// A validation NLL of the second head.
     fn saw(&mut self, v: f64) {
         self.running = Some(self.running.map_or(v, |r| r.min(v)));
+    }
+
+    /// A validation NLL of the first head.
+    fn saw_first(&mut self, v: f64) {
+        self.running_first = Some(self.running_first.map_or(v, |r| r.min(v)));
+    }
+
+    /// Where the second head ended before the first: the recipe whose final training the second
+    /// thread should run now (the second unless the first's running best is already at or below
+    /// the second's final value); `None` once the first head has ended, or if the second failed.
+    fn second_leader(&self) -> Option<usize> {
+        if self.first.is_some() {
+            return None;
+        }
+        let second = self.ended??;
+        let first_ahead = self.running_first.is_some_and(|a| second >= a);
+        Some(usize::from(!first_ahead))
+    }
+
+    /// Whether the final training of recipe `k` on the second thread is still worth finishing.
+    fn second_keeps(&self, k: usize) -> bool {
+        match self.first {
+            None => self.second_leader() == Some(k),
+            Some(first) => self.keeps(k, first),
+        }
     }
 
     /// The second head ended with `outcome`.
@@ -1011,6 +1098,47 @@ impl Race {
     }
 }
 
+/// The watch of recipe `recipe`'s proxy of `iterations` steps ([`super::proxy_watch`]), as
+/// its own run in the final stage would train it.
+fn proxy_watch(recipe: &MsgpSettings, iterations: usize) -> ProxyWatch {
+    let n = iterations.min(recipe.iterations);
+    ProxyWatch::new(
+        n,
+        recipe.segments.is_some() && recipe.optimizer == FitOptimizer::Adam,
+        Some(recipe.full_data_blow_up),
+        match recipe.choose_final_budget {
+            true => final_budgets(n),
+            false => Vec::new(),
+        },
+    )
+}
+
+/// Recipe `k`'s proxy as its own run in the final stage would have returned it, from what its
+/// watch read off the head's training (which started at `start`).
+fn read_proxy(k: usize, read: ProxyOutcome, start: &GpParams<f64>) -> FinalTraining {
+    let shape = start.shape().ok();
+    let params = |x: &[f64]| shape.and_then(|s| GpParams::from_flat(s, x).ok());
+    let outcome = read.outcome.and_then(|(x, it)| Some((params(&x)?, it)));
+    let snapshots = match &outcome {
+        Some(_) => read
+            .snapshots
+            .iter()
+            .filter_map(|(b, x, it)| Some((*b, params(x)?, *it)))
+            .collect(),
+        None => Vec::new(),
+    };
+    FinalTraining {
+        recipe: k,
+        outcome: Ok(outcome),
+        report: FitReport {
+            full_data_failed: read.failed,
+            numerical_stop: read.numerical_stop,
+            ..FitReport::default()
+        },
+        snapshots,
+    }
+}
+
 /// Adam's first steps are not judged by [`MsgpSettings::full_data_blow_up`]: before its moment estimates
 /// settle they move every coordinate by about the full step size at once, and the loss jumps and
 /// recovers (by up to 100 nats per step on a small linear plant, 9 on actuator's linear start).
@@ -1018,14 +1146,14 @@ const BLOW_UP_AFTER: usize = 10;
 
 /// Watches a training loss for a blow-up: a rise by more than `limit` nats per step above its
 /// lowest since iteration [`BLOW_UP_AFTER`].
-struct BlowUp {
+pub(super) struct BlowUp {
     limit: f64,
     /// The lowest loss since [`BLOW_UP_AFTER`] and its iteration.
     lowest: (f64, usize),
 }
 
 impl BlowUp {
-    fn new(limit: f64) -> Self {
+    pub(super) fn new(limit: f64) -> Self {
         Self {
             limit,
             lowest: (f64::INFINITY, 0),
@@ -1033,7 +1161,7 @@ impl BlowUp {
     }
 
     /// The loss of iteration `it`; why it is a blow-up, if it is one.
-    fn observe(&mut self, it: usize, loss: f64) -> Option<String> {
+    pub(super) fn observe(&mut self, it: usize, loss: f64) -> Option<String> {
         if it < BLOW_UP_AFTER {
             return None;
         }
@@ -1236,6 +1364,9 @@ struct Stage<'a, 'p> {
     checkpoints: Vec<usize>,
     /// `(checkpoint, flat parameters, their iteration)`, in the order reached.
     snapshots: Vec<(usize, Vec<f64>, usize)>,
+    /// The calibration's proxy, read off a training with a validation tail, which then goes on
+    /// past its early stop until the proxy's length ([`super::proxy_watch`]).
+    proxy_watch: Option<ProxyWatch>,
 }
 
 impl Stage<'_, '_> {
@@ -1444,6 +1575,12 @@ impl Stage<'_, '_> {
         let progress = &mut *self.progress;
         let mut last_it = iterations;
         let mut stopped = None;
+        // past the early stop, the training goes on only for the proxy it carries
+        let mut watch = match tails.is_empty() {
+            true => None,
+            false => self.proxy_watch.take(),
+        };
+        let mut frozen = false;
         let (last_x, _) = minimize(
             &mut objective,
             &solver,
@@ -1455,8 +1592,13 @@ impl Stage<'_, '_> {
                     // the parameters of this step failed numerically (see `failure`)
                     return Ok(Flow::Stop);
                 }
-                good = Some((x.to_vec(), it));
-                last_it = it;
+                if let Some(w) = watch.as_mut() {
+                    w.observe(it, loss, x);
+                }
+                if !frozen {
+                    good = Some((x.to_vec(), it));
+                    last_it = it;
+                }
                 if batched && tails.is_empty() && 2 * it >= iterations {
                     let (sum, count) = average.get_or_insert_with(|| (vec![0.0; x.len()], 0));
                     sum.iter_mut().zip(x).for_each(|(s, x)| *s += x);
@@ -1480,7 +1622,7 @@ impl Stage<'_, '_> {
                     return Ok(Flow::Stop);
                 }
                 let mut validation = None;
-                if !tails.is_empty() && (it % every == 0 || it == iterations) {
+                if !tails.is_empty() && !frozen && (it % every == 0 || it == iterations) {
                     let p = GpParams::from_flat(shape, x)?;
                     let v = validation_nll(&p, &config, &spec, msgp.likelihood, tails)?;
                     validation = Some(v);
@@ -1505,7 +1647,8 @@ impl Stage<'_, '_> {
                     stopped = Some(it);
                     return Ok(Flow::Stop);
                 }
-                if it == iterations || (!tails.is_empty() && since_best >= msgp.patience) {
+                frozen |= !tails.is_empty() && since_best >= msgp.patience;
+                if it == iterations || (frozen && watch.as_ref().is_none_or(|w| w.done())) {
                     return Ok(Flow::Stop);
                 }
                 Ok(Flow::Continue)
@@ -1517,12 +1660,21 @@ impl Stage<'_, '_> {
         if let Some(iteration) = stopped {
             return Err(MsgpError::Stopped { iteration });
         }
+        let mut failure = objective.failure.take();
+        if let (Some(w), Some(e)) = (watch.as_mut(), failure.as_ref()) {
+            w.failed(e.to_string());
+        }
+        self.proxy_watch = watch;
+        // a failure past the early stop was the proxy's alone
+        if frozen {
+            failure = None;
+        }
         let validation = if tails.is_empty() {
             f64::INFINITY
         } else {
             best.0
         };
-        let (x, it) = match (objective.failure.take(), good) {
+        let (x, it) = match (failure, good) {
             (Some(e), None) => return Err(e),
             (Some(e), Some((x, it))) => {
                 report.numerical_stop = Some(format!(
@@ -1694,6 +1846,39 @@ mod race_tests {
         let failed = || Some(Err(MsgpError::NonFinite("late".into())));
         assert_eq!(chosen(Some(Some(0.5)), failed()), Some(0));
         assert_eq!(chosen(Some(None), failed()), None, "both failed");
+    }
+
+    #[test]
+    fn a_second_head_that_ends_first_trains_the_leader() {
+        let params = GpParams::filled(GpShape { m: 1, d: 1, e: 1 }, 0.0);
+        let second = |v: f64| {
+            let mut race = Race::default();
+            race.finished(&Ok((params.clone(), 3, v)));
+            race
+        };
+        // the first has not validated yet: the second leads
+        let mut race = second(0.4);
+        assert_eq!(race.second_leader(), Some(1));
+        assert!(race.second_keeps(1) && !race.second_keeps(0));
+        // the first's running best above the second's: still the second; at or below: the
+        // first has won (its best only falls, and ties go to the first)
+        race.saw_first(0.6);
+        assert_eq!(race.second_leader(), Some(1));
+        race.saw_first(0.4);
+        assert_eq!(race.second_leader(), Some(0));
+        assert!(race.second_keeps(0) && !race.second_keeps(1));
+        // once the first has ended, no new speculation: the exact choice
+        race.first = Some(Some(0.4));
+        assert_eq!(race.second_leader(), None);
+        assert!(race.second_keeps(0) && !race.second_keeps(1));
+        let mut race = second(0.4);
+        race.saw_first(0.6);
+        race.first = Some(None);
+        assert!(race.second_keeps(1), "the first failed numerically");
+        // a second head that failed leads nothing
+        let mut race = Race::default();
+        race.finished(&Err(MsgpError::NonFinite("late".into())));
+        assert_eq!(race.second_leader(), None);
     }
 }
 
