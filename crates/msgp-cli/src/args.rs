@@ -352,6 +352,25 @@ pub fn parse_history(s: &str) -> Result<HistoryArg, String> {
     Ok(HistoryArg { ly, lu })
 }
 
+/// The history of `msgp fit`: given, or chosen from the training data.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FitHistory {
+    /// `LY,LU`.
+    Given(HistoryArg),
+    /// `auto`: [`msgp_core::fit::history::with_chosen_history`].
+    Auto,
+}
+
+/// Parses `LY,LU` or `auto`.
+pub fn parse_fit_history(s: &str) -> Result<FitHistory, String> {
+    match s.trim() {
+        "auto" => Ok(FitHistory::Auto),
+        _ => parse_history(s)
+            .map(FitHistory::Given)
+            .map_err(|e| format!("{e}, or `auto`")),
+    }
+}
+
 /// Parses `OUTPUT:ORDER[:linear]`.
 pub fn parse_integrator(s: &str) -> Result<Integrator, String> {
     let expected = || format!("expected OUTPUT:ORDER or OUTPUT:ORDER:linear (e.g. 0:2), got `{s}`");
@@ -385,9 +404,13 @@ pub struct FitArgs {
     /// Fraction of each trajectory used for training, in (0, 1] [default: 0.5].
     #[arg(long, value_name = "F")]
     pub train_frac: Option<f64>,
-    /// NARX history: past outputs and past inputs in the GP input.
-    #[arg(long, value_name = "LY,LU", value_parser = parse_history, default_value = "2,2")]
-    pub history: HistoryArg,
+    /// NARX history: past outputs and past inputs in the GP input; `auto`: chosen on the
+    /// training part alone (its first 80 % fits, its last 20 % judges: every history up to 10
+    /// lags as a linear model, then the best few and the equal ones `(l, l)` each fitted by
+    /// the method itself and judged by their free simulation; the shortest within one standard
+    /// error of the best wins). `auto` takes one fit per judged candidate (minutes for msgp).
+    #[arg(long, value_name = "LY,LU|auto", value_parser = parse_fit_history, default_value = "2,2")]
+    pub history: FitHistory,
     /// Number of pseudo-inputs [default: min(100, training windows / 2)].
     #[arg(long, value_name = "M")]
     pub inducing: Option<usize>,
@@ -1136,6 +1159,13 @@ mod tests {
         assert!(parse_history("0,2").is_err());
         assert!(parse_history("2").is_err());
         assert!(parse_history("a,b").is_err());
+        assert_eq!(parse_fit_history("auto"), Ok(FitHistory::Auto));
+        assert_eq!(
+            parse_fit_history("3,1"),
+            Ok(FitHistory::Given(HistoryArg { ly: 3, lu: 1 }))
+        );
+        let e = parse_fit_history("auto,2").expect_err("neither");
+        assert!(e.contains("`auto`"), "{e}");
     }
 
     #[test]

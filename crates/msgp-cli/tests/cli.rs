@@ -1540,3 +1540,82 @@ fn reproductions_run_over_seeds_and_unseen_excitations() {
         &["plots' folder", "file/sub"],
     );
 }
+
+/// `n` samples of a linear ARX system of orders (3, 2) (`y_{t+1} = 1.2 y_t − 0.55 y_{t−1} +
+/// 0.1 y_{t−2} + 0.5 u_t + 0.3 u_{t−1}`) under a piecewise-constant input (a new level every 7
+/// samples, from a fixed hash), with a little output noise.
+fn arx_csv(n: usize) -> String {
+    let hash = |k: f64| ((k * 12.9898).sin() * 43_758.545).fract();
+    let u: Vec<f64> = (0..n).map(|t| hash((t / 7) as f64 + 0.5)).collect();
+    let mut y = vec![0.0; n];
+    for t in 2..n - 1 {
+        y[t + 1] = 1.2 * y[t] - 0.55 * y[t - 1] + 0.1 * y[t - 2] + 0.5 * u[t] + 0.3 * u[t - 1];
+    }
+    let mut s = String::from("t,u,y\n");
+    for t in 0..n {
+        let noise = 0.02 * hash(t as f64 + 1000.25);
+        s.push_str(&format!("{t},{},{}\n", u[t], y[t] + noise));
+    }
+    s
+}
+
+/// `--history auto` chooses the history on the training part, with the fit's own settings
+/// as the judge (here linear-kf at 60 iterations; the recovery of the true orders by the
+/// default search is `msgp_core::fit::history`'s test), says how it chose, and records the
+/// choice (with every score) in `--json` and in the model file; neither a history nor `auto`
+/// is refused by name.
+#[test]
+fn the_history_is_chosen_from_the_data() {
+    let dir = Scratch::new("history-auto");
+    dir.write("a.csv", &arx_csv(1200));
+    dir.write("s.csv", &system_csv(120, None));
+    let base = [
+        "fit",
+        "--data",
+        "a.csv",
+        "--method",
+        "linear-kf",
+        "--iters",
+        "60",
+        "--history",
+        "auto",
+    ];
+    let v = ok_json(&dir, &args(&base, &["--json", "--out", "a.json"]));
+    let choice = &v["history_choice"];
+    let (ly, lu) = (choice["ly"].as_u64(), choice["lu"].as_u64());
+    assert_eq!(v["history"], serde_json::json!([ly, lu]), "{v}");
+    let judged = choice["judged"].as_array().expect("judged");
+    assert!(
+        judged.len() >= 10,
+        "the equal histories (l, l) are judged: {choice}"
+    );
+    // the linear stage tried every history up to 10 lags; the chosen one was judged
+    assert_eq!(choice["linear"].as_array().map(Vec::len), Some(100));
+    assert!(
+        judged
+            .iter()
+            .any(|s| (s["ly"].as_u64(), s["lu"].as_u64()) == (ly, lu))
+    );
+    let file: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path("a.json")).expect("model"))
+            .expect("model file");
+    assert_eq!(file["training"]["history_choice"], *choice);
+    assert_eq!(file["history"], serde_json::json!({"ly": ly, "lu": lu}));
+    let text = ok(&dir, &args(&base, &["--out", "b.json"]));
+    assert!(
+        text.contains(&format!(
+            "history l_y={}, l_u={}",
+            ly.unwrap_or(0),
+            lu.unwrap_or(0)
+        )) && text.contains("history chosen from the training part:")
+            && text.contains("fitted by linear-kf"),
+        "{text}"
+    );
+    let given = fitted_model(&dir, &["--history", "2,2"], "g.json");
+    assert_eq!(given["training"]["history_choice"], Value::Null);
+    fails(
+        &dir,
+        &["fit", "--data", "a.csv", "--history", "auto,2"],
+        &["LY,LU", "`auto`"],
+    );
+}

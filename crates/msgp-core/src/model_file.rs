@@ -141,6 +141,10 @@ pub struct Training {
     /// (`msgp_core::fit::FitReport::final_budget`); absent where none was.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub final_budget: Option<usize>,
+    /// The history chosen from the training data (`--history auto`): the choice and what each
+    /// stage scored ([`crate::fit::history::HistoryChoice`]); absent where it was given.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub history_choice: Option<crate::fit::history::HistoryChoice>,
     /// Every fit setting, as `msgp_core::fit::FitSettings` serialises it (informational).
     pub settings: Value,
 }
@@ -374,6 +378,7 @@ impl ModelFile {
                 full_data_failed: record.report.full_data_failed.clone(),
                 final_budgets: record.report.final_budgets.clone(),
                 final_budget: record.report.final_budget,
+                history_choice: record.report.history_choice.clone(),
                 settings: serde_json::to_value(record.settings)
                     .map_err(|e| MsgpError::Data(format!("cannot serialise the settings: {e}")))?,
             },

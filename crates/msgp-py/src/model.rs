@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use msgp_core::data::Trajectory;
+use msgp_core::fit::history::{HistoryEvent, HistorySearch, with_chosen_history};
 use msgp_core::fit::{
     FitOptimizer, FitOptions, FitReport, FitSettings, MsgpStart, OutputRange, fit_observed,
 };
@@ -142,6 +143,9 @@ struct Fitted {
 #[derive(Debug)]
 pub struct Msgp {
     options: FitOptions,
+    /// `history="auto"`: each fit chooses the history from its training data first
+    /// ([`with_chosen_history`]); `options` then hold the last choice.
+    auto_history: bool,
     /// Other `FitSettings` fields given by the user (a JSON object), applied after `options`.
     overrides: Option<serde_json::Value>,
     /// Shared so that long calls hold no borrow of the object while the GIL is released.
@@ -224,6 +228,7 @@ impl Msgp {
                 segment_length: None,
             },
             overrides: recorded_overrides(model.method, &file.training.settings),
+            auto_history: false,
             fitted: Some(Arc::new(Fitted {
                 file,
                 model,
@@ -385,8 +390,13 @@ impl Msgp {
         }
         let likelihood = crate::model::likelihood(m, likelihood)?.unwrap_or_default();
         let start = crate::model::start(m, start)?;
+        let auto_history = history
+            .and_then(|h| h.extract::<String>().ok())
+            .is_some_and(|h| h == "auto");
         let (ly, lu) = match history.filter(|h| !h.is_none()) {
             None => (2, 2),
+            // (the search's judge: these options with each candidate's history)
+            Some(_) if auto_history => (1, 1),
             Some(h) => {
                 let pair: Option<(i128, i128)> =
                     if h.cast::<PyTuple>().is_ok() || h.cast::<PyList>().is_ok() {
@@ -396,7 +406,8 @@ impl Msgp {
                     };
                 let Some((ly, lu)) = pair else {
                     return Err(input(format!(
-                        "history must be a pair (l_y, l_u) of past outputs and inputs, got {h}"
+                        "history must be a pair (l_y, l_u) of past outputs and inputs, or \
+                         \"auto\", got {h}"
                     ))
                     .into());
                 };
@@ -481,6 +492,7 @@ impl Msgp {
         Ok(Self {
             options,
             overrides,
+            auto_history,
             fitted: None,
         })
     }
@@ -501,9 +513,9 @@ impl Msgp {
     ) -> PyResult<Bound<'py, Self>> {
         let py = slf.py();
         let progress = callable(progress, "one training iteration's dict")?;
-        let (options, overrides) = {
+        let (options, overrides, auto_history) = {
             let me = slf.try_borrow().map_err(|e| Error::Busy(e.to_string()))?;
-            (me.options.clone(), me.overrides.clone())
+            (me.options.clone(), me.overrides.clone(), me.auto_history)
         };
         let train = trajectories(u, y)?;
         let (du, dy) = train.first().map_or((0, 0), |t| (t.u.ncols(), t.y.ncols()));
@@ -529,8 +541,43 @@ impl Msgp {
             )?;
         }
         let fitted = detached(py, move || -> Result<std::result::Result<Fitted, PyErr>> {
-            let settings = Msgp::settings(&options, overrides.as_ref(), &train)?;
             let mut raised = None;
+            // `history="auto"`: each judged candidate is a progress event of stage 0
+            let (options, choice) = match auto_history {
+                false => (options, None),
+                true => {
+                    let chosen = with_chosen_history(
+                        &options,
+                        &train,
+                        &HistorySearch::default(),
+                        &mut |event| match event {
+                            // (Ctrl-C stops the candidate's fit)
+                            HistoryEvent::Fit(_) => with_python(&mut raised, |_| Ok(())),
+                            HistoryEvent::Judged(p) => with_python(&mut raised, |py| {
+                                let Some(f) = &progress else {
+                                    return Ok(());
+                                };
+                                let d = PyDict::new(py);
+                                d.set_item("stage", 0)?;
+                                d.set_item("iteration", p.done)?;
+                                d.set_item("iterations", p.of)?;
+                                d.set_item("loss", p.scored.score)?;
+                                d.set_item("validation", None::<f64>)?;
+                                d.set_item("elapsed", p.elapsed)?;
+                                d.set_item("history", (p.scored.ly, p.scored.lu))?;
+                                f.call1(py, (d,))?;
+                                Ok(())
+                            }),
+                        },
+                    );
+                    if let Some(err) = raised.take() {
+                        return Ok(Err(err));
+                    }
+                    let (options, choice) = chosen?;
+                    (options, Some(choice))
+                }
+            };
+            let settings = Msgp::settings(&options, overrides.as_ref(), &train)?;
             let fitted = fit_observed(&train, &settings, &mut |p| {
                 with_python(&mut raised, |py| {
                     let Some(f) = &progress else {
@@ -550,7 +597,8 @@ impl Msgp {
             if let Some(err) = raised {
                 return Ok(Err(err));
             }
-            let (model, report) = fitted?;
+            let (model, mut report) = fitted?;
+            report.history_choice = choice;
             let file = ModelFile::from_fit(
                 &model,
                 &FitRecord {
@@ -742,10 +790,14 @@ impl Msgp {
         self.options.method.name()
     }
 
-    /// `(l_y, l_u)`.
+    /// `(l_y, l_u)`: the fitted model's; before a fit, as given (None for "auto").
     #[getter]
-    fn history(&self) -> (usize, usize) {
-        (self.options.ly, self.options.lu)
+    fn history(&self) -> Option<(usize, usize)> {
+        match (&self.fitted, self.auto_history) {
+            (Some(f), _) => Some((f.model.spec.ly, f.model.spec.lu)),
+            (None, true) => None,
+            (None, false) => Some((self.options.ly, self.options.lu)),
+        }
     }
 
     /// Number of pseudo-inputs (None before fitting with the default).
@@ -845,7 +897,8 @@ impl Msgp {
     /// is, or full_data_failed; final_budget, the length of that training, and final_budgets,
     /// the lengths considered, each with its proxy's RMSE on the validation tail (normalised
     /// units); calibration, the output-variance calibration: added_std
-    /// per output, original units, and its judge); None for a loaded model.
+    /// per output, original units, and its judge; history_choice, with history="auto": the
+    /// chosen ly, lu and every candidate's score); None for a loaded model.
     #[getter]
     fn report<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
         self.fitted()?
@@ -871,10 +924,13 @@ impl Msgp {
     fn __repr__(&self) -> String {
         let o = &self.options;
         let opt = |v: Option<usize>| v.map_or_else(|| "None".to_string(), |n| n.to_string());
+        let history = match (self.auto_history, self.history()) {
+            (true, None) => "'auto'".to_string(),
+            (_, Some((ly, lu))) => format!("({ly}, {lu})"),
+            (false, None) => format!("({}, {})", o.ly, o.lu),
+        };
         let mut s = format!(
-            "Msgp(history=({}, {}), inducing={}, method='{}', seed={}, iterations={})",
-            o.ly,
-            o.lu,
+            "Msgp(history={history}, inducing={}, method='{}', seed={}, iterations={})",
             opt(self.inducing()),
             o.method.name(),
             o.seed,

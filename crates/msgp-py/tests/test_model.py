@@ -268,3 +268,31 @@ def test_segment_length_trains_by_segments_and_says_so():
     assert whole.report["segments"] is None
     with pytest.raises(ValueError, match="segment_length"):
         msgp.Msgp(method="gp-narx", segment_length=50)
+
+
+def test_history_auto_chooses_on_the_training_data_and_says_so():
+    # a linear ARX system of orders (3, 2) under a piecewise-constant input, a little noise
+    rng = np.random.default_rng(0)
+    n = 600
+    u = np.repeat(rng.uniform(-1, 1, n // 7 + 1), 7)[:n]
+    y = np.zeros(n)
+    for t in range(2, n - 1):
+        y[t + 1] = 1.2 * y[t] - 0.55 * y[t - 1] + 0.1 * y[t - 2] + 0.5 * u[t] + 0.3 * u[t - 1]
+    y += 0.02 * rng.uniform(-1, 1, n)
+    model = msgp.Msgp(history="auto", method="linear-kf", iterations=60)
+    assert model.history is None and "history='auto'" in repr(model)
+    seen = []
+    model.fit(u, y, progress=seen.append)
+    choice = model.report["history_choice"]
+    assert model.history == (choice["ly"], choice["lu"])
+    assert model.training["history_choice"] == choice
+    # one progress event of stage 0 per judged candidate, then none (linear-kf has no Adam)
+    judged = [e for e in seen if e["stage"] == 0]
+    assert len(judged) == len(choice["judged"]) >= 10
+    assert judged[-1]["iteration"] == judged[-1]["iterations"] == len(choice["judged"])
+    scores = {tuple(e["history"]): e["loss"] for e in judged}
+    assert all(
+        math.isclose(scores[(s["ly"], s["lu"])], s["score"]) for s in choice["judged"] if s["score"]
+    )
+    with pytest.raises(ValueError, match="auto"):
+        msgp.Msgp(history="automatic")

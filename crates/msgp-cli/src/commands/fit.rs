@@ -1,11 +1,13 @@
 //! `msgp fit`: fit a model on the first part of each trajectory, save it, and score its free
 //! simulation of the held-out rest.
 
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use msgp_core::data::Trajectory;
 use msgp_core::fit::calibration::Judge;
+use msgp_core::fit::history::{HistoryChoice, HistoryEvent, HistorySearch, with_chosen_history};
 use msgp_core::fit::{
     FitOptimizer, FitOptions, FitProgress, FitReport, MethodSettings, MsgpStart, fit,
 };
@@ -15,7 +17,7 @@ use msgp_core::model_file::{FitRecord, ModelFile};
 use msgp_core::numeric::parallel::Threads;
 use serde_json::json;
 
-use crate::args::{DEFAULT_TRAIN_FRAC, FitArgs, HistoryArg};
+use crate::args::{DEFAULT_TRAIN_FRAC, FitArgs, FitHistory, HistoryArg};
 use crate::render::output::{out, out_json};
 use crate::render::plot::plot;
 use crate::render::progress::FitBar;
@@ -54,10 +56,6 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     if train.is_empty() {
         bail!("no training samples: raise --train or --train-frac");
     }
-    let HistoryArg { ly, lu } = args.history;
-    let warmup = ly.max(lu);
-    check_lengths(&train, warmup, "training")?;
-    check_lengths(&test, warmup, "test")?;
     let method = Method::from(args.method);
     if let (Some(l), false) = (args.likelihood, method == Method::Msgp) {
         bail!(
@@ -80,11 +78,16 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         );
     }
     let trajs: Vec<Trajectory> = train.iter().map(|p| p.traj.clone()).collect();
+    let given = match args.history {
+        FitHistory::Given(h) => h,
+        // (the search's judge: these options with each candidate's history)
+        FitHistory::Auto => HistoryArg { ly: 1, lu: 1 },
+    };
     // the same settings as the Python `msgp.Msgp` for the same options
     let options = FitOptions {
         method,
-        ly,
-        lu,
+        ly: given.ly,
+        lu: given.lu,
         inducing: args.inducing,
         iterations: args.iters,
         seed: args.seed,
@@ -96,6 +99,17 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         threads: Threads::from_env()?,
         segment_length: args.segment_length,
     };
+    let (options, history_choice) = match args.history {
+        FitHistory::Given(_) => (options, None),
+        FitHistory::Auto => {
+            let (options, choice) = choose(&options, &trajs, args.quiet || args.json)?;
+            (options, Some(choice))
+        }
+    };
+    let (ly, lu) = (options.ly, options.lu);
+    let warmup = ly.max(lu);
+    check_lengths(&train, warmup, "training")?;
+    check_lengths(&test, warmup, "test")?;
     let mut settings = options.settings(&trajs)?;
     if let Some(o) = args.one_step {
         match &mut settings.method {
@@ -157,7 +171,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
     );
     let mut bar = FitBar::new(&label, args.quiet || args.json);
-    let (model, report) = match fit(&trajs, &settings, &mut |p: &FitProgress| bar.update(p)) {
+    let (model, mut report) = match fit(&trajs, &settings, &mut |p: &FitProgress| bar.update(p)) {
         Ok(r) => r,
         Err(e) => {
             bar.abandon();
@@ -168,6 +182,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             ));
         }
     };
+    report.history_choice = history_choice;
     // what the model has (a linear-kf model has one idle pseudo-input and no GP)
     let inducing = model.params.pseudo_inputs.nrows();
     bar.finish(&format!("trained in {:.1} s", report.train_seconds));
@@ -220,6 +235,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             "inputs": data.inputs,
             "outputs": data.outputs,
             "history": [ly, lu],
+            "history_choice": report.history_choice,
             "inducing": inducing,
             "seed": args.seed,
             "train_seconds": report.train_seconds,
@@ -269,6 +285,10 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         ));
     }
     text.push('\n');
+    if let Some(c) = &report.history_choice {
+        text.push_str(&chosen_history(c, method));
+        text.push('\n');
+    }
     if let Some((s, count)) = report.segments {
         text.push_str(&format!(
             "trained by segments (a long log): {count} segments of up to {} predicted steps, \
@@ -289,6 +309,76 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         text.push_str(&format!("\nplot written to {}", p.display()));
     }
     out(&text)
+}
+
+/// `options` with the history chosen from `train` (`--history auto`), its progress on stderr
+/// unless `quiet`.
+fn choose(
+    options: &FitOptions,
+    train: &[Trajectory],
+    quiet: bool,
+) -> anyhow::Result<(FitOptions, HistoryChoice)> {
+    let search = HistorySearch::default();
+    if !quiet {
+        eprintln!(
+            "msgp: choosing the history on the training part: every (l_y, l_u) up to {} as a \
+             linear model, then the best few and the equal ones each fitted by {} on the first \
+             {:.0} % and simulated on the last {:.0} %",
+            search.max_lag,
+            options.method.name(),
+            100.0 * (1.0 - search.validation),
+            100.0 * search.validation
+        );
+    }
+    let mut shown = |event: HistoryEvent<'_>| {
+        if let (HistoryEvent::Judged(p), false) = (event, quiet) {
+            eprintln!(
+                "msgp: history ({}, {}): score {} ({}/{} judged, {:.0} s)",
+                p.scored.ly,
+                p.scored.lu,
+                score(p.scored.score),
+                p.done,
+                p.of,
+                p.elapsed
+            );
+        }
+        ControlFlow::Continue(())
+    };
+    with_chosen_history(options, train, &search, &mut shown)
+        .context("choosing the history (--history auto)")
+}
+
+/// A score as printed: four decimals, or "diverged".
+fn score(s: f64) -> String {
+    match s.is_finite() {
+        true => format!("{s:.4}"),
+        false => "diverged".into(),
+    }
+}
+
+/// The line that says how the history was chosen.
+fn chosen_history(c: &HistoryChoice, method: Method) -> String {
+    let runner_up = c
+        .judged
+        .iter()
+        .find(|s| (s.ly, s.lu) != (c.ly, c.lu))
+        .map_or_else(String::new, |s| {
+            format!("; next ({}, {}) at {}", s.ly, s.lu, score(s.score))
+        });
+    let own = c
+        .judged
+        .iter()
+        .find(|s| (s.ly, s.lu) == (c.ly, c.lu))
+        .map_or(f64::INFINITY, |s| s.score);
+    format!(
+        "history chosen from the training part: {} candidates fitted by {} and judged by their \
+         free simulation of its last 20 % (RMSE per output std); ({}, {}) at {}{runner_up}",
+        c.judged.len(),
+        method.name(),
+        c.ly,
+        c.lu,
+        score(own)
+    )
 }
 
 /// Which iterate an MSGP fit returned, in words: the head's (chosen on the validation tail) or

@@ -24,12 +24,15 @@
 //! windows per GP input is not tried. `docs/design.md` ("The history chosen from the data")
 //! has the experiments behind the design.
 
+use std::ops::ControlFlow;
+use std::time::Instant;
+
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use crate::data::{Normalizer, Trajectory};
 use crate::error::{MsgpError, Result};
-use crate::fit::{FitOptions, fit};
+use crate::fit::{FitOptions, FitProgress, fit_observed};
 use crate::model::Model;
 use crate::narx::NarxSpec;
 
@@ -87,13 +90,65 @@ pub struct HistoryChoice {
     pub linear: Vec<HistoryScore>,
 }
 
+/// One candidate of the second stage judged, for a progress display.
+#[derive(Clone, Copy, Debug)]
+pub struct HistoryProgress {
+    /// The candidate and its score.
+    pub scored: HistoryScore,
+    /// Candidates judged so far, this one included.
+    pub done: usize,
+    /// Candidates the stage judges.
+    pub of: usize,
+    /// Seconds since the search began.
+    pub elapsed: f64,
+}
+
+/// What a history search shows as it goes: each iteration of a candidate's fit, and each
+/// candidate judged.
+#[derive(Clone, Copy, Debug)]
+pub enum HistoryEvent<'a> {
+    /// An iteration of the fit of the candidate being judged.
+    Fit(&'a FitProgress),
+    /// A candidate judged.
+    Judged(&'a HistoryProgress),
+}
+
+/// `options` with the history chosen from `train` by `search` ([`choose_history`], `options`
+/// the judge), and the choice: what `--history auto` (CLI) and `history="auto"` (Python) run.
+/// `progress` sees the search as it goes; a break stops it ([`MsgpError::Stopped`]).
+pub fn with_chosen_history(
+    options: &FitOptions,
+    train: &[Trajectory],
+    search: &HistorySearch,
+    progress: &mut dyn FnMut(HistoryEvent<'_>) -> ControlFlow<()>,
+) -> Result<(FitOptions, HistoryChoice)> {
+    let choice = choose_history_observed(train, search, options, progress)?;
+    let chosen = FitOptions {
+        ly: choice.ly,
+        lu: choice.lu,
+        ..options.clone()
+    };
+    Ok((chosen, choice))
+}
+
 /// Chooses the history of `train` by `search` (see the module docs); the second stage fits
-/// each candidate with `judge`'s method, pseudo-inputs, seed and threads (its history, mean
-/// and iterations are the candidate's and the method's defaults).
+/// each candidate as `judge` says, with the candidate's history and without integrating
+/// outputs (whose fixed coefficients depend on the history).
 pub fn choose_history(
     train: &[Trajectory],
     search: &HistorySearch,
     judge: &FitOptions,
+) -> Result<HistoryChoice> {
+    choose_history_observed(train, search, judge, &mut |_| ControlFlow::Continue(()))
+}
+
+/// [`choose_history`], showing `progress` its events; a break stops the search
+/// ([`MsgpError::Stopped`]).
+pub fn choose_history_observed(
+    train: &[Trajectory],
+    search: &HistorySearch,
+    judge: &FitOptions,
+    progress: &mut dyn FnMut(HistoryEvent<'_>) -> ControlFlow<()>,
 ) -> Result<HistoryChoice> {
     let split = Split::new(train, search)?;
     let linear = linear_stage(&split);
@@ -115,7 +170,7 @@ pub fn choose_history(
             candidates.push(equal);
         }
     }
-    let judged = judge_stage(&split, &candidates, judge)?;
+    let judged = judge_stage(&split, &candidates, judge, progress)?;
     let chosen = split.parsimonious(&judged).ok_or_else(|| {
         MsgpError::Data(
             "no candidate history's model simulates the validation part without diverging: \
@@ -255,23 +310,39 @@ fn judge_stage(
     split: &Split,
     candidates: &[(usize, usize)],
     judge: &FitOptions,
+    progress: &mut dyn FnMut(HistoryEvent<'_>) -> ControlFlow<()>,
 ) -> Result<Vec<HistoryScore>> {
+    let start = Instant::now();
     let mut scores = Vec::new();
     for &(ly, lu) in candidates {
         let options = FitOptions {
             ly,
             lu,
-            iterations: None,
-            mean: None,
             integrators: Vec::new(),
             ..judge.clone()
         };
         let settings = options.settings(&split.fit)?;
-        let score = fit(&split.fit, &settings, &mut |_| {})
-            .ok()
-            .and_then(|(model, _)| model_score(split, &model))
-            .unwrap_or(f64::INFINITY);
-        scores.push(HistoryScore { ly, lu, score });
+        let fitted = fit_observed(&split.fit, &settings, &mut |p| {
+            progress(HistoryEvent::Fit(p))
+        });
+        let score = match fitted {
+            Err(e @ MsgpError::Stopped { .. }) => return Err(e),
+            Err(_) => f64::INFINITY,
+            Ok((model, _)) => model_score(split, &model).unwrap_or(f64::INFINITY),
+        };
+        let scored = HistoryScore { ly, lu, score };
+        scores.push(scored);
+        let judged = HistoryProgress {
+            scored,
+            done: scores.len(),
+            of: candidates.len(),
+            elapsed: start.elapsed().as_secs_f64(),
+        };
+        if progress(HistoryEvent::Judged(&judged)).is_break() {
+            return Err(MsgpError::Stopped {
+                iteration: judged.done,
+            });
+        }
     }
     scores.sort_by(|a, b| a.score.total_cmp(&b.score));
     Ok(scores)

@@ -74,8 +74,13 @@ pub struct FitProgress {
 /// What happened during a fit.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct FitReport {
-    /// Adam iterations run (all stages, the calibration's proxy included).
+    /// Adam iterations run (all stages; a head's iterations past its early stop that the
+    /// calibration's proxy reads off it included).
     pub iterations_run: usize,
+    /// Where the history was chosen from the data (`--history auto`): the choice and every
+    /// score ([`history::with_chosen_history`]; set by the front end that searched).
+    #[serde(default)]
+    pub history_choice: Option<history::HistoryChoice>,
     /// Iteration chosen by early stopping (the refit runs this many); without a validation
     /// tail, the iteration of the lowest training loss, whose parameters the fit returns.
     pub best_iteration: usize,

@@ -36,7 +36,12 @@ class Msgp:
     """Gaussian-process dynamics model trained for long-term predictions (MSGP), or the
     one-step GP-NARX baselines ("gp-narx", "pilco-narx").
 
-    history: (l_y, l_u), past outputs and inputs in the GP input.
+    history: (l_y, l_u), past outputs and inputs in the GP input; "auto": chosen by each fit
+        on its training data alone (the first 80 % fits, the last 20 % judges: every history up
+        to 10 lags as a linear model, then the best few and the equal ones (l, l) each fitted
+        by the method itself and judged by their free simulation; the shortest within one
+        standard error of the best) — `msgp fit --history auto`; one fit per judged candidate
+        (minutes for MSGP). The choice is in `report["history_choice"]` and the model file.
     inducing: pseudo-inputs; None: min(100, training windows / 2).
     iterations: the method's own solver iterations (MSGP: trajectory likelihood, default 400;
         baselines: one-step marginal likelihood, default 300; linear-kf: L-BFGS on the filter
@@ -62,7 +67,7 @@ class Msgp:
 
     def __init__(
         self,
-        history: Tuple[int, int] = (2, 2),
+        history: Union[Tuple[int, int], str] = (2, 2),
         inducing: Optional[int] = None,
         method: str = "msgp",
         seed: int = 0,
@@ -84,7 +89,10 @@ class Msgp:
         """Fits on inputs `u` and outputs `y` (arrays (n, d) or (n,), or lists of arrays for
         several trajectories); returns self. Releases the GIL. `progress` is called with a
         dict (stage, iteration, iterations, loss, validation, elapsed) after every training
-        iteration of an MSGP fit; Ctrl-C or an exception it raises stops the fit and raises."""
+        iteration of an MSGP fit; with history="auto", first with stage 0 after each candidate
+        history judged (iteration: candidates judged, iterations: of how many, loss: its
+        score, history: (l_y, l_u)); Ctrl-C or an exception it raises stops the fit and
+        raises."""
     def simulate(
         self, u: ArrayLike, y_init: ArrayLike, *, rollout: str = "mm"
     ) -> Tuple[Array, Array]:
@@ -118,7 +126,8 @@ class Msgp:
     @property
     def method(self) -> str: ...
     @property
-    def history(self) -> Tuple[int, int]: ...
+    def history(self) -> Optional[Tuple[int, int]]:
+        """The fitted model's (l_y, l_u); before a fit, as given (None for "auto")."""
     @property
     def inducing(self) -> Optional[int]: ...
     @property
