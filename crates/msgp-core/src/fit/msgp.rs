@@ -172,6 +172,8 @@ pub(super) fn fit_msgp(
         start: recipe.start_window,
         ..GpConfig::default()
     };
+    // what each racing head knows of the other (`Race`; untouched when the heads run in turn)
+    let race = Mutex::new(Race::default());
     // one recipe's training under its own report and observer
     let run = |k: usize,
                recipe: &MsgpSettings,
@@ -179,6 +181,17 @@ pub(super) fn fit_msgp(
                progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
                report: &mut FitReport|
      -> Result<Trained> {
+        // whether this head, at its early stop with validation NLL `best`, can still be chosen
+        // (a racing head already behind the other's running best never is: its proxy would
+        // be trained for nothing)
+        let ahead = |best: f64| {
+            let race = race.lock().unwrap_or_else(|e| e.into_inner());
+            match k {
+                0 => race.running.is_none_or(|b| b >= best),
+                1 => race.running_first.is_none_or(|a| best < a),
+                _ => true,
+            }
+        };
         let mut stage = Stage {
             spec,
             config: config_of(recipe),
@@ -190,6 +203,7 @@ pub(super) fn fit_msgp(
             checkpoints: Vec::new(),
             snapshots: Vec::new(),
             proxy_watch: proxy_iterations.map(|n| proxy_watch(recipe, n)),
+            proxy_ahead: Some(&ahead),
         };
         let stage_number = if k == 0 { 1 } else { 3 };
         let mut head_start = None;
@@ -242,6 +256,7 @@ pub(super) fn fit_msgp(
             checkpoints,
             snapshots: Vec::new(),
             proxy_watch: None,
+            proxy_ahead: None,
         };
         let init = match init {
             Some(init) => Ok(init),
@@ -338,7 +353,6 @@ pub(super) fn fit_msgp(
             threads: Threads::new((settings.threads.get() / 2).max(1))?,
             ..settings.clone()
         };
-        let race = Mutex::new(Race::default());
         let mut side = FitReport::default();
         // the progress of a final training on the second thread, for the observer on this one
         let (relay, relayed) = std::sync::mpsc::channel::<FitProgress>();
@@ -803,6 +817,7 @@ pub(super) fn fit_msgp(
                     checkpoints: Vec::new(),
                     snapshots: Vec::new(),
                     proxy_watch: None,
+                    proxy_ahead: None,
                 };
                 let trained = if inner_tails.is_empty() {
                     None
@@ -1367,6 +1382,9 @@ struct Stage<'a, 'p> {
     /// The calibration's proxy, read off a training with a validation tail, which then goes on
     /// past its early stop until the proxy's length ([`super::proxy_watch`]).
     proxy_watch: Option<ProxyWatch>,
+    /// Whether a head at its early stop, with its best validation NLL, can still be chosen:
+    /// where not, it drops its proxy instead of training on for it.
+    proxy_ahead: Option<&'a dyn Fn(f64) -> bool>,
 }
 
 impl Stage<'_, '_> {
@@ -1581,6 +1599,7 @@ impl Stage<'_, '_> {
             false => self.proxy_watch.take(),
         };
         let mut frozen = false;
+        let proxy_ahead = self.proxy_ahead;
         let (last_x, _) = minimize(
             &mut objective,
             &solver,
@@ -1647,7 +1666,12 @@ impl Stage<'_, '_> {
                     stopped = Some(it);
                     return Ok(Flow::Stop);
                 }
-                frozen |= !tails.is_empty() && since_best >= msgp.patience;
+                if !frozen && !tails.is_empty() && since_best >= msgp.patience {
+                    frozen = true;
+                    if proxy_ahead.is_some_and(|ahead| !ahead(best.0)) {
+                        watch = None;
+                    }
+                }
                 if it == iterations || (frozen && watch.as_ref().is_none_or(|w| w.done())) {
                     return Ok(Flow::Stop);
                 }
