@@ -9,6 +9,7 @@
 //! run [`fit_episodes_observed`]; front ends build their [`FitSettings`] from the user's
 //! [`FitOptions`].
 
+mod blow_up;
 pub mod calibration;
 mod continuation;
 mod divergence;

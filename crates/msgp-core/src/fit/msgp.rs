@@ -27,6 +27,7 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
+use super::blow_up::BlowUp;
 use super::calibration::{CalibrationReport, Judge, tail_calibration};
 use super::continuation;
 use super::divergence::check_divergence;
@@ -1154,46 +1155,6 @@ fn read_proxy(k: usize, read: ProxyOutcome, start: &GpParams<f64>) -> FinalTrain
     }
 }
 
-/// Adam's first steps are not judged by [`MsgpSettings::full_data_blow_up`]: before its moment estimates
-/// settle they move every coordinate by about the full step size at once, and the loss jumps and
-/// recovers (by up to 100 nats per step on a small linear plant, 9 on actuator's linear start).
-const BLOW_UP_AFTER: usize = 10;
-
-/// Watches a training loss for a blow-up: a rise by more than `limit` nats per step above its
-/// lowest since iteration [`BLOW_UP_AFTER`].
-pub(super) struct BlowUp {
-    limit: f64,
-    /// The lowest loss since [`BLOW_UP_AFTER`] and its iteration.
-    lowest: (f64, usize),
-}
-
-impl BlowUp {
-    pub(super) fn new(limit: f64) -> Self {
-        Self {
-            limit,
-            lowest: (f64::INFINITY, 0),
-        }
-    }
-
-    /// The loss of iteration `it`; why it is a blow-up, if it is one.
-    pub(super) fn observe(&mut self, it: usize, loss: f64) -> Option<String> {
-        if it < BLOW_UP_AFTER {
-            return None;
-        }
-        if loss > self.lowest.0 + self.limit {
-            return Some(format!(
-                "the training loss on all the data blew up at iteration {it}: {loss:.3} nats per \
-                 step after {:.3} at iteration {}",
-                self.lowest.0, self.lowest.1
-            ));
-        }
-        if loss < self.lowest.0 {
-            self.lowest = (loss, it);
-        }
-        None
-    }
-}
-
 /// Most L-BFGS iterations of the Kalman-filter fit behind [`MsgpStart::LinearKf`] (it stops by
 /// itself when converged, after 10–60 on the pendulum loop's data).
 const KALMAN_START_ITERATIONS: usize = 300;
@@ -1514,7 +1475,7 @@ impl Stage<'_, '_> {
     /// parameters of the best validation NLL and their iteration; otherwise returns the iterate of
     /// the lowest training loss (the last one, unless a late Adam step threw the loss up). With
     /// `blow_up` (and no validation episodes), a training loss that rises by more than that (per
-    /// predicted step) above its lowest since iteration [`BLOW_UP_AFTER`] stops the run and is
+    /// predicted step) above its lowest since iteration 10 ([`super::blow_up`]) stops the run and is
     /// reported in [`FitReport::full_data_failed`].
     fn train(
         &mut self,
@@ -1759,45 +1720,6 @@ mod budget_tests {
         // the longest failed: no choice
         assert_eq!(shorter_if_clearly_better(&[None, Some(clearly)]), None);
         assert_eq!(shorter_if_clearly_better(&[]), None);
-    }
-}
-
-#[cfg(test)]
-mod blow_up_tests {
-    use super::*;
-
-    fn first_blow_up(losses: &[f64]) -> Option<(usize, String)> {
-        let mut watch = BlowUp::new(crate::fit::DEFAULT_FULL_DATA_BLOW_UP);
-        losses
-            .iter()
-            .enumerate()
-            .find_map(|(it, &l)| watch.observe(it, l).map(|w| (it, w)))
-    }
-
-    /// Ballbeam's final training (seed 0: 1.32 → 0.38 in ten steps, 56 at the 11th) is a
-    /// blow-up; Adam's first-step jumps that the loss recovers from, and setbacks of a nat or
-    /// two later on, are not.
-    #[test]
-    fn a_blow_up_is_a_large_rise_after_adams_first_steps() {
-        let ballbeam = [
-            1.32, 1.16, 1.14, 1.09, 1.03, 0.97, 0.89, 0.78, 0.72, 0.66, 0.38, 56.0, 39.0, 25.6,
-        ];
-        let (it, why) = first_blow_up(&ballbeam).expect("a blow-up");
-        assert_eq!(it, 11);
-        assert!(
-            why.contains("at iteration 11") && why.contains("0.380"),
-            "{why}"
-        );
-        let first_steps = [
-            -1.47, 99.2, 4.5, 3.6, 4.0, 5.8, 5.5, 5.3, 5.4, 5.5, 5.6, 5.6, 5.1,
-        ];
-        assert_eq!(first_blow_up(&first_steps), None);
-        let mut setbacks: Vec<f64> = (0..60).map(|k| 2.0 - 0.05 * k as f64).collect();
-        setbacks[40] += 1.6;
-        setbacks[50] += 4.9;
-        assert_eq!(first_blow_up(&setbacks), None);
-        setbacks[55] += 5.1 + 0.3;
-        assert_eq!(first_blow_up(&setbacks).map(|b| b.0), Some(55));
     }
 }
 

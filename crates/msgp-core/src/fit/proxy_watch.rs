@@ -12,7 +12,7 @@
 //! up to 400 iterations is then not needed: on a short log it was the longer of the two
 //! threads' last stages.
 
-use super::msgp::BlowUp;
+use super::blow_up::BlowUp;
 
 /// Flat parameters and their iteration.
 type Iterate = (Vec<f64>, usize);
