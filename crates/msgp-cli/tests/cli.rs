@@ -1465,6 +1465,40 @@ fn reproductions_run_over_seeds_and_unseen_excitations() {
     assert!(md.contains(" ± "), "{md}");
     assert!(md.contains("GP-NARX (ours, mean)"), "{md}");
     assert!(md.contains("at or below the paper's MSGP"), "{md}");
+    // histories chosen from the data: their own section, each fit's choice in the JSON
+    let v = ok_json(
+        &dir,
+        &[
+            "reproduce",
+            "table1",
+            "--only",
+            "synthetic1",
+            "--seeds",
+            "0",
+            "--methods",
+            "gp-narx",
+            "--history",
+            "auto",
+            "--out",
+            "t.md",
+            "--json",
+            "--quiet",
+        ],
+    );
+    let row = &v["rows"][0];
+    let chosen = &row["history_choice"];
+    assert_eq!(
+        row["history"],
+        serde_json::json!([chosen["ly"], chosen["lu"]]),
+        "{row}"
+    );
+    let md = std::fs::read_to_string(dir.path("t.md")).expect("markdown");
+    assert!(
+        md.contains("<!-- msgp:table1-auto-history:begin -->"),
+        "{md}"
+    );
+    assert!(md.contains("<!-- msgp:table1:begin -->"), "{md}");
+    assert!(md.contains("## Chosen histories"), "{md}");
     fails(
         &dir,
         &[

@@ -9,7 +9,7 @@ use msgp_core::fit::{FitOptimizer, FitProgress};
 use msgp_core::loss::Likelihood;
 use msgp_core::numeric::parallel::Threads;
 use msgp_core::reproduce::results::{machine, today, update_section};
-use msgp_core::reproduce::table1::{self, Cell, Plan, Provenance, Unit};
+use msgp_core::reproduce::table1::{self, Cell, Plan, Provenance, TableHistory, Unit};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use serde::de::DeserializeOwned;
@@ -43,7 +43,7 @@ fn likelihood(name: &str) -> Result<Likelihood> {
 /// run's order). `data_dir` holds the real series (default: `$MSGP_DATA_DIR`, else
 /// `../shared/data/real`, as the command line).
 #[pyfunction]
-#[pyo3(signature = (seeds, *, data_dir = None, only = None, methods = None, likelihoods = None, inducing = 100, iters = None, optimizer = "adam"))]
+#[pyo3(signature = (seeds, *, data_dir = None, only = None, methods = None, likelihoods = None, inducing = 100, iters = None, optimizer = "adam", history = "paper"))]
 #[allow(clippy::too_many_arguments)]
 pub fn table1_plan<'py>(
     py: Python<'py>,
@@ -55,7 +55,19 @@ pub fn table1_plan<'py>(
     inducing: usize,
     iters: Option<usize>,
     optimizer: &str,
+    history: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let history = match history {
+        "paper" => TableHistory::Paper,
+        "auto" => TableHistory::Auto,
+        other => {
+            return Err(input(format!(
+                "unknown history {other:?}: expected \"paper\" (Table 3's) or \"auto\" (chosen \
+                 on each fit's training part)"
+            ))
+            .into());
+        }
+    };
     let methods = methods
         .unwrap_or_default()
         .iter()
@@ -86,7 +98,8 @@ pub fn table1_plan<'py>(
         optimizer,
         &data_dir.unwrap_or_else(|| msgp_core::data::real::data_dir(std::path::Path::new("."))),
     )
-    .map_err(crate::error::Error::from)?;
+    .map_err(crate::error::Error::from)?
+    .with_history(history);
     let out = PyDict::new(py);
     out.set_item("plan", to_python(py, &plan)?)?;
     out.set_item("units", to_python(py, &plan.units())?)?;

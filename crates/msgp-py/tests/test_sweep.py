@@ -77,6 +77,21 @@ def test_the_command_line_entry_point(serial, tmp_path):
     assert bad.returncode == 1 and "unknown benchmark `nowhere`" in bad.stderr, bad.stderr
 
 
+def test_histories_chosen_from_the_data_as_the_command_line_chooses_them(cli, tmp_path):
+    args = dict(seeds=[0], only=["synthetic1"], methods=["gp-narx"], inducing=10)
+    report = sweep.table1(**args, history="auto", out=None, workers=1, quiet=True)
+    assert report["section"] == "table1-auto-history"
+    serial = cli("reproduce", "table1", "--seeds", "0", "--only", "synthetic1", "--methods",
+                 "gp-narx", "--inducing", 10, "--history", "auto", "--json", "--quiet",
+                 "--out", tmp_path / "t.md")
+    assert numbers(report["rows"]) == numbers(serial["rows"])
+    choice = report["rows"][0]["history_choice"]
+    assert report["rows"][0]["history"] == [choice["ly"], choice["lu"]]
+    assert "## Chosen histories" in report["markdown"]
+    with pytest.raises(ValueError, match="unknown history"):
+        sweep.table1(**args, history="table3", out=None, workers=1, quiet=True)
+
+
 def test_a_local_ray_cluster_equals_the_serial_run(serial, tmp_path):
     ray = pytest.importorskip("ray")
     rows, text = serial

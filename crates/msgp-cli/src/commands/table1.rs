@@ -48,7 +48,8 @@ pub fn run(args: &Table1Args) -> anyhow::Result<()> {
         args.iters,
         args.optimizer.into(),
         &args.common.data_dir(),
-    )?;
+    )?
+    .with_history(args.history.into());
     // (the plots' folder before the fits, which it would outlast)
     if let Some(dir) = &args.plots {
         std::fs::create_dir_all(dir)
@@ -83,8 +84,12 @@ pub fn run(args: &Table1Args) -> anyhow::Result<()> {
             _ => String::new(),
         };
         let [mm, mean] = &cell.metrics;
+        let history = cell
+            .chosen_history
+            .as_ref()
+            .map_or(String::new(), |h| format!("history ({}, {}), ", h.ly, h.lu));
         let summary = format!(
-            "RMSE {:.4}{paper}, mean feedback {:.4}, NLL {:.3}, coverage {:.2}, {:.1} s",
+            "{history}RMSE {:.4}{paper}, mean feedback {:.4}, NLL {:.3}, coverage {:.2}, {:.1} s",
             mm.rmse, mean.rmse, mm.nll, mm.coverage_2sigma, cell.train_seconds
         );
         bar.finish(&summary);

@@ -268,10 +268,12 @@ def table1_plan(
     inducing: int = 100,
     iters: Optional[int] = None,
     optimizer: str = "adam",
+    history: str = "paper",
 ) -> Dict[str, Any]:
     """The validated plan of a Table 1 reproduction (as `msgp reproduce table1` takes its
     options): {"plan", "units", "section"}; each unit is one benchmark × seed × column, in the
-    serial run's order. Used by `msgp.sweep`."""
+    serial run's order. `history`: "paper" (Table 3's) or "auto" (chosen on each fit's
+    training part, as `msgp fit --history auto`). Used by `msgp.sweep`."""
 
 def table1_unit(plan: Dict[str, Any], unit: Dict[str, Any]) -> Dict[str, Any]:
     """Fits one unit of a plan and returns its cell (metrics of the moment-matching and the
