@@ -4,9 +4,11 @@
 //! paper's, for comparison).
 //!
 //! `cargo run --release -p msgp-diagnostics --bin history_choice -- [kf|msgp-judge] [narx|msgp]
-//! [fit] [only=name,...] [name=ly,lu ...]`: the judge of the search's second stage (default
-//! one-step GP-NARX), `narx`/`msgp` also print each equal history's validation RMSE, `fit`
-//! fits the default MSGP with the chosen (or given) history on the whole training part.
+//! [fit] [folds=2] [inducing=M] [only=name,...] [name=ly,lu ...]`: the judge of the search's
+//! second stage (default one-step GP-NARX), `narx`/`msgp` also print each equal history's
+//! validation RMSE, `fit` fits the default MSGP with the chosen (or given) history on the whole
+//! training part, `folds=2` judges on the first part too (each judged candidate's score per
+//! fold printed), `inducing` sets the pseudo-inputs of every fit (Table 1: 100).
 use std::path::PathBuf;
 
 use msgp_core::data::Benchmark;
@@ -15,7 +17,11 @@ use msgp_core::fit::{FitOptions, HistorySearch, choose_history, fit};
 use msgp_core::model::{Method, Rollout};
 
 fn options(method: Method, ly: usize, lu: usize) -> FitOptions {
-    FitOptions::new(method, ly, lu)
+    let inducing = std::env::args().find_map(|a| a.strip_prefix("inducing=")?.parse().ok());
+    FitOptions {
+        inducing,
+        ..FitOptions::new(method, ly, lu)
+    }
 }
 
 /// The validation RMSE (mean feedback and moment matching) of `method` fitted on the first
@@ -86,9 +92,16 @@ fn main() {
         } else {
             Method::GpNarx
         };
+        let folds = args
+            .iter()
+            .find_map(|a| a.strip_prefix("folds=")?.parse().ok())
+            .unwrap_or(1);
         let choice = choose_history(
             std::slice::from_ref(&b.train),
-            &HistorySearch::default(),
+            &HistorySearch {
+                folds,
+                ..HistorySearch::default()
+            },
             &options(judge_method, 1, 1),
         )
         .expect("choice");
@@ -112,6 +125,13 @@ fn main() {
             b.lu,
             best.join(", ")
         );
+        for s in choice.judged.iter().filter(|s| s.by_fold.is_some()) {
+            let f = s.by_fold.expect("two folds");
+            println!(
+                "  ({},{}) pooled {:.4}: last part {:.4}, first part {:.4}",
+                s.ly, s.lu, s.score, f.last, f.first
+            );
+        }
         if let Some(method) = judge_with {
             let mut cands: Vec<(usize, usize)> =
                 [1, 2, 3, 5, 7, 10].iter().map(|&l| (l, l)).collect();

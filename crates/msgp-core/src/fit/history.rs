@@ -3,8 +3,11 @@
 //! Each training trajectory is split in time: its first part fits, its last part (the
 //! `validation` fraction) judges, every candidate simulated freely over it from the same
 //! measured warm-up (the `max_lag` samples before the split), driven by the measured inputs.
-//! A score is the free simulation's RMSE of each output over its training standard
-//! deviation, averaged over the outputs (∞: the simulation diverged). Two stages:
+//! With two folds the first part judges too (a block of the same length after a warm-up of
+//! `max_lag` measured samples), fitted on the rest: every sample then fits in one fold and
+//! judges in the other's, and the judged samples double. A score is the free simulation's RMSE
+//! of each output over its training standard deviation, pooled over the folds' judged samples
+//! and averaged over the outputs (∞: a simulation diverged). Two stages:
 //!
 //! 1. **Linear shortlist.** Every history with `1 ≤ l_y, l_u ≤ max_lag` (`l_u = 0` without
 //!    inputs) is fitted as a linear ARX model and scored: a hundred histories in well under a
@@ -52,6 +55,13 @@ pub struct HistorySearch {
     pub validation: f64,
     /// Best linear histories the GP stage also judges.
     pub shortlist: usize,
+    /// 1: the last part judges; 2: the first part too, each fitted on the rest.
+    #[serde(default = "one_fold")]
+    pub folds: usize,
+}
+
+fn one_fold() -> usize {
+    1
 }
 
 impl Default for HistorySearch {
@@ -60,6 +70,7 @@ impl Default for HistorySearch {
             max_lag: 10,
             validation: 0.2,
             shortlist: 3,
+            folds: 1,
         }
     }
 }
@@ -75,6 +86,20 @@ pub struct HistoryScore {
     /// training standard deviation, averaged over outputs (∞: diverged; serialised as null).
     #[serde(with = "crate::numeric::infinite_as_null")]
     pub score: f64,
+    /// With two folds, each fold's own score.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub by_fold: Option<FoldScores>,
+}
+
+/// A candidate's score on each of two folds.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FoldScores {
+    /// Judged on the last part, fitted on the rest.
+    #[serde(with = "crate::numeric::infinite_as_null")]
+    pub last: f64,
+    /// Judged on the first part, fitted on the rest.
+    #[serde(with = "crate::numeric::infinite_as_null")]
+    pub first: f64,
 }
 
 /// The chosen history and what each stage scored, best first.
@@ -186,11 +211,16 @@ pub fn choose_history_observed(
     })
 }
 
-/// The training data split for the search: the fitting parts, the judged parts (each with
-/// the `lag` samples before it), and what the scores need.
-struct Split {
+/// One way of splitting the training data: the fitting parts and the judged parts (each with
+/// the `lag` measured samples before its scored samples).
+struct Fold {
     fit: Vec<Trajectory>,
     judge: Vec<Trajectory>,
+}
+
+/// The training data split for the search: its folds and what the scores need.
+struct Split {
+    folds: Vec<Fold>,
     lag: usize,
     dy: usize,
     du: usize,
@@ -210,6 +240,16 @@ impl Split {
                     .then(|| (t.slice(0, cut), t.slice(cut - lag, t.len())))
             })
             .unzip();
+        // the first part: as many scored samples after its `lag` warm-up as the last part has
+        let (first_fit, first_judge): (Vec<Trajectory>, Vec<Trajectory>) = train
+            .iter()
+            .filter_map(|t| {
+                let cut = ((1.0 - search.validation) * t.len() as f64).round() as usize;
+                let head = t.len().saturating_sub(cut) + lag;
+                (cut > lag && t.len() - cut >= 2 && t.len() > head + lag)
+                    .then(|| (t.slice(head, t.len()), t.slice(0, head)))
+            })
+            .unzip();
         if fit.is_empty() {
             return Err(MsgpError::Data(format!(
                 "choosing the history needs a trajectory longer than {} samples (the longest \
@@ -218,10 +258,16 @@ impl Split {
                 100.0 * search.validation
             )));
         }
+        let mut folds = vec![Fold { fit, judge }];
+        if search.folds == 2 && !first_fit.is_empty() {
+            folds.push(Fold {
+                fit: first_fit,
+                judge: first_judge,
+            });
+        }
         let (dy, du) = (train[0].y.ncols(), train[0].u.ncols());
         Ok(Self {
-            fit,
-            judge,
+            folds,
             lag,
             dy,
             du,
@@ -238,15 +284,47 @@ impl Split {
         }
     }
 
-    /// Whether the fitting parts have enough windows for the history.
+    /// Whether every fold's fitting parts have enough windows for the history.
     fn fits(&self, history: (usize, usize)) -> bool {
         let spec = self.spec(history);
-        let windows: usize = self
-            .fit
-            .iter()
-            .map(|t| t.len().saturating_sub(spec.warmup()))
-            .sum();
-        windows >= MIN_WINDOWS_PER_INPUT * (spec.input_dim() + 1)
+        self.folds.iter().all(|f| {
+            let windows: usize = f
+                .fit
+                .iter()
+                .map(|t| t.len().saturating_sub(spec.warmup()))
+                .sum();
+            windows >= MIN_WINDOWS_PER_INPUT * (spec.input_dim() + 1)
+        })
+    }
+
+    /// The pooled score and, with two folds, each fold's, from `fold_score` (each fold's
+    /// squared errors per output and count; `None`: a simulation failed).
+    fn pooled(
+        &self,
+        mut fold_score: impl FnMut(&Fold) -> Option<(Vec<f64>, usize)>,
+    ) -> (f64, Option<FoldScores>) {
+        let mut sq = vec![0.0; self.dy];
+        let mut n = 0;
+        let mut each = Vec::new();
+        for f in &self.folds {
+            match fold_score(f) {
+                Some((s, m)) => {
+                    each.push(self.score(&s, m));
+                    sq.iter_mut().zip(&s).for_each(|(a, b)| *a += b);
+                    n += m;
+                }
+                None => each.push(f64::INFINITY),
+            }
+        }
+        let score = match each.iter().all(|s| s.is_finite()) {
+            true => self.score(&sq, n),
+            false => f64::INFINITY,
+        };
+        let by_fold = match each[..] {
+            [last, first] => Some(FoldScores { last, first }),
+            _ => None,
+        };
+        (score, by_fold)
     }
 
     /// The shortest window within one standard error of the lowest finite score (see the
@@ -257,7 +335,12 @@ impl Split {
             .map(|s| s.score)
             .filter(|s| s.is_finite())
             .min_by(f64::total_cmp)?;
-        let scored: usize = self.judge.iter().map(|t| t.len() - self.lag).sum();
+        let scored: usize = self
+            .folds
+            .iter()
+            .flat_map(|f| &f.judge)
+            .map(|t| t.len() - self.lag)
+            .sum();
         let band = lowest * (1.0 + 1.0 / (2.0 * scored as f64).sqrt());
         let inputs = |s: &HistoryScore| self.spec((s.ly, s.lu)).input_dim();
         scores
@@ -293,11 +376,16 @@ fn linear_stage(split: &Split) -> Vec<HistoryScore> {
                 continue;
             }
             let spec = split.spec((ly, lu));
-            let score = match linear_arx(&split.fit, &spec) {
-                Some(theta) => free_run_score(split, &spec, &theta),
-                None => f64::INFINITY,
-            };
-            tried.push(HistoryScore { ly, lu, score });
+            let (score, by_fold) = split.pooled(|fold| {
+                let theta = linear_arx(&fold.fit, &spec)?;
+                free_run_errors(split, fold, &spec, &theta)
+            });
+            tried.push(HistoryScore {
+                ly,
+                lu,
+                score,
+                by_fold,
+            });
         }
     }
     tried.sort_by(|a, b| a.score.total_cmp(&b.score));
@@ -321,16 +409,33 @@ fn judge_stage(
             integrators: Vec::new(),
             ..judge.clone()
         };
-        let settings = options.settings(&split.fit)?;
-        let fitted = fit_observed(&split.fit, &settings, &mut |p| {
-            progress(HistoryEvent::Fit(p))
+        let mut stopped = None;
+        let (score, by_fold) = split.pooled(|fold| {
+            if stopped.is_some() {
+                return None;
+            }
+            let settings = options.settings(&fold.fit).ok()?;
+            let fitted = fit_observed(&fold.fit, &settings, &mut |p| {
+                progress(HistoryEvent::Fit(p))
+            });
+            match fitted {
+                Err(e @ MsgpError::Stopped { .. }) => {
+                    stopped = Some(e);
+                    None
+                }
+                Err(_) => None,
+                Ok((model, _)) => model_errors(split, fold, &model),
+            }
         });
-        let score = match fitted {
-            Err(e @ MsgpError::Stopped { .. }) => return Err(e),
-            Err(_) => f64::INFINITY,
-            Ok((model, _)) => model_score(split, &model).unwrap_or(f64::INFINITY),
+        if let Some(e) = stopped {
+            return Err(e);
+        }
+        let scored = HistoryScore {
+            ly,
+            lu,
+            score,
+            by_fold,
         };
-        let scored = HistoryScore { ly, lu, score };
         scores.push(scored);
         let judged = HistoryProgress {
             scored,
@@ -348,11 +453,12 @@ fn judge_stage(
     Ok(scores)
 }
 
-/// A model's score over the judged parts (`None`: its simulation failed).
-fn model_score(split: &Split, model: &Model) -> Option<f64> {
+/// A model's squared errors per output and their count over `fold`'s judged parts (`None`:
+/// its simulation failed).
+fn model_errors(split: &Split, fold: &Fold, model: &Model) -> Option<(Vec<f64>, usize)> {
     let mut sq = vec![0.0; split.dy];
     let mut n = 0;
-    for t in &split.judge {
+    for t in &fold.judge {
         let sim = model.simulate(t).ok()?;
         // rows of `sim.mean` are time steps from `sim.start`
         let from = split.lag - sim.start;
@@ -362,17 +468,21 @@ fn model_score(split: &Split, model: &Model) -> Option<f64> {
         }
         split.accumulate(t, &y, &mut sq, &mut n);
     }
-    Some(split.score(&sq, n))
+    Some((sq, n))
 }
 
 /// The search's settings and the data's shape, checked once.
 fn check(train: &[Trajectory], search: &HistorySearch) -> Result<()> {
-    if search.max_lag == 0 || !(search.validation > 0.0 && search.validation < 1.0) {
+    if search.max_lag == 0
+        || !(search.validation > 0.0 && search.validation < 1.0)
+        || !(1..=2).contains(&search.folds)
+    {
         return Err(MsgpError::InvalidSetting {
             name: "history search",
             reason: format!(
-                "needs max_lag ≥ 1 and a validation fraction in (0, 1), got {} and {}",
-                search.max_lag, search.validation
+                "needs max_lag ≥ 1, a validation fraction in (0, 1) and 1 or 2 folds, got {}, \
+                 {} and {}",
+                search.max_lag, search.validation, search.folds
             ),
         });
     }
@@ -464,19 +574,23 @@ fn simulate(
     Some(y)
 }
 
-/// The linear model's score over the judged parts: each simulated from its first `lag`
-/// measured samples (the same for every history), on its measured inputs.
-fn free_run_score(split: &Split, spec: &NarxSpec, theta: &DMatrix<f64>) -> f64 {
+/// The linear model's squared errors per output and their count over `fold`'s judged parts:
+/// each simulated from its first `lag` measured samples (the same for every history), on its
+/// measured inputs (`None`: a simulation diverged).
+fn free_run_errors(
+    split: &Split,
+    fold: &Fold,
+    spec: &NarxSpec,
+    theta: &DMatrix<f64>,
+) -> Option<(Vec<f64>, usize)> {
     let mut sq = vec![0.0; split.dy];
     let mut n = 0;
-    for t in &split.judge {
-        let Some(y) = simulate(t, spec, theta, split.lag) else {
-            return f64::INFINITY;
-        };
+    for t in &fold.judge {
+        let y = simulate(t, spec, theta, split.lag)?;
         let y = y.rows(split.lag, t.len() - split.lag).into_owned();
         split.accumulate(t, &y, &mut sq, &mut n);
     }
-    split.score(&sq, n)
+    Some((sq, n))
 }
 
 #[cfg(test)]
@@ -569,6 +683,60 @@ mod tests {
             }
             assert_eq!(choice.linear.len(), 16);
         }
+    }
+
+    /// With two folds the first part judges too, fitted on the rest, with as many scored
+    /// samples as the last part; the pooled score is the RMSE over both folds' samples, and
+    /// the last fold's scores are the one-fold search's.
+    #[test]
+    fn two_folds_judge_the_first_part_too() {
+        let t = arx_system(600, 0.02, 0);
+        let search = HistorySearch {
+            folds: 2,
+            ..Default::default()
+        };
+        let split = Split::new(std::slice::from_ref(&t), &search).expect("split");
+        let [last, first] = &split.folds[..] else {
+            panic!("two folds")
+        };
+        // last: fits on samples 0..480, judges 480..600 after 470..480
+        assert_eq!((last.fit[0].len(), last.judge[0].len()), (480, 130));
+        // first: judges 10..130 after 0..10, fits on 130..600
+        assert_eq!((first.judge[0].len(), first.fit[0].len()), (130, 470));
+        assert_eq!(first.judge[0].y, t.slice(0, 130).y);
+        assert_eq!(first.fit[0].y, t.slice(130, 600).y);
+        let linear = linear_stage(&split);
+        for s in linear.iter().filter(|s| s.score.is_finite()) {
+            let f = s.by_fold.expect("per fold");
+            // equal counts: the pooled RMSE is the root mean square of the folds'
+            let pooled = ((f.last.powi(2) + f.first.powi(2)) / 2.0).sqrt();
+            assert!((s.score - pooled).abs() < 1e-12 * pooled, "{s:?}");
+        }
+        // one fold: the last part's scores, as before
+        let one = Split::new(&[t], &HistorySearch::default()).expect("split");
+        let single = linear_stage(&one);
+        for s in &single {
+            let two = linear
+                .iter()
+                .find(|x| (x.ly, x.lu) == (s.ly, s.lu))
+                .expect("tried");
+            assert_eq!(s.by_fold, None);
+            match s.score.is_finite() {
+                true => assert_eq!(two.by_fold.expect("per fold").last, s.score),
+                false => assert!(!two.score.is_finite()),
+            }
+        }
+        let e = Split::new(
+            &[arx_system(600, 0.02, 0)],
+            &HistorySearch {
+                folds: 3,
+                ..Default::default()
+            },
+        )
+        .err()
+        .expect("three folds")
+        .to_string();
+        assert!(e.contains("1 or 2 folds"), "{e}");
     }
 
     #[test]
