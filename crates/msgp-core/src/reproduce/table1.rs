@@ -1028,7 +1028,7 @@ const AUTO_HISTORY_NOTE: &str = "Here the history `l_y, l_u` of every fit is not
      judges; every history up to 10 lags is scored as a linear ARX model, and the best three \
      with the equal histories `(l, l)` are each fitted by the column's own fit and scored by \
      their free simulation of the judged part; the shortest within one standard error of the \
-     best wins. The test part plays no part in the choice. \n";
+     best wins. The test part plays no part in the choice.\n\n";
 
 /// The section's table of the histories chosen per row, column and seed, with each one's
 /// judged score and the runner-up.
@@ -1036,7 +1036,8 @@ fn chosen_histories(rows: &[Row], columns: &[Column]) -> String {
     let mut s = String::from(
         "\n## Chosen histories\n\nPer fit (seed order): the history chosen on the training \
          part, its judged score (free-simulation RMSE of the judged 20 % per output standard \
-         deviation) and the next-best judged history's.\n\n\
+         deviation) and the best other judged history's (lower where the \
+         one-standard-error rule took the shorter history).\n\n\
          | Task | column | paper's l_y, l_u | chosen (score; next) |\n|---|---|---|---|\n",
     );
     let score = |x: f64| match x.is_finite() {
