@@ -3,6 +3,7 @@ the serial `msgp reproduce table1` run, and write the same markdown section but 
 provenance lines and the timings."""
 
 import json
+import os
 import re
 import subprocess
 import sys
@@ -79,7 +80,10 @@ def test_the_command_line_entry_point(serial, tmp_path):
 
 def test_histories_chosen_from_the_data_as_the_command_line_chooses_them(cli, tmp_path):
     args = dict(seeds=[0], only=["synthetic1"], methods=["gp-narx"], inducing=10)
+    before = os.environ.get("MSGP_THREADS")
     report = sweep.table1(**args, history="auto", out=None, workers=1, quiet=True)
+    # the units ran here single-threaded, and the caller's environment is as it was
+    assert os.environ.get("MSGP_THREADS") == before
     assert report["section"] == "table1-auto-history"
     serial = cli("reproduce", "table1", "--seeds", "0", "--only", "synthetic1", "--methods",
                  "gp-narx", "--inducing", 10, "--history", "auto", "--json", "--quiet",

@@ -386,7 +386,7 @@ impl TaskPlan {
         };
         let same = run.task == self.task
             && run.unit == *unit
-            && run.settings == self.settings(unit)?
+            && run.settings == self.settings(unit)?.as_recorded()
             && run.target == self.task.target();
         Ok(same.then_some(run))
     }

@@ -52,6 +52,17 @@ pub struct LearnerSettings {
 }
 
 impl LearnerSettings {
+    /// The settings as a run's record holds them: without the threads of the fit and the
+    /// search, which are not recorded (results do not depend on them) and read back as the
+    /// default. A finished run is recognised by `stored == settings.as_recorded()`, whatever
+    /// `MSGP_THREADS` says.
+    pub fn as_recorded(&self) -> Self {
+        let mut recorded = self.clone();
+        recorded.fit.threads = Default::default();
+        recorded.search.threads = Default::default();
+        recorded
+    }
+
     /// The loop's defaults on a plant of `spec` (PILCO's loop with an MSGP model): MSGP on the
     /// filter likelihood (a linear prior mean under a GP of 30 pseudo-inputs, started from
     /// the one-step GP-NARX fit, 100 L-BFGS iterations, then each later fit continuing the

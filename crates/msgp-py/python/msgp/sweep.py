@@ -103,8 +103,16 @@ def _run_local(
         _progress(quiet, len(results), total, describe(unit, result))
 
     if workers == 1:
-        for unit in units:
-            finished(unit, work(plan, unit))
+        # the units run here, each single-threaded; the caller's MSGP_THREADS is theirs again after
+        before = os.environ.get("MSGP_THREADS")
+        try:
+            for unit in units:
+                finished(unit, work(plan, unit))
+        finally:
+            if before is None:
+                os.environ.pop("MSGP_THREADS", None)
+            else:
+                os.environ["MSGP_THREADS"] = before
         return results
     # spawn: a fresh interpreter per worker (no fork of a process that runs Rust threads)
     context = multiprocessing.get_context("spawn")

@@ -236,7 +236,7 @@ pub fn finished_run(
     let stored: LearnSettings = serde_json::from_value(v.get("settings")?.clone()).ok()?;
     let stored_plant: PendulumParams = serde_json::from_value(v.get("plant")?.clone()).ok()?;
     let same = v["model"] == settings.method().name()
-        && stored == *settings
+        && stored == settings.as_recorded()
         && stored_plant == *params
         && iterations.len() == settings.iterations;
     same.then(|| FinishedRun {

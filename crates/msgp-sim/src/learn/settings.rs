@@ -131,6 +131,17 @@ impl Default for LearnSettings {
 }
 
 impl LearnSettings {
+    /// The settings as a run's record holds them: without the threads of the fit and the
+    /// search, which are not recorded (results do not depend on them) and read back as the
+    /// default. A finished run is recognised by `stored == settings.as_recorded()`, whatever
+    /// `MSGP_THREADS` says.
+    pub fn as_recorded(&self) -> Self {
+        let mut recorded = self.clone();
+        recorded.fit.threads = Default::default();
+        recorded.search.threads = Default::default();
+        recorded
+    }
+
     /// The defaults for `method`. A [`Method::LinearKf`] model has no GP to absorb what a row
     /// should not carry, so the end effector is declared kinematic
     /// ([`END_EFFECTOR_KINEMATIC`]): in closed loop the command is a function of the pole's
@@ -312,5 +323,25 @@ pub fn learn_excitation() -> ExcitationConfig {
         min_hz: 0.1,
         max_hz: 10.0,
         rms: 1.0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use msgp_core::numeric::parallel::Threads;
+
+    /// A run made on one thread (`MSGP_THREADS=1`) reads back as the same settings: the
+    /// threads are not recorded.
+    #[test]
+    fn settings_read_back_whatever_the_threads() {
+        let mut settings = LearnSettings::for_method(Method::LinearKf);
+        let one = Threads::new(1).expect("one thread");
+        settings.fit.threads = one;
+        settings.search.threads = one;
+        let text = serde_json::to_string(&settings).expect("written");
+        let stored: LearnSettings = serde_json::from_str(&text).expect("read");
+        assert_eq!(stored, settings.as_recorded());
+        assert_eq!(stored.fit.threads, Threads::default());
     }
 }
