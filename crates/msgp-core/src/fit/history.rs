@@ -409,25 +409,32 @@ fn judge_stage(
             integrators: Vec::new(),
             ..judge.clone()
         };
-        let mut stopped = None;
+        // a stop or settings the data refuse end the search; a fit that fails scores ∞
+        let mut ended = None;
         let (score, by_fold) = split.pooled(|fold| {
-            if stopped.is_some() {
+            if ended.is_some() {
                 return None;
             }
-            let settings = options.settings(&fold.fit).ok()?;
+            let settings = match options.settings(&fold.fit) {
+                Ok(s) => s,
+                Err(e) => {
+                    ended = Some(e);
+                    return None;
+                }
+            };
             let fitted = fit_observed(&fold.fit, &settings, &mut |p| {
                 progress(HistoryEvent::Fit(p))
             });
             match fitted {
                 Err(e @ MsgpError::Stopped { .. }) => {
-                    stopped = Some(e);
+                    ended = Some(e);
                     None
                 }
                 Err(_) => None,
                 Ok((model, _)) => model_errors(split, fold, &model),
             }
         });
-        if let Some(e) = stopped {
+        if let Some(e) = ended {
             return Err(e);
         }
         let scored = HistoryScore {
