@@ -4,7 +4,7 @@ A cross-entropy search over open-loop acceleration commands (piecewise constant 
 pendulum's equations with the actuator's first-order lag (the pole of msgp_sim's default
 parameters, hanging at the start): for each command limit it prints how far from upright the
 best command ends, its angular and end-effector speed there, and the largest |x| on the way.
-Behind docs/design.md "Angles on the pole's tip, and the arm swing-up plant".
+Behind docs/experiments/2026-12-06-angles-on-the-poles-tip-and-the-arm.md "Angles on the pole's tip, and the arm swing-up plant".
 
     python scripts/swing_up_feasibility.py            # about a minute
 """

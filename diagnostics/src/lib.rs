@@ -7,7 +7,7 @@
 //! - `dump_sim`: one benchmark fit's free simulation of its test part as CSV (t, y, mean, std),
 //!   the data of a free-simulation plot (no section cites it).
 //! - `probe`: the pendulum loop's model fitted to fixed data, its predicted cost against the
-//!   plant's for seven gain sets; docs/design.md "What the diagnostics of 2026-11-27 (evening)
+//!   plant's for seven gain sets; docs/experiments/2026-11-27-what-the-diagnostics-of-2026-11-27-evening.md "What the diagnostics of 2026-11-27 (evening)
 //!   found", "The start of the training rollouts, the pole row's basin, and the sensor noise",
 //!   "Exploration: …" ("What the loop's models believe about the pole") and "The models' noise
 //!   split and the filter likelihood".
@@ -15,17 +15,17 @@
 //!   come; BENCHMARKS.md "2026-11-29 (fourth session): the loop's MSGP fit is an unconverged
 //!   300-iteration run" and docs/design.md "Guarding against noise collapse and overfitting".
 //! - `stable_region`: how much of a box of PID + PD gains passes the stability test;
-//!   docs/design.md "Exploration: how much of the gain box balances, …".
+//!   docs/experiments/2026-11-28-exploration-how-much-of-the-gain-box-balances.md "Exploration: how much of the gain box balances, …".
 //! - `history_choice`: the history `msgp_core::fit::history` chooses on each Table 1
-//!   benchmark, and the default MSGP fit's test RMSE with it; docs/design.md ("Table 1 against
+//!   benchmark, and the default MSGP fit's test RMSE with it; docs/experiments/2026-12-06-table-1-against-all-six-columns-and-the.md ("Table 1 against
 //!   all six columns, and the history chosen from the data").
-//! - `swing_up`: the learning loop on the arm swing-up, iteration by iteration; docs/design.md
+//! - `swing_up`: the learning loop on the arm swing-up, iteration by iteration; docs/experiments/2026-12-06-angles-on-the-poles-tip-and-the-arm.md
 //!   "Angles on the pole's tip, and the arm swing-up plant".
 //! - `swing_up_models`: MSGP and GP-NARX fitted to the same swing-up episodes, each model's
-//!   predictions of both searched policies against the plant; docs/design.md "The plant
+//!   predictions of both searched policies against the plant; docs/experiments/2026-12-06-the-plant-tasks-per-model.md "The plant
 //!   tasks, per model".
 //! - `true_cost`: the loop's cost minimised with the plant as the model, and whether its
-//!   minimiser is stable; docs/design.md "Exploration: …" ("The objective itself: what a perfect
+//!   minimiser is stable; docs/experiments/2026-11-28-exploration-how-much-of-the-gain-box-balances.md "Exploration: …" ("The objective itself: what a perfect
 //!   model would choose").
 //!
 //! No diagnostic reads an environment variable except `MSGP_DATA_DIR` (where the real series

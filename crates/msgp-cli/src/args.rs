@@ -471,18 +471,18 @@ pub struct FitArgs {
     pub one_step: Option<OneStepArg>,
     /// msgp: report the free simulation's variance as the model predicts it, without the
     /// output-variance calibration the default protocol judges on the validation tail
-    /// (`docs/design.md`, "Honest uncertainty on data the model never saw").
+    /// (`docs/experiments/2026-12-05-honest-uncertainty-on-data-the-model-never-saw.md`, "Honest uncertainty on data the model never saw").
     #[arg(long)]
     pub no_calibration: bool,
     /// msgp: keep the one-step head's model when the zero-mean recipe's final training on all
     /// the data blows up, instead of training that recipe's fallback heads (from the spread
     /// start; with a linear mean) and returning the first whose final training completes
-    /// (`docs/design.md`, "A fallback with a linear mean").
+    /// (`docs/experiments/2026-12-05-a-fallback-with-a-linear-mean.md`, "A fallback with a linear mean").
     #[arg(long)]
     pub no_blow_up_fallback: bool,
     /// msgp: let the held-out tail shorten the final training on all the data: 200, 100 or
     /// 50 iterations instead of 400 where the same training on the first 80 % alone simulates
-    /// the tail with an RMSE at least 10 % lower (off by default; `docs/design.md`, "How long
+    /// the tail with an RMSE at least 10 % lower (off by default; `docs/experiments/2026-12-05-how-long-the-final-training-is.md`, "How long
     /// the final training is").
     #[arg(long)]
     pub choose_final_length: bool,

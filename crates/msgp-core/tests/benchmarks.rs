@@ -108,7 +108,7 @@ fn msgp_beats_gp_narx_on_synthetic_system_4_and_does_not_degrade() {
 /// slow sine: the input dwells, and the plant's static gain of 10 sums the same function error
 /// step after step). The band that keeps the GP's function uncertainty correlated over time
 /// holds the noise-free outputs; the paper's moment matching, which draws the function afresh
-/// every step, does not (seed 1: 2σ coverage 0.80 with the same means, `docs/design.md`,
+/// every step, does not (seed 1: 2σ coverage 0.80 with the same means, `docs/experiments/2026-12-05-correlated-function-uncertainty.md`,
 /// "Correlated function uncertainty").
 #[test]
 fn synthetic_system_4_keeps_its_band_on_an_input_it_never_saw() {

@@ -9,7 +9,7 @@
 //! saturating cost of three saturated PD controllers on the measured angle over 100 steps from
 //! rest, as policy search does, and the plant's cost is the Monte Carlo mean of the same cost
 //! under the same controller. The free-run likelihood fits a damped pole with process noise of
-//! the sensor's size (`docs/design.md`, "The models' noise split and the filter likelihood")
+//! the sensor's size (`docs/experiments/2026-11-29-the-models-noise-split-and-the-filter-likelihood.md`, "The models' noise split and the filter likelihood")
 //! and predicts the pole to fall under every controller; the filter likelihood, from the
 //! linear-kf start, keeps the pole and the noise split. Measured (plant / filter / free-run):
 //! 1.36 / 1.36 / 55.1, 0.41 / 0.40 / 10.6, 2.32 / 2.65 / 58.6. The free-run model still orders

@@ -6,7 +6,7 @@
 //! draws); reward `−(θ² + 0.1 θ̇² + 0.001 u²)` with θ wrapped to `[−π, π]`. The torque is
 //! float32 as the environment's action, and so are its products (NumPy's promotion); the
 //! observation is float32 as the environment returns it (the loop's run from a seed diverges
-//! with the last bits of its data: `docs/design.md`, "The plant tasks, per model").
+//! with the last bits of its data: `docs/experiments/2026-12-06-the-plant-tasks-per-model.md`, "The plant tasks, per model").
 //!
 //! The Python bindings run the environment itself; this copy lets the Rust tests, benchmarks
 //! and diagnostics run the task without Python. Its test replays a run of gymnasium's own

@@ -5,7 +5,7 @@
 //! found by a cross-entropy search (400 candidates × 60 rounds, 4 s at 10 Hz) ends 1.07 rad
 //! short of upright, 5 m/s² ends 0.13 rad short, 10 m/s² comes within 0.12 rad of upright
 //! in 3 s with the end effector inside ±0.96 m (`scripts/swing_up_feasibility.py`;
-//! `docs/design.md`, "Angles on the pole's tip, and the arm swing-up plant"). The swing-up
+//! `docs/experiments/2026-12-06-angles-on-the-poles-tip-and-the-arm.md`, "Angles on the pole's tip, and the arm swing-up plant"). The swing-up
 //! plant is therefore the same pole and actuator lag on a rail: the command limited to
 //! ±10 m/s², the end effector free within ±3 m (an episode ends at a rail end), controlled at
 //! 10 Hz as PILCO's cart-pole (a swing-up needs seconds: 5 s is 50 steps of rollout; at

@@ -24,8 +24,9 @@
 //! the lowest score wins (ties: the lower score; Breiman's one-standard-error rule): an RMSE
 //! over `n` samples is known to about `1/√(2n)` of itself, and a longer history must earn its
 //! inputs by more than that. A history with fewer than [`MIN_WINDOWS_PER_INPUT`] fitting
-//! windows per GP input is not tried. `docs/design.md` ("The history chosen from the data")
-//! has the experiments behind the design.
+//! windows per GP input is not tried. The experiments behind the design:
+//! `docs/experiments/2026-12-06-table-1-against-all-six-columns-and-the.md` and
+//! `docs/experiments/2026-12-06-history-auto-on-every-real-series-the-second.md`.
 
 use std::ops::ControlFlow;
 use std::time::Instant;

@@ -956,7 +956,7 @@ fn choose_budget(
 /// [`CLEARLY_BETTER`] below the first; the first where none is. The longest training is the
 /// protocol's default, chosen on the training data of every row; a short tail that chooses
 /// among several close candidates chooses its own noise, so a shorter one replaces it only by a
-/// clear margin (`docs/design.md`, "How long the final training is"). `None` where the first
+/// clear margin (`docs/experiments/2026-12-05-how-long-the-final-training-is.md`, "How long the final training is"). `None` where the first
 /// failed.
 fn shorter_if_clearly_better(rmses: &[Option<f64>]) -> Option<usize> {
     let first = (*rmses.first()?)?;

@@ -18,7 +18,7 @@
 //! most logs long enough to need segments). The validation tails that stop the training and
 //! choose the recipe stay whole (the last 20 % of each trajectory, one free run each): cut
 //! into segments too, they judged 40-step predictions, stopped later and chose models whose
-//! long free runs were worse (`docs/design.md`, "Long logs by segments"). A trajectory of at
+//! long free runs were worse (`docs/experiments/2026-12-06-long-logs-by-segments.md`, "Long logs by segments"). A trajectory of at
 //! most `length + w` samples is one segment: the fit is then bit for bit the unsegmented one.
 
 use rand::seq::index::sample;
@@ -48,7 +48,7 @@ impl Segments {
     /// The default for long logs: segments of 1,000 steps, 2 per Adam step (2,000 predicted
     /// steps per step, five times the dryer's whole training part). Against 200 × 8 (the same
     /// work per step) on a synthetic log, fewer restarts from the data simulated the held-out
-    /// part better (`docs/design.md`, "Long logs by segments").
+    /// part better (`docs/experiments/2026-12-06-long-logs-by-segments.md`, "Long logs by segments").
     pub const DEFAULT: Segments = Segments {
         length: 1000,
         batch: 2,

@@ -155,7 +155,7 @@ pub struct MsgpSettings {
     /// (the whole `full_data_iterations`): on actuator it takes the test RMSE from 0.75 to
     /// 0.62 (seeds 0–2), but on furnace's 30-sample tail the proxy's verdict does not carry
     /// over to the final training (1.196 → 1.206, its 2σ coverage 0.91 → 0.56), and three
-    /// variants of the rule moved other rows for the worse (`docs/design.md`, "How long the
+    /// variants of the rule moved other rows for the worse (`docs/experiments/2026-12-05-how-long-the-final-training-is.md`, "How long the
     /// final training is").
     #[serde(default)]
     pub choose_final_budget: bool,
@@ -180,7 +180,7 @@ pub fn final_budgets(iterations: usize) -> Vec<usize> {
 /// How much lower a shorter final training's proxy must put the validation tail's RMSE than
 /// the whole length's proxy to replace it ([`MsgpSettings::choose_final_budget`]): by 10 %. Set
 /// after seeing Table 1's test figures: actuator's shorter lengths were 22–39 % lower, while
-/// all but one of the fits a shorter length made worse were 1–5 % lower (`docs/design.md`,
+/// all but one of the fits a shorter length made worse were 1–5 % lower (`docs/experiments/2026-12-05-how-long-the-final-training-is.md`,
 /// "How long the final training is").
 pub const CLEARLY_BETTER: f64 = 0.1;
 
@@ -268,7 +268,7 @@ pub enum MsgpStart {
     /// predict the next one almost exactly (ballbeam), the one-step
     /// marginal likelihood explains the next output by the output lags alone, with a tiny noise,
     /// and a free simulation from that start cannot learn how the inputs drive the plant; from
-    /// this start it can (`docs/design.md`, "The start that ignores the input"). See
+    /// this start it can (`docs/experiments/2026-12-05-the-start-that-ignores-the-input.md`, "The start that ignores the input"). See
     /// [`MsgpSettings::blow_up_fallback`].
     Spread,
 }
@@ -435,7 +435,7 @@ pub const DEFAULT_ONE_STEP_ITERATIONS: usize = 300;
 /// *how long* to train on short series: on drives (200 head samples) its NLL rises from the
 /// first check while the same training on all 250 samples takes the test RMSE from 0.54 to
 /// 0.33. 400 was chosen on training data alone: each row's recipe trained on its first 80 % for
-/// 100, 200, 400 and 800 iterations and simulated on the last 20 % (`docs/design.md`, "The
+/// 100, 200, 400 and 800 iterations and simulated on the last 20 % (`docs/experiments/2026-12-04-the-validation-tail-chooses-the-recipe-all-the.md`, "The
 /// validation tail chooses the recipe, all the data train it").
 pub const DEFAULT_FULL_DATA_ITERATIONS: usize = 400;
 

@@ -5,7 +5,7 @@
 //! independent. For an open-loop unstable plant measured with noise this overstates what is known
 //! about the start: two noisy samples 20 ms apart leave the velocity uncertain by `√2 σ_y / T`,
 //! and the plant amplifies that uncertainty exponentially. Under the per-step likelihood a model
-//! then scores better by *damping* the plant, which keeps the spread small (`docs/design.md`,
+//! then scores better by *damping* the plant, which keeps the spread small (`docs/experiments/2026-11-28-the-poles-row-errors-in-variables.md`,
 //! "The pole's row"). [`StartWindow::Smoothed`] estimates the window instead from a
 //! least-squares polynomial in time through the trajectory's first samples, with the covariance
 //! that estimate really has (`σ_y²` times the smoother's `H Hᵀ`, correlated across lags), and
