@@ -13,11 +13,11 @@ use msgp_core::data::table::TimeSource;
 use msgp_core::fit::{FitOptimizer, MsgpStart, OneStepObjective};
 use msgp_core::gp::MeanFunction;
 use msgp_core::gp::integrator::Integrator;
+use msgp_core::learner::LoopModel;
 use msgp_core::loss::Likelihood;
 use msgp_core::model::{Method, Rollout};
-use msgp_core::reproduce::table1::TableHistory;
+use msgp_reproduce::table1::TableHistory;
 use msgp_sim::Saturation;
-use msgp_sim::figure4::Figure4Model;
 use msgp_sim::learn::{Budget, LearnSettings};
 use msgp_sim::plant_tasks::PlantTask;
 
@@ -704,7 +704,7 @@ impl BudgetArgs {
 }
 
 /// A `--models` entry of `msgp reproduce figure4`.
-fn model4(s: &str) -> Result<Figure4Model, String> {
+fn model4(s: &str) -> Result<LoopModel, String> {
     s.trim().parse()
 }
 
@@ -791,7 +791,7 @@ pub struct PlantTaskArgs {
     /// standard PILCO), linear-kf (the linear-Gaussian window model).
     #[arg(long, value_name = "MODEL,...", value_delimiter = ',', value_parser = model4,
           default_values = ["msgp-filter", "msgp", "gp-narx", "linear-kf"])]
-    pub models: Vec<Figure4Model>,
+    pub models: Vec<LoopModel>,
     #[command(flatten)]
     pub runs: RunsArgs,
 }
@@ -902,7 +902,7 @@ pub struct Figure4Args {
     /// linear-kf (the linear-Gaussian window model by the Kalman-filter likelihood).
     #[arg(long, value_name = "MODEL,...", value_delimiter = ',', value_parser = model4,
           default_values = ["msgp", "msgp-filter", "gp-narx", "linear-kf"])]
-    pub models: Vec<Figure4Model>,
+    pub models: Vec<LoopModel>,
     #[command(flatten)]
     pub runs: RunsArgs,
     #[command(flatten)]

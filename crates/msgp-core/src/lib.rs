@@ -51,7 +51,6 @@ pub mod plant;
 pub mod policy;
 pub mod policy_file;
 pub mod policy_search;
-pub mod reproduce;
 pub mod rollout;
 
 pub use error::{MsgpError, Result};

@@ -18,6 +18,7 @@ use std::any::Any;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
 use msgp_core::MsgpError as CoreError;
+use msgp_reproduce::ReproduceError;
 use msgp_sim::SimError;
 use pyo3::exceptions::{PyException, PyValueError};
 use pyo3::prelude::*;
@@ -90,12 +91,27 @@ pub enum Error {
     /// From msgp-sim.
     #[error(transparent)]
     Sim(#[from] SimError),
+    /// From msgp-reproduce, other than the two above.
+    #[error(transparent)]
+    Reproduce(ReproduceError),
     /// The object is borrowed elsewhere (cannot happen under the GIL; reported, not panicked).
     #[error("this Msgp model is in use by another call: {0}")]
     Busy(String),
     /// A panic in Rust code: a bug, reported instead of crashing the interpreter.
     #[error("internal error (a bug in msgp, please report it): {0}")]
     Panic(String),
+}
+
+impl From<ReproduceError> for Error {
+    /// The model's and the simulator's errors as they are, so that they become the same Python
+    /// exceptions whichever crate passed them on.
+    fn from(e: ReproduceError) -> Self {
+        match e {
+            ReproduceError::Core(e) => Error::Core(e),
+            ReproduceError::Sim(e) => Error::Sim(e),
+            other => Error::Reproduce(other),
+        }
+    }
 }
 
 /// Result alias of the bindings.
@@ -153,7 +169,8 @@ impl Error {
             Error::Sim(SimError::NonFiniteCommand { .. } | SimError::NonFiniteState { .. }) => {
                 Kind::Numerical
             }
-            Error::Sim(_) | Error::Busy(_) | Error::Panic(_) => Kind::Other,
+            Error::Reproduce(ReproduceError::Plan { .. }) => Kind::Input,
+            Error::Sim(_) | Error::Reproduce(_) | Error::Busy(_) | Error::Panic(_) => Kind::Other,
         }
     }
 
@@ -162,6 +179,7 @@ impl Error {
             Error::Sim(SimError::Model(e)) => format!("model: {}", chain(e)),
             Error::Sim(e) => chain(e),
             Error::Core(e) => chain(e),
+            Error::Reproduce(e) => chain(e),
             other => other.to_string(),
         }
     }

@@ -8,13 +8,14 @@ use std::path::PathBuf;
 use msgp_core::fit::{FitOptimizer, FitProgress};
 use msgp_core::loss::Likelihood;
 use msgp_core::numeric::parallel::Threads;
-use msgp_core::reproduce::results::{machine, today, update_section};
-use msgp_core::reproduce::table1::{self, Cell, Plan, Provenance, TableHistory, Unit};
+use msgp_reproduce::results::{machine, today, update_section};
+use msgp_reproduce::table1::{self, Cell, Plan, Provenance, TableHistory, Unit};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use serde::de::DeserializeOwned;
 
-use msgp_sim::figure4::{self as fig4, Figure4Model};
+use msgp_core::learner::LoopModel;
+use msgp_reproduce::figure4 as fig4;
 use msgp_sim::learn::{Budget, learn_policy_observed, summary, write_run_dir};
 use msgp_sim::{PendulumParams, PlantTier};
 
@@ -198,10 +199,10 @@ pub fn figure4_plan<'py>(
         })?;
     let plant: PendulumParams = with_overrides(&PendulumParams::tier(tier), params, "params")?;
     let models = match models {
-        None => Figure4Model::ALL.to_vec(),
+        None => LoopModel::ALL.to_vec(),
         Some(names) => names
             .iter()
-            .map(|m| m.parse::<Figure4Model>().map_err(input))
+            .map(|m| m.parse::<LoopModel>().map_err(input))
             .collect::<Result<Vec<_>>>()?,
     };
     let budget: Budget = with_overrides(&Budget::default(), budget, "budget")?;

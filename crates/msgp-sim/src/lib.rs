@@ -14,9 +14,9 @@
 //!   seeded [`RandomExcitation`].
 //! * [`run_episode`] — seeded episodes; same seed, same bytes.
 //! * [`stability_test`] — five fixed starts, pass/fail per start.
-//! * [`plant_tasks`] — the loop's named plant tasks (Pendulum-v1, the arm swing-up) per model.
-//! * [`figure4`] — the paper's Figure 4 as independent learning runs: plan, units, report.
-//! * [`plot`] — PNG cost curves of learning runs (one run, or bands over seeds).
+//! * [`plant_tasks`] — the loop's named plant tasks (Pendulum-v1, the arm swing-up): plant,
+//!   target, preset settings per model, score.
+//! * [`plot`] — the PNG cost curve of a learning run, and the style every msgp plot shares.
 //! * [`log`] — CSV and MCAP (JSON messages, Foxglove-ready) run logs, written atomically
 //!   ([`atomic`], as the policy files are).
 //!
@@ -38,7 +38,6 @@ pub mod atomic;
 pub mod controller;
 pub mod episode;
 pub mod error;
-pub mod figure4;
 pub mod gym_pendulum;
 pub mod learn;
 pub mod log;

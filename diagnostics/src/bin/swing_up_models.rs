@@ -11,14 +11,14 @@
 //! iterations=N`
 use std::ops::ControlFlow;
 
+use msgp_core::learner::LoopModel;
+use msgp_core::learner::with_model;
 use msgp_core::learner::{Actor, Episode, Learner, LearnerSettings, run_episode};
 use msgp_core::model::Model;
 use msgp_core::plant::Plant;
 use msgp_core::policy::Policy;
 use msgp_core::policy_search::PolicyProblem;
 use msgp_diagnostics::{Switches, overridden};
-use msgp_sim::figure4::Figure4Model;
-use msgp_sim::plant_tasks::with_model;
 use msgp_sim::swing_up::{
     SwingUp, held_upright, success_seed, swing_up_params, swing_up_settings, swing_up_task,
 };
@@ -46,7 +46,7 @@ fn main() {
     }
     let episodes: Vec<Episode> = learner.episodes().to_vec();
     let last = episodes.last().expect("episodes").clone();
-    let narx = with_model(settings.clone(), Figure4Model::GpNarx).expect("gp-narx");
+    let narx = with_model(settings.clone(), LoopModel::GpNarx).expect("gp-narx");
     let mut searched: Vec<(&str, Model, Policy)> = Vec::new();
     for (name, s) in [("msgp", settings.clone()), ("gp-narx", narx)] {
         let mut l = Learner::from_episodes(task.clone(), s, episodes.clone(), &mut |_| {

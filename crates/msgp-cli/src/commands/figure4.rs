@@ -1,5 +1,5 @@
 //! `msgp reproduce figure4`: the paper's Figure 4 on the simulated pendulum, `--jobs` of its runs
-//! at a time (`msgp_sim::figure4`: plan → units → runs' folders → report); finished runs in the
+//! at a time (`msgp_reproduce::figure4`: plan → units → runs' folders → report); finished runs in the
 //! folder are reused, so runs can be split over processes (`msgp learn-policy --out`) or
 //! machines (`python -m msgp.sweep figure4`) and collected here.
 
@@ -7,12 +7,12 @@ use std::time::Instant;
 
 use anyhow::Context;
 use msgp_core::numeric::parallel::Threads;
-use msgp_core::reproduce::results::{Provenance, machine, today, update_section};
-use msgp_sim::figure4::{self, Plan, Run, Unit};
+use msgp_reproduce::figure4::{self, Plan, Run, Unit};
+use msgp_reproduce::results::{Provenance, machine, today, update_section};
 use msgp_sim::learn::{summary, write_run_dir};
 
 use crate::args::Figure4Args;
-use crate::commands::learn::{flagged, learn};
+use crate::commands::learn::{flagged_plan, learn};
 use crate::commands::side_by_side;
 
 /// Runs `msgp reproduce figure4`.
@@ -28,7 +28,7 @@ pub fn run(args: &Figure4Args) -> anyhow::Result<()> {
         args.budget.budget(),
         args.dir.clone(),
     )
-    .map_err(flagged)?;
+    .map_err(flagged_plan)?;
     let (mut done, todo) = side_by_side::reuse(
         plan.units(),
         args.runs.quiet,

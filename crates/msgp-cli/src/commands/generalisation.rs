@@ -23,7 +23,7 @@ use crate::commands::side_by_side;
 use crate::render::output::{out, out_json};
 use crate::render::plot::{plot_grid, simulated};
 use crate::render::progress::FitBar;
-use msgp_core::reproduce::results::{machine, today};
+use msgp_reproduce::results::{machine, today};
 
 const METHODS: [Method; 2] = [Method::Msgp, Method::GpNarx];
 
@@ -251,7 +251,7 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
     let cases: Vec<Case> = per_unit_cases.into_iter().flat_map(|(c, _)| c).collect();
     let seconds = started.elapsed().as_secs_f64();
     let markdown = render(args, &cases, &plots, seconds);
-    msgp_core::reproduce::results::update_section(&args.common.out, "generalisation", &markdown)?;
+    msgp_reproduce::results::update_section(&args.common.out, "generalisation", &markdown)?;
     if args.common.json {
         let rows: Vec<_> = cases
             .iter()

@@ -37,6 +37,18 @@ pub fn flagged(e: SimError) -> anyhow::Error {
     }
 }
 
+/// [`flagged`] for a reproduction's plan: its option errors as flags, the simulator's as
+/// [`flagged`] says them.
+pub fn flagged_plan(e: msgp_reproduce::ReproduceError) -> anyhow::Error {
+    match e {
+        msgp_reproduce::ReproduceError::Plan { option, reason } => {
+            anyhow::anyhow!("invalid --{option}: {reason}")
+        }
+        msgp_reproduce::ReproduceError::Sim(e) => flagged(e),
+        other => other.into(),
+    }
+}
+
 /// A progress line for one iteration.
 pub fn progress_line(r: &IterationReport, started: Instant) -> String {
     let mut notes = String::new();

@@ -1,5 +1,5 @@
 //! `msgp reproduce plant-task --task NAME`: PILCO on a named plant task with each loop model
-//! over seeds, `--jobs` runs at a time (`msgp_sim::plant_tasks`: plan → runs' records →
+//! over seeds, `--jobs` runs at a time (`msgp_reproduce::plant_task`: plan → runs' records →
 //! report); records in the folder with the plan's settings are reused.
 
 use std::time::Instant;
@@ -7,13 +7,13 @@ use std::time::Instant;
 use anyhow::Context;
 use msgp_core::learner::LearnEvent;
 use msgp_core::numeric::parallel::Threads;
-use msgp_core::reproduce::results::{Provenance, machine, today, update_section};
-use msgp_sim::figure4::Unit;
-use msgp_sim::plant_tasks::{self, TaskPlan, TaskRun};
+use msgp_reproduce::figure4::Unit;
+use msgp_reproduce::plant_task::{self as plant_tasks, TaskPlan, TaskRun};
+use msgp_reproduce::results::{Provenance, machine, today, update_section};
 
 use crate::args::PlantTaskArgs;
 use crate::commands::figure4::invocation;
-use crate::commands::learn::flagged;
+use crate::commands::learn::flagged_plan;
 use crate::commands::side_by_side;
 
 /// Runs `msgp reproduce plant-task`.
@@ -25,7 +25,7 @@ pub fn run(args: &PlantTaskArgs) -> anyhow::Result<()> {
         args.iterations,
         args.dir.clone(),
     )
-    .map_err(flagged)?;
+    .map_err(flagged_plan)?;
     let (mut done, todo) = side_by_side::reuse(
         plan.units(),
         args.runs.quiet,

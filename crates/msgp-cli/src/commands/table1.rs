@@ -1,4 +1,4 @@
-//! `msgp reproduce table1`: the paper's Table 1 (`msgp_core::reproduce::table1`), its units fitted
+//! `msgp reproduce table1`: the paper's Table 1 (`msgp_reproduce::table1`), its units fitted
 //! `--jobs` at a time on this machine (one job: a progress bar each; more: a line per finished
 //! fit), written as a section of the results file.
 
@@ -12,8 +12,8 @@ use msgp_core::fit::FitProgress;
 use msgp_core::model::Method;
 use msgp_core::model::{Simulated, Simulation};
 use msgp_core::numeric::parallel::Threads;
-use msgp_core::reproduce::results::{machine, today, update_section};
-use msgp_core::reproduce::table1::{
+use msgp_reproduce::results::{machine, today, update_section};
+use msgp_reproduce::table1::{
     Cell, Column, Plan, Provenance, Unit, assemble, fit_unit_simulated, render, rmse_table,
     rows_json, targets, task,
 };

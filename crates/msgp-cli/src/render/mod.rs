@@ -1,5 +1,5 @@
 //! What `msgp` shows: text and JSON lines on stdout ([`output`], [`report`]), markdown results
-//! files (`msgp_core::reproduce::results`), PNG plots of simulations ([`plot`]; cost curves: `msgp_sim::plot`)
+//! files (`msgp_reproduce::results`), PNG plots of simulations ([`plot`]; cost curves: `msgp_sim::plot`)
 //! and progress bars on stderr ([`progress`]).
 
 pub mod output;

@@ -20,7 +20,7 @@ mod settings;
 pub use budget::Budget;
 pub use episodes::episode_trajectory;
 pub use msgp_core::learner::{HeldOut, ModelChoice, SearchModel, segments};
-pub use plant::PendulumPlant;
+pub use plant::{PendulumPlant, plant_error};
 pub use problem::{
     episode_cost, gains_from, learner_settings, modelled_policy, pendulum_problem, pendulum_task,
 };

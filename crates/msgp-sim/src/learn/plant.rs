@@ -121,7 +121,7 @@ pub(crate) fn acceleration_command(params: &PendulumParams) -> CommandSpec {
 }
 
 /// A simulator error as the loop's plant error.
-pub(crate) fn plant_error(e: SimError) -> MsgpError {
+pub fn plant_error(e: SimError) -> MsgpError {
     MsgpError::Plant(e.to_string())
 }
 

@@ -3,8 +3,10 @@
 
 use std::path::Path;
 
-use crate::error::{MsgpError, Result};
-use crate::model_file::write_atomically;
+use msgp_core::MsgpError;
+use msgp_core::model_file::write_atomically;
+
+use crate::error::Result;
 
 fn markers(name: &str) -> (String, String) {
     (
@@ -39,10 +41,14 @@ pub fn update_section(path: &Path, name: &str, body: &str) -> Result<()> {
             return Err(MsgpError::File {
                 path: path.to_path_buf(),
                 message: format!("cannot read: {e}"),
-            });
+            }
+            .into());
         }
     };
-    write_atomically(path, with_section(&old, name, body).as_bytes())
+    Ok(write_atomically(
+        path,
+        with_section(&old, name, body).as_bytes(),
+    )?)
 }
 
 /// "2 CPUs (AMD EPYC …)" from the OS, best effort.

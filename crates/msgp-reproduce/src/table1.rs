@@ -17,17 +17,21 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::data::real::RealSeries;
-use crate::data::{Benchmark, NoiseScale, SyntheticSystem, Trajectory};
-use crate::error::{MsgpError, Result};
-use crate::fit::history::{HistoryChoice, HistoryEvent, HistorySearch, choose_history_observed};
-use crate::fit::{
+use msgp_core::MsgpError;
+use msgp_core::data::real::RealSeries;
+use msgp_core::data::{Benchmark, NoiseScale, SyntheticSystem, Trajectory};
+use msgp_core::fit::history::{
+    HistoryChoice, HistoryEvent, HistorySearch, choose_history_observed,
+};
+use msgp_core::fit::{
     FitOptimizer, FitOptions, FitProgress, FitSettings, MsgpSettings, OutputRange, fit,
 };
-use crate::loss::Likelihood;
-use crate::model::{Method, Metrics, Rollout, Simulation, score};
-use crate::numeric::parallel::Threads;
-pub use crate::reproduce::results::Provenance;
+use msgp_core::loss::Likelihood;
+use msgp_core::model::{Method, Metrics, Rollout, Simulation, score};
+use msgp_core::numeric::parallel::Threads;
+
+use crate::error::{ReproduceError, Result};
+pub use crate::results::Provenance;
 
 /// One benchmark of Table 1 and the paper's RMSE in each of its columns.
 #[derive(Clone, Copy, Debug)]
@@ -247,20 +251,20 @@ pub struct Cell {
     /// The iteration whose parameters were kept: the head's, chosen on the validation tail.
     pub best_iteration: usize,
     /// MSGP: the kept iterate of the final training on all the data, when it ran
-    /// ([`crate::fit::MsgpSettings::full_data_iterations`]).
+    /// ([`msgp_core::fit::MsgpSettings::full_data_iterations`]).
     #[serde(default)]
     pub full_data_iteration: Option<usize>,
     /// MSGP: the standard deviation its output-variance calibration adds (original units;
-    /// [`crate::fit::calibration`]), when it has one.
+    /// [`msgp_core::fit::calibration`]), when it has one.
     #[serde(default)]
     pub added_std: Option<f64>,
-    /// MSGP: the kept model is a fallback head's ([`crate::fit::MsgpSettings::blow_up_fallback`]),
-    /// named by [`crate::fit::RecipeOutcome::fallback_label`]: `spread` or `linear`.
+    /// MSGP: the kept model is a fallback head's ([`msgp_core::fit::MsgpSettings::blow_up_fallback`]),
+    /// named by [`msgp_core::fit::RecipeOutcome::fallback_label`]: `spread` or `linear`.
     #[serde(default)]
     pub fallback: Option<String>,
     /// MSGP: the recipe the validation tail preferred whose model diverged over the training
-    /// inputs and was set aside for this one's ([`crate::fit::FitReport::set_aside`]), named
-    /// by [`crate::fit::RecipeOutcome::fallback_label`]'s word for its mean or start.
+    /// inputs and was set aside for this one's ([`msgp_core::fit::FitReport::set_aside`]), named
+    /// by [`msgp_core::fit::RecipeOutcome::fallback_label`]'s word for its mean or start.
     #[serde(default)]
     pub set_aside: Option<String>,
     /// Why the model diverges: the fit's check on its training inputs, else the moment-matching
@@ -346,7 +350,7 @@ pub enum TableHistory {
     #[default]
     Paper,
     /// Chosen on each fit's training part alone, as `msgp fit --history auto` chooses it
-    /// ([`crate::fit::history::choose_history`] with [`HistorySearch::default`], the fit itself the judge): a
+    /// ([`msgp_core::fit::history::choose_history`] with [`HistorySearch::default`], the fit itself the judge): a
     /// user's fit on a log whose history nobody has told them.
     Auto,
 }
@@ -364,7 +368,8 @@ impl Plan {
         optimizer: FitOptimizer,
         data_dir: &Path,
     ) -> Result<Self> {
-        let invalid = |name, reason: String| MsgpError::InvalidSetting { name, reason };
+        let invalid =
+            |name, reason: String| ReproduceError::from(MsgpError::InvalidSetting { name, reason });
         if seeds.is_empty() {
             return Err(invalid("seeds", "give at least one seed".into()));
         }
@@ -485,20 +490,20 @@ impl Unit {
 
 /// The benchmark `key`.
 pub fn task(key: &str) -> Result<Task> {
-    tasks()
-        .into_iter()
-        .find(|t| t.key == key)
-        .ok_or_else(|| MsgpError::InvalidSetting {
+    tasks().into_iter().find(|t| t.key == key).ok_or_else(|| {
+        MsgpError::InvalidSetting {
             name: "benchmark",
             reason: format!("unknown benchmark `{key}`"),
-        })
+        }
+        .into()
+    })
 }
 
 /// The data of `task` for `seed` (synthetic: generated; real: read from `data_dir`).
 pub fn benchmark(task: &Task, seed: u64, data_dir: &Path) -> Result<Benchmark> {
     match task.source {
-        Source::Synthetic(k) => SyntheticSystem::new(k)?.generate(seed, NoiseScale::StdDev),
-        Source::Real(s) => s.load(data_dir).map_err(|e| match e {
+        Source::Synthetic(k) => Ok(SyntheticSystem::new(k)?.generate(seed, NoiseScale::StdDev)?),
+        Source::Real(s) => Ok(s.load(data_dir).map_err(|e| match e {
             MsgpError::File { path, message } => MsgpError::File {
                 path,
                 message: format!(
@@ -508,7 +513,7 @@ pub fn benchmark(task: &Task, seed: u64, data_dir: &Path) -> Result<Benchmark> {
                 ),
             },
             other => other,
-        }),
+        })?),
     }
 }
 
@@ -628,7 +633,7 @@ fn search_history(
         threads,
         ..FitOptions::new(method, bench.ly, bench.lu)
     };
-    choose_history_observed(
+    Ok(choose_history_observed(
         std::slice::from_ref(&bench.train),
         &HistorySearch::default(),
         &judge,
@@ -638,7 +643,7 @@ fn search_history(
             }
             ControlFlow::Continue(())
         },
-    )
+    )?)
 }
 
 /// The rows of the table from every unit's cell (any order; each unit exactly once).
@@ -650,13 +655,11 @@ pub fn assemble(plan: &Plan, results: Vec<(Unit, Cell)>) -> Result<Vec<Row>> {
             return Err(MsgpError::Data(format!(
                 "a result for {} is not part of this plan",
                 unit.describe()
-            )));
+            ))
+            .into());
         };
         if slots[k].replace(cell).is_some() {
-            return Err(MsgpError::Data(format!(
-                "two results for {}",
-                unit.describe()
-            )));
+            return Err(MsgpError::Data(format!("two results for {}", unit.describe())).into());
         }
     }
     let mut cells = units.into_iter().zip(slots);
@@ -668,12 +671,11 @@ pub fn assemble(plan: &Plan, results: Vec<(Unit, Cell)>) -> Result<Vec<Row>> {
             match cells.next() {
                 Some((unit, Some(cell))) => by_column[unit.column.index()].push(cell),
                 Some((unit, None)) => {
-                    return Err(MsgpError::Data(format!(
-                        "no result for {}",
-                        unit.describe()
-                    )));
+                    return Err(
+                        MsgpError::Data(format!("no result for {}", unit.describe())).into(),
+                    );
                 }
-                None => return Err(MsgpError::Data("fewer units than the plan".into())),
+                None => return Err(MsgpError::Data("fewer units than the plan".into()).into()),
             }
         }
         let bench = benchmark(&task, plan.seeds[0], &plan.data_dir)?;
@@ -904,7 +906,7 @@ pub fn render(plan: &Plan, rows: &[Row], provenance: &Provenance) -> String {
         full = plan
             .iters
             .unwrap_or(MsgpSettings::default().iterations)
-            .min(crate::fit::DEFAULT_FULL_DATA_ITERATIONS),
+            .min(msgp_core::fit::DEFAULT_FULL_DATA_ITERATIONS),
     );
     if plan.history == TableHistory::Auto {
         s.push_str(AUTO_HISTORY_NOTE);
@@ -1318,7 +1320,7 @@ mod tests {
             threads,
             ..FitOptions::new(Method::GpNarx, 1, 1)
         };
-        let expected = crate::fit::history::choose_history(
+        let expected = msgp_core::fit::history::choose_history(
             std::slice::from_ref(&bench.train),
             &HistorySearch::default(),
             &judge,

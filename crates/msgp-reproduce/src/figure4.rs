@@ -4,7 +4,7 @@
 //!
 //! A [`Plan`] (plant, models, seeds, iterations, [`Budget`], folder) lists its [`Unit`]s (one
 //! model × seed each); every unit is one learning loop whose folder
-//! ([`crate::learn::write_run_dir`]) is collected again by [`Plan::finished`]; [`report`]
+//! ([`msgp_sim::learn::write_run_dir`]) is collected again by [`Plan::finished`]; [`report`]
 //! draws the cost bands and renders the markdown section from the finished runs. `msgp
 //! reproduce figure4` runs the units one after another (reusing finished folders), the Python
 //! sweep (`python -m msgp.sweep figure4`) on processes or a Ray cluster: same units, same
@@ -12,87 +12,31 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::str::FromStr;
 
 use msgp_core::fit::FitOptimizer;
+use msgp_core::learner::LoopModel;
 use msgp_core::loss::Likelihood;
 use msgp_core::model::Method;
-use msgp_core::reproduce::results::Provenance;
 use serde::{Deserialize, Serialize};
 
-use crate::error::SimError;
-use crate::learn::{
+use msgp_sim::learn::{
     Budget, FILTERED_MSGP_INDUCING, FILTERED_MSGP_ITERATIONS, FILTERED_MSGP_SEARCH_ITERATIONS,
     FILTERED_MSGP_WARM_START, FinishedRun, IterationReport, LEARN_INDUCING,
     LINEAR_KF_POLICY_HORIZON_SECONDS, LINEAR_KF_WARM_START, LearnSettings, SearchModel,
     finished_run,
 };
-use crate::params::PendulumParams;
-use crate::plot::{CostPoint, plot_cost_bands};
+use msgp_sim::params::PendulumParams;
+use msgp_sim::plot::CostPoint;
 
-/// A model of the figure: a learning loop's model, MSGP with either likelihood.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Figure4Model {
-    /// MSGP trained on the free-run likelihood (the paper's).
-    Msgp,
-    /// MSGP trained on the filter likelihood.
-    MsgpFilter,
-    /// One-step GP-NARX (standard PILCO).
-    GpNarx,
-    /// The linear-Gaussian window model by the Kalman-filter likelihood.
-    LinearKf,
-}
-
-impl Figure4Model {
-    /// Every model, in the figure's order (the default set).
-    pub const ALL: [Figure4Model; 4] = [
-        Figure4Model::Msgp,
-        Figure4Model::MsgpFilter,
-        Figure4Model::GpNarx,
-        Figure4Model::LinearKf,
-    ];
-
-    /// The loop's model and MSGP likelihood.
-    pub fn model(self) -> (Method, Option<Likelihood>) {
-        match self {
-            Figure4Model::Msgp => (Method::Msgp, Some(Likelihood::FreeRun)),
-            Figure4Model::MsgpFilter => (Method::Msgp, Some(Likelihood::Filter)),
-            Figure4Model::GpNarx => (Method::GpNarx, None),
-            Figure4Model::LinearKf => (Method::LinearKf, None),
-        }
-    }
-
-    /// Name in tables, folders and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            Figure4Model::Msgp => "msgp",
-            Figure4Model::MsgpFilter => "msgp-filter",
-            Figure4Model::GpNarx => "gp-narx",
-            Figure4Model::LinearKf => "linear-kf",
-        }
-    }
-}
-
-impl FromStr for Figure4Model {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Self, String> {
-        Figure4Model::ALL
-            .into_iter()
-            .find(|m| m.name() == s)
-            .ok_or_else(|| {
-                let names: Vec<&str> = Figure4Model::ALL.iter().map(|m| m.name()).collect();
-                format!("unknown model `{s}` (known: {})", names.join(", "))
-            })
-    }
-}
+use crate::error::{ReproduceError, Result};
+use crate::plot::plot_cost_bands;
+pub use crate::results::Provenance;
 
 /// One learning run of the plan.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Unit {
     /// Its model.
-    pub model: Figure4Model,
+    pub model: LoopModel,
     /// Its seed.
     pub seed: u64,
 }
@@ -112,7 +56,7 @@ pub struct Plan {
     /// The plant every run learns on.
     pub plant: PendulumParams,
     /// Models, in the table's order.
-    pub models: Vec<Figure4Model>,
+    pub models: Vec<LoopModel>,
     /// Seeds of every model.
     pub seeds: Vec<u64>,
     /// Policy iterations per run.
@@ -129,13 +73,13 @@ impl Plan {
     pub fn new(
         tier: &str,
         plant: PendulumParams,
-        models: Vec<Figure4Model>,
+        models: Vec<LoopModel>,
         seeds: Vec<u64>,
         iterations: usize,
         budget: Budget,
         dir: Option<PathBuf>,
-    ) -> Result<Plan, SimError> {
-        let invalid = |option: &str, reason: String| SimError::Budget {
+    ) -> Result<Plan> {
+        let invalid = |option: &str, reason: String| ReproduceError::Plan {
             option: option.to_string(),
             reason,
         };
@@ -202,13 +146,13 @@ impl Plan {
     }
 
     /// The loop's settings of `unit`.
-    pub fn settings(&self, unit: &Unit) -> Result<LearnSettings, SimError> {
+    pub fn settings(&self, unit: &Unit) -> Result<LearnSettings> {
         let (method, likelihood) = unit.model.model();
-        Budget {
+        Ok(Budget {
             likelihood,
             ..self.budget.clone()
         }
-        .settings(method, unit.seed, self.iterations)
+        .settings(method, unit.seed, self.iterations)?)
     }
 
     /// The folder of `unit`'s run.
@@ -217,7 +161,7 @@ impl Plan {
     }
 
     /// `unit`'s run if its folder holds it, finished, with this plan's plant and settings.
-    pub fn finished(&self, unit: &Unit) -> Result<Option<FinishedRun>, SimError> {
+    pub fn finished(&self, unit: &Unit) -> Result<Option<FinishedRun>> {
         Ok(finished_run(
             &self.run_dir(unit),
             &self.settings(unit)?,
@@ -244,12 +188,12 @@ impl Run {
 
 /// Every unit's finished run, in the plan's order; a unit whose folder lacks it is an error
 /// naming the folder.
-pub fn collect(plan: &Plan) -> Result<Vec<Run>, SimError> {
+pub fn collect(plan: &Plan) -> Result<Vec<Run>> {
     plan.units()
         .into_iter()
         .map(|unit| match plan.finished(&unit)? {
             Some(run) => Ok(Run { unit, run }),
-            None => Err(SimError::MalformedLog {
+            None => Err(ReproduceError::MalformedRecord {
                 path: plan.run_dir(&unit).join("summary.json"),
                 reason: format!(
                     "no finished run of {} with this plan's plant and settings",
@@ -262,7 +206,7 @@ pub fn collect(plan: &Plan) -> Result<Vec<Run>, SimError> {
 
 /// Draws `figure4.png` into the plan's folder and returns the markdown section for `runs`
 /// (every unit of the plan, [`collect`]).
-pub fn report(plan: &Plan, runs: &[Run], provenance: &Provenance) -> Result<String, SimError> {
+pub fn report(plan: &Plan, runs: &[Run], provenance: &Provenance) -> Result<String> {
     let plot = plan.dir.join("figure4.png");
     let bands: Vec<(String, Vec<Vec<CostPoint>>)> = plan
         .models
@@ -321,7 +265,7 @@ fn render(
 ) -> String {
     let d = &plan.budget;
     let params = &plan.plant;
-    let has = |m: Figure4Model| plan.models.contains(&m);
+    let has = |m: LoopModel| plan.models.contains(&m);
     let models: Vec<&str> = plan.models.iter().map(|&m| m.name()).collect();
     let tier = &plan.tier;
     let mut s =
@@ -351,7 +295,7 @@ fn render(
         None | Some(0) => String::new(),
         Some(n) => format!(", from the second iteration on warm-started for {n} iterations"),
     };
-    let kf = match (has(Figure4Model::LinearKf), d.warm_start) {
+    let kf = match (has(LoopModel::LinearKf), d.warm_start) {
         (false, _) => String::new(),
         (true, None) => format!(
             " (linear-kf: no GP, at most that many L-BFGS iterations on the filter likelihood from each of two starts at iteration 1, then at most {LINEAR_KF_WARM_START} from the previous model)"
@@ -365,7 +309,7 @@ fn render(
                 .to_string()
         }
     };
-    let kf = match has(Figure4Model::MsgpFilter) {
+    let kf = match has(LoopModel::MsgpFilter) {
         false => kf,
         true => format!(
             "{kf} (msgp-filter: m = {}, {} L-BFGS iterations on the filter likelihood at iteration 1 from the linear-kf model of the data under a GP that starts at zero, then {} from the previous model, {} Adam steps per search start; with the prequential choice each iteration also fits the linear-kf model of the same data, and the search runs on the GP model only while the GP's filter likelihood of the episodes neither had seen beats the linear model's)",
@@ -380,7 +324,7 @@ fn render(
     };
     let horizon = match d.policy_horizon {
         Some(h) => format!("{h} s"),
-        None if has(Figure4Model::LinearKf) || has(Figure4Model::MsgpFilter) => format!(
+        None if has(LoopModel::LinearKf) || has(LoopModel::MsgpFilter) => format!(
             "{} s (linear-kf and msgp-filter: {LINEAR_KF_POLICY_HORIZON_SECONDS} s)",
             LearnSettings::default().policy_horizon_seconds,
         ),
@@ -533,8 +477,9 @@ fn render(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use msgp_sim::SimError;
 
-    fn plan(models: Vec<Figure4Model>, seeds: Vec<u64>, budget: Budget) -> Result<Plan, SimError> {
+    fn plan(models: Vec<LoopModel>, seeds: Vec<u64>, budget: Budget) -> Result<Plan> {
         Plan::new(
             "apollo",
             PendulumParams::default(),
@@ -549,7 +494,7 @@ mod tests {
     #[test]
     fn units_run_model_by_model_in_seed_order() {
         let p = plan(
-            vec![Figure4Model::LinearKf, Figure4Model::Msgp],
+            vec![LoopModel::LinearKf, LoopModel::Msgp],
             vec![0, 1, 2],
             Budget::default(),
         )
@@ -586,10 +531,10 @@ mod tests {
     fn a_plan_refuses_what_no_run_could_use() {
         let refused = [
             plan(Vec::new(), vec![0], Budget::default()),
-            plan(vec![Figure4Model::Msgp], Vec::new(), Budget::default()),
-            plan(vec![Figure4Model::Msgp], vec![1, 1], Budget::default()),
+            plan(vec![LoopModel::Msgp], Vec::new(), Budget::default()),
+            plan(vec![LoopModel::Msgp], vec![1, 1], Budget::default()),
             plan(
-                vec![Figure4Model::Msgp],
+                vec![LoopModel::Msgp],
                 vec![0],
                 Budget {
                     likelihood: Some(Likelihood::Filter),
@@ -597,7 +542,7 @@ mod tests {
                 },
             ),
             plan(
-                vec![Figure4Model::GpNarx],
+                vec![LoopModel::GpNarx],
                 vec![0],
                 Budget {
                     episode_seconds: 0.0,
@@ -606,9 +551,13 @@ mod tests {
             ),
         ];
         for r in refused {
-            assert!(matches!(r, Err(SimError::Budget { .. })), "{r:?}");
+            let refused = matches!(
+                r,
+                Err(ReproduceError::Plan { .. } | ReproduceError::Sim(SimError::Budget { .. }))
+            );
+            assert!(refused, "{r:?}");
         }
-        assert_eq!("msgp-filter".parse(), Ok(Figure4Model::MsgpFilter));
-        assert!("msgp_filter".parse::<Figure4Model>().is_err());
+        assert_eq!("msgp-filter".parse(), Ok(LoopModel::MsgpFilter));
+        assert!("msgp_filter".parse::<LoopModel>().is_err());
     }
 }
