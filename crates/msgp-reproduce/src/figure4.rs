@@ -264,8 +264,25 @@ fn render(
     plot: &Path,
 ) -> String {
     let d = &plan.budget;
+    let mut s = intro(plan, learned, provenance);
+    s.push_str(&budget(plan, learned));
+    s.push_str(&wall_time(plan, runs, provenance));
+    s.push_str(&summary_table(plan, runs));
+    s.push_str(&runs_table(runs));
+    let _ = write!(
+        s,
+        "\nCost over each {} s episode (a step after an early stop counts 1): mean ± 1 standard deviation over the seeds, predicted by the model (left) and measured on the simulator (right). Per-run artefacts (policy, iterations.csv, episodes as MCAP, cost.png) are in `{}/<model>-seed<k>/`.\n\n![cost curves]({})\n",
+        d.episode_seconds,
+        plan.dir.display(),
+        plot.display()
+    );
+    s
+}
+
+/// The section's title, what was learned and how, and the command.
+fn intro(plan: &Plan, learned: &LearnSettings, provenance: &Provenance) -> String {
+    let d = &plan.budget;
     let params = &plan.plant;
-    let has = |m: LoopModel| plan.models.contains(&m);
     let models: Vec<&str> = plan.models.iter().map(|&m| m.name()).collect();
     let tier = &plan.tier;
     let mut s =
@@ -286,6 +303,14 @@ fn render(
         plan.iterations
     );
     let _ = writeln!(s, "- Command: {}", provenance.command);
+    s
+}
+
+/// The budget line: each model's fit and the policy search per iteration.
+fn budget(plan: &Plan, learned: &LearnSettings) -> String {
+    let d = &plan.budget;
+    let has = |m: LoopModel| plan.models.contains(&m);
+    let mut s = String::new();
     let solver = learned
         .fit
         .msgp()
@@ -340,6 +365,12 @@ fn render(
         d.search_iters
             .unwrap_or(LearnSettings::default().search.iterations)
     );
+    s
+}
+
+/// Wall time and date.
+fn wall_time(plan: &Plan, runs: &[Run], provenance: &Provenance) -> String {
+    let mut s = String::new();
     let summed: f64 = runs
         .iter()
         .map(|r| r.run.seconds)
@@ -355,6 +386,13 @@ fn render(
         provenance.machine,
         provenance.date
     );
+    s
+}
+
+/// Per model: stable seeds, iterations and interaction to the first stable policy, kept and
+/// calibrated iterations, searches on the GP, time per iteration.
+fn summary_table(plan: &Plan, runs: &[Run]) -> String {
+    let mut s = String::new();
     s.push_str("## Summary\n\n| model | stable within the budget | iterations to first stable policy (per seed) | interaction s to stable (median) | kept: later iterations stable | calibrated: iterations ≥ 3 with the predicted cost within 2× of the expected (mean of the evaluation episodes) | … within 2× of the one episode run | searches on the GP model (prequential choice) | fit + search s per iteration (median) |\n|---|---:|---|---:|---:|---:|---:|---:|---:|\n");
     for &m in &plan.models {
         let mine: Vec<&Run> = runs.iter().filter(|r| r.unit.model == m).collect();
@@ -429,6 +467,12 @@ fn render(
                 .map_or_else(|| "—".to_string(), |t| format!("{t:.1}"))
         );
     }
+    s
+}
+
+/// Per run: its first stable iteration, stable iterations and costs.
+fn runs_table(runs: &[Run]) -> String {
+    let mut s = String::new();
     s.push_str("\n## Runs\n\n| model | seed | first stable iteration | interaction s to stable | stable iterations | lowest actual cost | last actual cost | wall s |\n|---|---:|---:|---:|---|---:|---:|---:|\n");
     for r in runs {
         let first = r.first_stable();
@@ -464,13 +508,6 @@ fn render(
             r.run.seconds
         );
     }
-    let _ = write!(
-        s,
-        "\nCost over each {} s episode (a step after an early stop counts 1): mean ± 1 standard deviation over the seeds, predicted by the model (left) and measured on the simulator (right). Per-run artefacts (policy, iterations.csv, episodes as MCAP, cost.png) are in `{}/<model>-seed<k>/`.\n\n![cost curves]({})\n",
-        d.episode_seconds,
-        plan.dir.display(),
-        plot.display()
-    );
     s
 }
 

@@ -18,6 +18,7 @@ mod hyper;
 pub mod linear_kf;
 mod msgp;
 pub mod one_step;
+mod options;
 mod proxy_watch;
 pub mod segments;
 mod settings;
@@ -25,13 +26,13 @@ mod vfe;
 
 pub use divergence::{DIVERGENCE_RANGES, OutputRange, check_divergence};
 pub use history::{HistoryChoice, HistoryScore, HistorySearch, choose_history};
+pub use options::{FEW_INDUCING, FitOptions, MANY_GP_INPUTS};
 pub use segments::{LONG_LOG_WINDOWS, Segments};
 pub use settings::{
     CLEARLY_BETTER, DEFAULT_FULL_DATA_BLOW_UP, DEFAULT_FULL_DATA_ITERATIONS, DEFAULT_MAX_INDUCING,
-    DEFAULT_ONE_STEP_ITERATIONS, FIT_LBFGS, FitOptimizer, FitOptions, FitSettings, LINEAR_RECIPE,
-    LinearKfSettings, MANY_GP_INPUTS, MethodSettings, MsgpSettings, MsgpStart, NoiseStart,
-    OneStepFitSettings, OneStepObjective, OneStepSolver, Recipe, SHORTEST_FINAL_BUDGET,
-    final_budgets,
+    DEFAULT_ONE_STEP_ITERATIONS, FIT_LBFGS, FitOptimizer, FitSettings, LINEAR_RECIPE,
+    LinearKfSettings, MethodSettings, MsgpSettings, MsgpStart, NoiseStart, OneStepFitSettings,
+    OneStepObjective, OneStepSolver, Recipe, SHORTEST_FINAL_BUDGET, final_budgets,
 };
 
 use std::ops::ControlFlow;
