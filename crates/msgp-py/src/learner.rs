@@ -23,7 +23,7 @@ use pyo3::types::{PyDict, PyList};
 
 use crate::convert::{array1, array2, matrix, to_json, to_python, with_overrides};
 use crate::error::{Error, Result, callable, detached, input, with_python};
-use crate::model::uint;
+use crate::options::uint;
 
 /// A Python object as the loop's plant; the first exception it raised is kept.
 struct PyPlant {

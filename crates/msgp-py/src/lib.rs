@@ -19,6 +19,7 @@ pub mod data;
 pub mod error;
 pub mod learner;
 pub mod model;
+pub mod options;
 pub mod reproduce;
 pub mod sim;
 

@@ -8,113 +8,18 @@ use std::sync::Arc;
 
 use msgp_core::data::Trajectory;
 use msgp_core::fit::history::{HistoryEvent, HistorySearch, with_chosen_history};
-use msgp_core::fit::{
-    FitOptimizer, FitOptions, FitReport, FitSettings, MsgpStart, OutputRange, fit_observed,
-};
+use msgp_core::fit::{FitOptions, FitReport, MsgpStart, OutputRange, fit_observed};
 use msgp_core::loss::Likelihood;
 use msgp_core::model::{Method, Metrics, Model, Rollout, pool, score};
 use msgp_core::model_file::{FitRecord, ModelFile};
 use msgp_core::numeric::parallel::Threads;
 use nalgebra::DMatrix;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList, PyTuple};
+use pyo3::types::{PyDict, PyTuple};
 
-use crate::convert::{array1, array2, matrix, to_python, trajectories, with_overrides};
+use crate::convert::{array1, array2, matrix, to_python, trajectories};
 use crate::error::{Error, Result, callable, detached, input, with_python};
-
-/// Settings that the constructor's own arguments set.
-const OWN_SETTINGS: [(&str, &str); 8] = [
-    ("method", "method"),
-    ("ly", "history"),
-    ("lu", "history"),
-    ("inducing", "inducing"),
-    ("iterations", "iterations"),
-    ("seed", "seed"),
-    ("likelihood", "likelihood"),
-    ("start", "start"),
-];
-
-/// A non-negative integer argument.
-pub fn uint(v: i128, name: &str) -> Result<u64> {
-    u64::try_from(v).map_err(|_| {
-        if v < 0 {
-            input(format!("{name} must be a non-negative integer, got {v}"))
-        } else {
-            input(format!("{name} is too large ({v})"))
-        }
-    })
-}
-
-/// A non-negative integer argument that counts something.
-pub fn count(v: i128, name: &str) -> Result<usize> {
-    usize::try_from(uint(v, name)?).map_err(|_| input(format!("{name} is too large ({v})")))
-}
-
-/// A method name (`msgp`, `gp-narx`, `pilco-narx`).
-pub fn method(name: &str) -> Result<Method> {
-    Method::from_name(name).ok_or_else(|| {
-        input(format!(
-            "unknown method {name:?}: expected one of {}",
-            Method::ALL
-                .iter()
-                .map(|m| format!("{:?}", m.name()))
-                .collect::<Vec<_>>()
-                .join(", ")
-        ))
-    })
-}
-
-/// The likelihood an MSGP fit trains on, by name (`free-run`, `filter`); `None`: the
-/// default. Other methods have their own and refuse one.
-pub fn likelihood(m: Method, name: Option<&str>) -> Result<Option<Likelihood>> {
-    let Some(name) = name else { return Ok(None) };
-    if m != Method::Msgp {
-        return Err(input(format!(
-            "likelihood={name:?}: the likelihood of an MSGP fit; method {:?} has its own",
-            m.name()
-        )));
-    }
-    [Likelihood::FreeRun, Likelihood::Filter]
-        .into_iter()
-        .find(|l| l.name() == name)
-        .map(Some)
-        .ok_or_else(|| {
-            input(format!(
-                "unknown likelihood {name:?}: expected \"free-run\" or \"filter\""
-            ))
-        })
-}
-
-/// The name of an MSGP start, as [`start`] reads it.
-fn start_name(s: MsgpStart) -> &'static str {
-    match s {
-        MsgpStart::OneStep => "one-step",
-        MsgpStart::Spread => "spread",
-        MsgpStart::LinearKf => "linear-kf",
-    }
-}
-
-/// Where an MSGP fit starts, by name (`one-step`, `spread`, `linear-kf`); `None`: the default. Other
-/// methods have their own fits and refuse one.
-fn start(m: Method, name: Option<&str>) -> Result<MsgpStart> {
-    let Some(name) = name else {
-        return Ok(MsgpStart::default());
-    };
-    if m != Method::Msgp {
-        return Err(input(format!(
-            "start={name:?}: where an MSGP fit starts; method {:?} has its own fit",
-            m.name()
-        )));
-    }
-    match name {
-        "one-step" => Ok(MsgpStart::OneStep),
-        "linear-kf" => Ok(MsgpStart::LinearKf),
-        "spread" => Ok(MsgpStart::Spread),
-        _ => Err(input(format!(
-            "unknown start {name:?}: expected \"one-step\", \"spread\" or \"linear-kf\""
-        ))),
-    }
-}
+use crate::options::{self, start_name};
 
 /// A rollout by name (`mm`, `mm-independent`, `mean`).
 fn rollout(name: &str) -> Result<Rollout> {
@@ -163,27 +68,6 @@ impl Msgp {
         Ok(me.fitted.clone().ok_or(Error::NotFitted)?)
     }
 
-    /// Settings for `train`: exactly `msgp fit`'s, then the user's other settings; threads
-    /// from `MSGP_THREADS` at the time of the call, as `msgp fit` takes them.
-    fn settings(
-        options: &FitOptions,
-        overrides: Option<&serde_json::Value>,
-        train: &[Trajectory],
-    ) -> Result<FitSettings> {
-        let threads = Threads::from_env()?;
-        let settings = options.settings(train)?;
-        let Some(user) = overrides else {
-            return Ok(FitSettings {
-                threads,
-                ..settings
-            });
-        };
-        let value = serde_json::to_value(&settings)
-            .map_err(|e| Error::Panic(format!("cannot describe the settings: {e}")))?;
-        let merged: FitSettings = crate::convert::merged(&value, user, "settings")?;
-        Ok(FitSettings { threads, ..merged })
-    }
-
     fn from_file(file: ModelFile, model: Model, report: Option<FitReport>) -> Self {
         // before format 1.2 the record held every method's settings, a one-step model's
         // own count under `one_step_iterations`
@@ -227,7 +111,7 @@ impl Msgp {
                 threads: Threads::default(),
                 segment_length: None,
             },
-            overrides: recorded_overrides(model.method, &file.training.settings),
+            overrides: options::recorded_overrides(model.method, &file.training.settings),
             auto_history: false,
             fitted: Some(Arc::new(Fitted {
                 file,
@@ -377,118 +261,17 @@ impl Msgp {
         start: Option<&str>,
         segment_length: Option<i128>,
     ) -> PyResult<Self> {
-        let m = crate::model::method(method)?;
-        let segment_length = segment_length
-            .map(|x| count(x, "segment_length"))
-            .transpose()?;
-        if segment_length.is_some() && m != Method::Msgp {
-            return Err(input(format!(
-                "segment_length: segments of the trajectory likelihood, an MSGP fit's; \
-                 method {method:?} has its own fit"
-            ))
-            .into());
-        }
-        let likelihood = crate::model::likelihood(m, likelihood)?.unwrap_or_default();
-        let start = crate::model::start(m, start)?;
-        let auto_history = history
-            .and_then(|h| h.extract::<String>().ok())
-            .is_some_and(|h| h == "auto");
-        let (ly, lu) = match history.filter(|h| !h.is_none()) {
-            None => (2, 2),
-            // (the search's judge: these options with each candidate's history)
-            Some(_) if auto_history => (1, 1),
-            Some(h) => {
-                let pair: Option<(i128, i128)> =
-                    if h.cast::<PyTuple>().is_ok() || h.cast::<PyList>().is_ok() {
-                        h.extract().ok()
-                    } else {
-                        None
-                    };
-                let Some((ly, lu)) = pair else {
-                    return Err(input(format!(
-                        "history must be a pair (l_y, l_u) of past outputs and inputs, or \
-                         \"auto\", got {h}"
-                    ))
-                    .into());
-                };
-                (count(ly, "history l_y")?, count(lu, "history l_u")?)
-            }
-        };
-        if ly == 0 {
-            return Err(input("history l_y must be at least 1").into());
-        }
-        let inducing = inducing.map(|x| count(x, "inducing")).transpose()?;
-        if inducing == Some(0) {
-            return Err(input("inducing must be at least 1").into());
-        }
-        let iterations = iterations.map(|x| count(x, "iterations")).transpose()?;
-        let seed = uint(seed, "seed")?;
-        let options = FitOptions {
-            method: m,
-            ly,
-            lu,
+        let (options, auto_history) = options::fit_options(
+            history,
             inducing,
-            iterations,
+            method,
             seed,
-            mean: None,
-            integrators: Vec::new(),
-            optimizer: FitOptimizer::Adam,
+            iterations,
             likelihood,
             start,
-            threads: Threads::default(),
             segment_length,
-        };
-        let overrides = match settings.filter(|s| !s.is_none()) {
-            None => None,
-            Some(s) => {
-                let user = crate::convert::to_json(s, "settings")?;
-                let Some(obj) = user.as_object() else {
-                    return Err(input(format!("settings must be a dict, got {s}")).into());
-                };
-                for (key, arg) in OWN_SETTINGS {
-                    if obj.contains_key(key) {
-                        return Err(input(format!(
-                            "settings[{key:?}]: set it with the Msgp({arg}=...) argument"
-                        ))
-                        .into());
-                    }
-                }
-                // another method's setting, named as such
-                let keys = |m: Method| {
-                    serde_json::to_value(FitSettings::new(m))
-                        .ok()
-                        .and_then(|v| v.as_object().map(|o| o.keys().cloned().collect::<Vec<_>>()))
-                        .unwrap_or_default()
-                };
-                let own = keys(m);
-                for key in obj.keys().filter(|k| !own.contains(k)) {
-                    let of = Method::ALL
-                        .into_iter()
-                        .filter(|&o| keys(o).contains(key))
-                        .map(|o| o.name())
-                        .collect::<Vec<_>>();
-                    if !of.is_empty() {
-                        let mut takes: Vec<&str> = own
-                            .iter()
-                            .map(String::as_str)
-                            .filter(|k| !OWN_SETTINGS.iter().any(|(o, _)| o == k))
-                            .collect();
-                        takes.sort_unstable();
-                        return Err(input(format!(
-                            "settings[{key:?}]: a setting of method {}, not of {}, whose settings \
-                             are {}",
-                            of.join(" and "),
-                            m.name(),
-                            takes.join(", ")
-                        ))
-                        .into());
-                    }
-                }
-                // checked now against the method's defaults, so mistakes show at construction
-                let _: FitSettings = with_overrides(&FitSettings::new(m), Some(s), "settings")?;
-                Some(user)
-            }
-        };
+        )?;
+        let overrides = options::user_overrides(options.method, settings)?;
         Ok(Self {
             options,
             overrides,
@@ -577,7 +360,7 @@ impl Msgp {
                     (options, Some(choice))
                 }
             };
-            let settings = Msgp::settings(&options, overrides.as_ref(), &train)?;
+            let settings = options::settings(&options, overrides.as_ref(), &train)?;
             let fitted = fit_observed(&train, &settings, &mut |p| {
                 with_python(&mut raised, |py| {
                     let Some(f) = &progress else {
@@ -997,29 +780,6 @@ impl Msgp {
             }
         }
     }
-}
-
-/// The settings a model file records that the constructor's arguments do not carry (the
-/// one-step solver and objective, the learning rate, the integrators, …), as the `settings`
-/// overrides of a refit: `Msgp.load(f).fit(...)` trains as the file's own fit did. `None` when
-/// the record is not this method's settings (files before format 1.2 held every method's).
-fn recorded_overrides(method: Method, recorded: &serde_json::Value) -> Option<serde_json::Value> {
-    let defaults = serde_json::to_value(FitSettings::new(method)).ok()?;
-    let own = defaults.as_object()?;
-    let kept: serde_json::Map<String, serde_json::Value> = recorded
-        .as_object()?
-        .iter()
-        .filter(|(k, _)| {
-            own.contains_key(k.as_str())
-                && k.as_str() != "threads"
-                && !OWN_SETTINGS.iter().any(|(o, _)| o == k)
-        })
-        .map(|(k, v)| (k.clone(), v.clone()))
-        .collect();
-    let kept = serde_json::Value::Object(kept);
-    crate::convert::merged::<FitSettings>(&defaults, &kept, "settings")
-        .is_ok()
-        .then_some(kept)
 }
 
 /// Warns `message` as a Python `RuntimeWarning` at the caller's line.

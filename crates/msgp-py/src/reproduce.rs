@@ -21,7 +21,7 @@ use msgp_sim::{PendulumParams, PlantTier};
 
 use crate::convert::{to_json, to_python, with_overrides};
 use crate::error::{Error, Result, detached, input, with_python};
-use crate::model::{count, method};
+use crate::options::{count, method};
 
 /// A plan, unit or cell given back by Python (a dict made by the functions below).
 fn parse<T: DeserializeOwned>(obj: &Bound<'_, PyAny>, what: &str) -> Result<T> {

@@ -16,7 +16,7 @@ use pyo3::types::{PyDict, PyList, PyString};
 
 use crate::convert::{array1, array2, to_json, to_python, with_overrides};
 use crate::error::{Error, Result, callable, detached, input, with_python};
-use crate::model::{count, uint};
+use crate::options::{count, uint};
 
 fn noise_scale(noise: &str) -> Result<NoiseScale> {
     match noise {
@@ -84,12 +84,12 @@ pub fn defaults<'py>(
         "pendulum" => to_python(py, &PendulumParams::default()),
         "stability" => to_python(py, &StabilityCriteria::default()),
         "learn" => {
-            let m = crate::model::method(method.unwrap_or("msgp"))?;
-            let l = crate::model::likelihood(m, likelihood)?;
+            let m = crate::options::method(method.unwrap_or("msgp"))?;
+            let l = crate::options::likelihood(m, likelihood)?;
             to_python(py, &LearnSettings::for_model(m, l))
         }
         "fit" => {
-            let m = crate::model::method(method.unwrap_or("msgp"))?;
+            let m = crate::options::method(method.unwrap_or("msgp"))?;
             to_python(py, &FitSettings::new(m))
         }
         other => Err(input(format!(
@@ -280,8 +280,8 @@ pub fn learn_policy<'py>(
     progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyList>> {
     let progress = callable(progress, "one iteration's dict")?;
-    let m = crate::model::method(method)?;
-    let l = crate::model::likelihood(m, likelihood)?;
+    let m = crate::options::method(method)?;
+    let l = crate::options::likelihood(m, likelihood)?;
     let iterations = count(iterations, "iterations")?;
     let seed = uint(seed, "seed")?;
     let p = plant(params)?;

@@ -1,0 +1,289 @@
+//! What `msgp.Msgp(...)` takes, turned into the fit's options and settings as `msgp fit` turns
+//! its flags: the constructor's own arguments into [`FitOptions`] (checked and named as Python
+//! arguments), the `settings` dict into overrides of the method's own settings (another
+//! method's setting named as such), and both into a fit's [`FitSettings`] at fit time.
+
+use msgp_core::data::Trajectory;
+use msgp_core::fit::{FitOptimizer, FitOptions, FitSettings, MsgpStart};
+use msgp_core::loss::Likelihood;
+use msgp_core::model::Method;
+use msgp_core::numeric::parallel::Threads;
+use pyo3::prelude::*;
+use pyo3::types::{PyList, PyTuple};
+
+use crate::convert::with_overrides;
+use crate::error::{Error, Result, input};
+
+/// Settings that the constructor's own arguments set.
+const OWN_SETTINGS: [(&str, &str); 8] = [
+    ("method", "method"),
+    ("ly", "history"),
+    ("lu", "history"),
+    ("inducing", "inducing"),
+    ("iterations", "iterations"),
+    ("seed", "seed"),
+    ("likelihood", "likelihood"),
+    ("start", "start"),
+];
+
+/// A non-negative integer argument.
+pub fn uint(v: i128, name: &str) -> Result<u64> {
+    u64::try_from(v).map_err(|_| {
+        if v < 0 {
+            input(format!("{name} must be a non-negative integer, got {v}"))
+        } else {
+            input(format!("{name} is too large ({v})"))
+        }
+    })
+}
+
+/// A non-negative integer argument that counts something.
+pub fn count(v: i128, name: &str) -> Result<usize> {
+    usize::try_from(uint(v, name)?).map_err(|_| input(format!("{name} is too large ({v})")))
+}
+
+/// A method name (`msgp`, `gp-narx`, `pilco-narx`).
+pub fn method(name: &str) -> Result<Method> {
+    Method::from_name(name).ok_or_else(|| {
+        input(format!(
+            "unknown method {name:?}: expected one of {}",
+            Method::ALL
+                .iter()
+                .map(|m| format!("{:?}", m.name()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ))
+    })
+}
+
+/// The likelihood an MSGP fit trains on, by name (`free-run`, `filter`); `None`: the
+/// default. Other methods have their own and refuse one.
+pub fn likelihood(m: Method, name: Option<&str>) -> Result<Option<Likelihood>> {
+    let Some(name) = name else { return Ok(None) };
+    if m != Method::Msgp {
+        return Err(input(format!(
+            "likelihood={name:?}: the likelihood of an MSGP fit; method {:?} has its own",
+            m.name()
+        )));
+    }
+    [Likelihood::FreeRun, Likelihood::Filter]
+        .into_iter()
+        .find(|l| l.name() == name)
+        .map(Some)
+        .ok_or_else(|| {
+            input(format!(
+                "unknown likelihood {name:?}: expected \"free-run\" or \"filter\""
+            ))
+        })
+}
+
+/// The name of an MSGP start, as `start` reads it.
+pub fn start_name(s: MsgpStart) -> &'static str {
+    match s {
+        MsgpStart::OneStep => "one-step",
+        MsgpStart::Spread => "spread",
+        MsgpStart::LinearKf => "linear-kf",
+    }
+}
+
+/// Where an MSGP fit starts, by name (`one-step`, `spread`, `linear-kf`); `None`: the default. Other
+/// methods have their own fits and refuse one.
+fn start(m: Method, name: Option<&str>) -> Result<MsgpStart> {
+    let Some(name) = name else {
+        return Ok(MsgpStart::default());
+    };
+    if m != Method::Msgp {
+        return Err(input(format!(
+            "start={name:?}: where an MSGP fit starts; method {:?} has its own fit",
+            m.name()
+        )));
+    }
+    match name {
+        "one-step" => Ok(MsgpStart::OneStep),
+        "linear-kf" => Ok(MsgpStart::LinearKf),
+        "spread" => Ok(MsgpStart::Spread),
+        _ => Err(input(format!(
+            "unknown start {name:?}: expected \"one-step\", \"spread\" or \"linear-kf\""
+        ))),
+    }
+}
+
+/// The constructor's arguments as the fit's options, and whether the history is to be chosen
+/// from the data (`history="auto"`: the options then hold the search's judge).
+#[allow(clippy::too_many_arguments)]
+pub fn fit_options(
+    history: Option<&Bound<'_, PyAny>>,
+    inducing: Option<i128>,
+    method: &str,
+    seed: i128,
+    iterations: Option<i128>,
+    likelihood: Option<&str>,
+    start: Option<&str>,
+    segment_length: Option<i128>,
+) -> Result<(FitOptions, bool)> {
+    let m = self::method(method)?;
+    let segment_length = segment_length
+        .map(|x| count(x, "segment_length"))
+        .transpose()?;
+    if segment_length.is_some() && m != Method::Msgp {
+        return Err(input(format!(
+            "segment_length: segments of the trajectory likelihood, an MSGP fit's; \
+             method {method:?} has its own fit"
+        )));
+    }
+    let likelihood = self::likelihood(m, likelihood)?.unwrap_or_default();
+    let start = self::start(m, start)?;
+    let auto_history = history
+        .and_then(|h| h.extract::<String>().ok())
+        .is_some_and(|h| h == "auto");
+    let (ly, lu) = match history.filter(|h| !h.is_none()) {
+        None => (2, 2),
+        // (the search's judge: these options with each candidate's history)
+        Some(_) if auto_history => (1, 1),
+        Some(h) => {
+            let pair: Option<(i128, i128)> =
+                if h.cast::<PyTuple>().is_ok() || h.cast::<PyList>().is_ok() {
+                    h.extract().ok()
+                } else {
+                    None
+                };
+            let Some((ly, lu)) = pair else {
+                return Err(input(format!(
+                    "history must be a pair (l_y, l_u) of past outputs and inputs, or \
+                     \"auto\", got {h}"
+                )));
+            };
+            (count(ly, "history l_y")?, count(lu, "history l_u")?)
+        }
+    };
+    if ly == 0 {
+        return Err(input("history l_y must be at least 1"));
+    }
+    let inducing = inducing.map(|x| count(x, "inducing")).transpose()?;
+    if inducing == Some(0) {
+        return Err(input("inducing must be at least 1"));
+    }
+    let iterations = iterations.map(|x| count(x, "iterations")).transpose()?;
+    let seed = uint(seed, "seed")?;
+    let options = FitOptions {
+        method: m,
+        ly,
+        lu,
+        inducing,
+        iterations,
+        seed,
+        mean: None,
+        integrators: Vec::new(),
+        optimizer: FitOptimizer::Adam,
+        likelihood,
+        start,
+        threads: Threads::default(),
+        segment_length,
+    };
+    Ok((options, auto_history))
+}
+
+/// The `settings` dict as overrides of method `m`'s own settings, checked against its defaults
+/// now so that mistakes show at construction: a setting a constructor argument sets, or another
+/// method's, is refused and named.
+pub fn user_overrides(
+    m: Method,
+    settings: Option<&Bound<'_, PyAny>>,
+) -> Result<Option<serde_json::Value>> {
+    Ok(match settings.filter(|s| !s.is_none()) {
+        None => None,
+        Some(s) => {
+            let user = crate::convert::to_json(s, "settings")?;
+            let Some(obj) = user.as_object() else {
+                return Err(input(format!("settings must be a dict, got {s}")));
+            };
+            for (key, arg) in OWN_SETTINGS {
+                if obj.contains_key(key) {
+                    return Err(input(format!(
+                        "settings[{key:?}]: set it with the Msgp({arg}=...) argument"
+                    )));
+                }
+            }
+            // another method's setting, named as such
+            let keys = |m: Method| {
+                serde_json::to_value(FitSettings::new(m))
+                    .ok()
+                    .and_then(|v| v.as_object().map(|o| o.keys().cloned().collect::<Vec<_>>()))
+                    .unwrap_or_default()
+            };
+            let own = keys(m);
+            for key in obj.keys().filter(|k| !own.contains(k)) {
+                let of = Method::ALL
+                    .into_iter()
+                    .filter(|&o| keys(o).contains(key))
+                    .map(|o| o.name())
+                    .collect::<Vec<_>>();
+                if !of.is_empty() {
+                    let mut takes: Vec<&str> = own
+                        .iter()
+                        .map(String::as_str)
+                        .filter(|k| !OWN_SETTINGS.iter().any(|(o, _)| o == k))
+                        .collect();
+                    takes.sort_unstable();
+                    return Err(input(format!(
+                        "settings[{key:?}]: a setting of method {}, not of {}, whose settings \
+                         are {}",
+                        of.join(" and "),
+                        m.name(),
+                        takes.join(", ")
+                    )));
+                }
+            }
+            // checked now against the method's defaults, so mistakes show at construction
+            let _: FitSettings = with_overrides(&FitSettings::new(m), Some(s), "settings")?;
+            Some(user)
+        }
+    })
+}
+
+/// Settings for `train`: exactly `msgp fit`'s, then the user's other settings; threads
+/// from `MSGP_THREADS` at the time of the call, as `msgp fit` takes them.
+pub fn settings(
+    options: &FitOptions,
+    overrides: Option<&serde_json::Value>,
+    train: &[Trajectory],
+) -> Result<FitSettings> {
+    let threads = Threads::from_env()?;
+    let settings = options.settings(train)?;
+    let Some(user) = overrides else {
+        return Ok(FitSettings {
+            threads,
+            ..settings
+        });
+    };
+    let value = serde_json::to_value(&settings)
+        .map_err(|e| Error::Panic(format!("cannot describe the settings: {e}")))?;
+    let merged: FitSettings = crate::convert::merged(&value, user, "settings")?;
+    Ok(FitSettings { threads, ..merged })
+}
+
+/// The settings a model file records that the constructor's arguments do not carry (the
+/// one-step solver and objective, the learning rate, the integrators, …), as the `settings`
+/// overrides of a refit: `Msgp.load(f).fit(...)` trains as the file's own fit did. `None` when
+/// the record is not this method's settings (files before format 1.2 held every method's).
+pub fn recorded_overrides(
+    method: Method,
+    recorded: &serde_json::Value,
+) -> Option<serde_json::Value> {
+    let defaults = serde_json::to_value(FitSettings::new(method)).ok()?;
+    let own = defaults.as_object()?;
+    let kept: serde_json::Map<String, serde_json::Value> = recorded
+        .as_object()?
+        .iter()
+        .filter(|(k, _)| {
+            own.contains_key(k.as_str())
+                && k.as_str() != "threads"
+                && !OWN_SETTINGS.iter().any(|(o, _)| o == k)
+        })
+        .map(|(k, v)| (k.clone(), v.clone()))
+        .collect();
+    let kept = serde_json::Value::Object(kept);
+    crate::convert::merged::<FitSettings>(&defaults, &kept, "settings")
+        .is_ok()
+        .then_some(kept)
+}
