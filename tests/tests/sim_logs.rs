@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use msgp_core::data::Trajectory;
 use msgp_core::data::dataset::{Dataset, Selection};
 use msgp_core::data::table::TimeSource;
-use msgp_core::fit::{FitOptimizer, FitOptions, fit};
+use msgp_core::fit::{FitOptimizer, FitOptions, Switches, fit};
 use msgp_core::gp::MeanFunction;
 use msgp_core::model::Method;
 use msgp_core::numeric::parallel::Threads;
@@ -136,6 +136,7 @@ fn a_model_fitted_on_a_simulator_log_predicts_another_excitation() {
         start: Default::default(),
         threads: Threads::available(),
         segment_length: None,
+        switches: Switches::default(),
     }
     .settings(&train)
     .expect("settings");

@@ -463,6 +463,7 @@ fn a_linear_mean_on_drives_does_not_diverge() {
         start: Default::default(),
         threads: Default::default(),
         segment_length: None,
+        switches: Default::default(),
     }
     .settings(std::slice::from_ref(&bench.train))
     .expect("settings");

@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use msgp_core::data::Trajectory;
 use msgp_core::fit::history::{HistoryEvent, HistorySearch, with_chosen_history};
-use msgp_core::fit::{FitOptions, FitReport, MsgpStart, OutputRange, fit_observed};
+use msgp_core::fit::{FitOptions, FitReport, MsgpStart, OutputRange, Switches, fit_observed};
 use msgp_core::loss::Likelihood;
 use msgp_core::model::{Method, Metrics, Model, Rollout, pool, score};
 use msgp_core::model_file::{FitRecord, ModelFile};
@@ -110,6 +110,7 @@ impl Msgp {
                     .unwrap_or_default(),
                 threads: Threads::default(),
                 segment_length: None,
+                switches: Switches::default(),
             },
             overrides: options::recorded_overrides(model.method, &file.training.settings),
             auto_history: false,

@@ -4,7 +4,7 @@
 //! method's setting named as such), and both into a fit's [`FitSettings`] at fit time.
 
 use msgp_core::data::Trajectory;
-use msgp_core::fit::{FitOptimizer, FitOptions, FitSettings, MsgpStart};
+use msgp_core::fit::{FitOptimizer, FitOptions, FitSettings, MsgpStart, Switches};
 use msgp_core::loss::Likelihood;
 use msgp_core::model::Method;
 use msgp_core::numeric::parallel::Threads;
@@ -179,6 +179,7 @@ pub fn fit_options(
         start,
         threads: Threads::default(),
         segment_length,
+        switches: Switches::default(),
     };
     Ok((options, auto_history))
 }

@@ -5,12 +5,11 @@ use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
+use msgp_core::MsgpError;
 use msgp_core::data::Trajectory;
 use msgp_core::fit::calibration::Judge;
 use msgp_core::fit::history::{HistoryChoice, HistoryEvent, HistorySearch, with_chosen_history};
-use msgp_core::fit::{
-    FitOptimizer, FitOptions, FitProgress, FitReport, MethodSettings, MsgpStart, fit,
-};
+use msgp_core::fit::{FitOptimizer, FitOptions, FitProgress, FitReport, MsgpStart, Switches, fit};
 use msgp_core::loss::Likelihood;
 use msgp_core::model::Method;
 use msgp_core::model_file::{FitRecord, ModelFile};
@@ -98,6 +97,12 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         start: args.start.map_or(MsgpStart::default(), Into::into),
         threads: Threads::from_env()?,
         segment_length: args.segment_length,
+        switches: Switches {
+            one_step_objective: args.one_step.map(Into::into),
+            calibrate: args.no_calibration.then_some(false),
+            choose_final_budget: args.choose_final_length.then_some(true),
+            blow_up_fallback: args.no_blow_up_fallback.then_some(false),
+        },
     };
     let (options, history_choice) = match args.history {
         FitHistory::Given(_) => (options, None),
@@ -110,53 +115,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let warmup = ly.max(lu);
     check_lengths(&train, warmup, "training")?;
     check_lengths(&test, warmup, "test")?;
-    let mut settings = options.settings(&trajs)?;
-    if let Some(o) = args.one_step {
-        match &mut settings.method {
-            MethodSettings::GpNarx(s) | MethodSettings::PilcoNarx(s) => s.objective = o.into(),
-            MethodSettings::Msgp(s) if s.start == MsgpStart::OneStep => {
-                s.one_step_objective = o.into()
-            }
-            _ => bail!(
-                "--one-step: the objective of a one-step fit; --method {}{} has none",
-                method.name(),
-                if method == Method::Msgp {
-                    " --start linear-kf"
-                } else {
-                    ""
-                }
-            ),
-        }
-    }
-    if args.no_calibration {
-        match &mut settings.method {
-            MethodSettings::Msgp(s) => s.calibrate = false,
-            _ => bail!(
-                "--no-calibration: only msgp fits are calibrated; --method {} is not",
-                method.name()
-            ),
-        }
-    }
-    if args.choose_final_length {
-        match &mut settings.method {
-            MethodSettings::Msgp(s) => s.choose_final_budget = true,
-            _ => bail!(
-                "--choose-final-length: only msgp fits train on all the data after a \
-                 validation tail; --method {} does not",
-                method.name()
-            ),
-        }
-    }
-    if args.no_blow_up_fallback {
-        match &mut settings.method {
-            MethodSettings::Msgp(s) => s.blow_up_fallback = false,
-            _ => bail!(
-                "--no-blow-up-fallback: where an msgp fit's zero-mean recipe may retrain; \
-                 --method {} has no such recipe",
-                method.name()
-            ),
-        }
-    }
+    let settings = options.settings(&trajs).map_err(flagged_switch)?;
     warnings.extend(options.history_warning(&trajs));
     warnings.extend(options.inducing_warning(&trajs));
     for w in &warnings {
@@ -501,6 +460,25 @@ pub fn calibrated(report: &FitReport, outputs: &[String]) -> Option<String> {
         "output variance calibrated by {judge}: added standard deviation {}",
         added.join(", ")
     ))
+}
+
+/// A switch of the fit that the method does not have, named by its flag
+/// ([`msgp_core::fit::Switches`]); other errors as they are.
+fn flagged_switch(e: MsgpError) -> anyhow::Error {
+    let flag = match &e {
+        MsgpError::InvalidSetting { name, .. } => match *name {
+            "one_step_objective" => "--one-step",
+            "calibrate" => "--no-calibration",
+            "choose_final_budget" => "--choose-final-length",
+            "blow_up_fallback" => "--no-blow-up-fallback",
+            _ => return e.into(),
+        },
+        _ => return e.into(),
+    };
+    match e {
+        MsgpError::InvalidSetting { reason, .. } => anyhow::anyhow!("{flag}: {reason}"),
+        other => other.into(),
+    }
 }
 
 #[cfg(test)]

@@ -26,7 +26,7 @@ mod vfe;
 
 pub use divergence::{DIVERGENCE_RANGES, OutputRange, check_divergence};
 pub use history::{HistoryChoice, HistoryScore, HistorySearch, choose_history};
-pub use options::{FEW_INDUCING, FitOptions, MANY_GP_INPUTS};
+pub use options::{FEW_INDUCING, FitOptions, MANY_GP_INPUTS, Switches};
 pub use segments::{LONG_LOG_WINDOWS, Segments};
 pub use settings::{
     CLEARLY_BETTER, DEFAULT_FULL_DATA_BLOW_UP, DEFAULT_FULL_DATA_ITERATIONS, DEFAULT_MAX_INDUCING,

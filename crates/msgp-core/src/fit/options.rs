@@ -6,7 +6,7 @@
 use super::segments::{LONG_LOG_WINDOWS, Segments};
 use super::settings::{
     DEFAULT_MAX_INDUCING, FitOptimizer, FitSettings, LINEAR_RECIPE, LinearKfSettings,
-    MethodSettings, MsgpSettings, MsgpStart, OneStepFitSettings,
+    MethodSettings, MsgpSettings, MsgpStart, OneStepFitSettings, OneStepObjective,
 };
 use crate::data::Trajectory;
 use crate::error::{MsgpError, Result};
@@ -59,6 +59,93 @@ pub struct FitOptions {
     /// segments of [`Segments::DEFAULT`] when the training part has more than
     /// [`LONG_LOG_WINDOWS`] windows, whole trajectories otherwise.
     pub segment_length: Option<usize>,
+    /// The protocol's switches a user may turn; each refused by a method without it.
+    pub switches: Switches,
+}
+
+/// Switches of a fit's protocol that the front ends offer beside [`FitOptions`]' own choices
+/// (`None`: the method's default). [`FitOptions::settings`] applies them and refuses one the
+/// method does not have, naming the setting.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Switches {
+    /// The one-step fit's objective: the baselines' own fit, MSGP's one-step start
+    /// ([`OneStepFitSettings::objective`], [`MsgpSettings::one_step_objective`]).
+    pub one_step_objective: Option<OneStepObjective>,
+    /// MSGP: the output-variance calibration ([`MsgpSettings::calibrate`]).
+    pub calibrate: Option<bool>,
+    /// MSGP: the final training's length chosen by its proxy
+    /// ([`MsgpSettings::choose_final_budget`]).
+    pub choose_final_budget: Option<bool>,
+    /// MSGP: the fallback heads where the zero-mean recipe's final training blows up
+    /// ([`MsgpSettings::blow_up_fallback`]).
+    pub blow_up_fallback: Option<bool>,
+}
+
+impl Switches {
+    /// Turns the switches that are set in `settings`.
+    fn apply(&self, settings: &mut FitSettings) -> Result<()> {
+        let name = settings.method().name();
+        let method = &mut settings.method;
+        let refused = |setting: &'static str, reason: String| MsgpError::InvalidSetting {
+            name: setting,
+            reason,
+        };
+        if let Some(o) = self.one_step_objective {
+            match method {
+                MethodSettings::GpNarx(s) | MethodSettings::PilcoNarx(s) => s.objective = o,
+                MethodSettings::Msgp(s) if s.start == MsgpStart::OneStep => {
+                    s.one_step_objective = o
+                }
+                MethodSettings::Msgp(s) => {
+                    let start = match s.start {
+                        MsgpStart::Spread => "spread",
+                        _ => "linear-kf",
+                    };
+                    Err(refused(
+                        "one_step_objective",
+                        format!(
+                            "the objective of a one-step fit; method {name} started from \
+                             {start} has none"
+                        ),
+                    ))?
+                }
+                MethodSettings::LinearKf(_) => Err(refused(
+                    "one_step_objective",
+                    format!("the objective of a one-step fit; method {name} has none"),
+                ))?,
+            }
+        }
+        if let Some(on) = self.calibrate {
+            msgp(method, "calibrate", "only msgp fits are calibrated")?.calibrate = on;
+        }
+        if let Some(on) = self.choose_final_budget {
+            let what = "only msgp fits train on all the data after a validation tail";
+            msgp(method, "choose_final_budget", what)?.choose_final_budget = on;
+        }
+        if let Some(on) = self.blow_up_fallback {
+            let what = "where an msgp fit's zero-mean recipe may retrain";
+            msgp(method, "blow_up_fallback", what)?.blow_up_fallback = on;
+        }
+        Ok(())
+    }
+}
+
+/// `method`'s MSGP settings, or the refusal of `setting` (`what` it is) by another method.
+fn msgp<'a>(
+    method: &'a mut MethodSettings,
+    setting: &'static str,
+    what: &str,
+) -> Result<&'a mut MsgpSettings> {
+    let name = match method {
+        MethodSettings::Msgp(s) => return Ok(s),
+        MethodSettings::GpNarx(_) => Method::GpNarx.name(),
+        MethodSettings::PilcoNarx(_) => Method::PilcoNarx.name(),
+        MethodSettings::LinearKf(_) => Method::LinearKf.name(),
+    };
+    Err(MsgpError::InvalidSetting {
+        name: setting,
+        reason: format!("{what}; method {name} has none"),
+    })
 }
 
 /// More GP inputs (`l_y·d_y + l_u·d_u`) than this make [`FitOptions::history_warning`] say
@@ -87,6 +174,7 @@ impl FitOptions {
             start: MsgpStart::default(),
             threads: Threads::default(),
             segment_length: None,
+            switches: Switches::default(),
         }
     }
 
@@ -233,10 +321,11 @@ impl FitOptions {
             method,
             threads: self.threads,
         };
-        let settings = match self.iterations {
+        let mut settings = match self.iterations {
             Some(n) => settings.with_solver_iterations(n),
             None => settings,
         };
+        self.switches.apply(&mut settings)?;
         settings.validate(&train.iter().collect::<Vec<_>>())?;
         Ok(settings)
     }

@@ -30,7 +30,112 @@ fn options(method: Method, inducing: Option<usize>, iterations: Option<usize>) -
         start: MsgpStart::OneStep,
         threads: Threads::default(),
         segment_length: None,
+        switches: Switches::default(),
     }
+}
+
+/// The protocol's switches ([`Switches`]) turn the MSGP settings they name and nothing else,
+/// reach a one-step fit's objective where there is one, and are refused, by name, by a method
+/// without them.
+#[test]
+fn switches_turn_their_settings_and_other_methods_refuse_them() {
+    let data = [traj(200)];
+    let with = |method, switches| FitOptions {
+        switches,
+        ..options(method, None, None)
+    };
+    let all = Switches {
+        one_step_objective: Some(OneStepObjective::Vfe),
+        calibrate: Some(false),
+        choose_final_budget: Some(true),
+        blow_up_fallback: Some(false),
+    };
+    let plain = with(Method::Msgp, Switches::default())
+        .settings(&data)
+        .expect("defaults");
+    let turned = with(Method::Msgp, all).settings(&data).expect("switched");
+    let (MethodSettings::Msgp(p), MethodSettings::Msgp(t)) = (&plain.method, &turned.method) else {
+        panic!("msgp settings");
+    };
+    assert_eq!(
+        (p.calibrate, p.choose_final_budget, p.blow_up_fallback),
+        (true, false, true)
+    );
+    let expected = MsgpSettings {
+        one_step_objective: OneStepObjective::Vfe,
+        calibrate: false,
+        choose_final_budget: true,
+        blow_up_fallback: false,
+        ..p.clone()
+    };
+    assert_eq!(*t, expected, "only the switched settings move");
+    assert_ne!(p.one_step_objective, OneStepObjective::Vfe);
+    let narx = with(
+        Method::GpNarx,
+        Switches {
+            one_step_objective: Some(OneStepObjective::Exact),
+            ..Switches::default()
+        },
+    )
+    .settings(&data)
+    .expect("a one-step objective");
+    assert!(matches!(
+        narx.method,
+        MethodSettings::GpNarx(OneStepFitSettings {
+            objective: OneStepObjective::Exact,
+            ..
+        })
+    ));
+    for (switch, name) in [
+        (
+            Switches {
+                calibrate: Some(false),
+                ..Switches::default()
+            },
+            "calibrate",
+        ),
+        (
+            Switches {
+                choose_final_budget: Some(true),
+                ..Switches::default()
+            },
+            "choose_final_budget",
+        ),
+        (
+            Switches {
+                blow_up_fallback: Some(false),
+                ..Switches::default()
+            },
+            "blow_up_fallback",
+        ),
+    ] {
+        let e = with(Method::GpNarx, switch)
+            .settings(&data)
+            .expect_err("not gp-narx's");
+        assert!(
+            matches!(&e, MsgpError::InvalidSetting { name: n, reason } if *n == name && reason.contains("gp-narx")),
+            "{e:?}"
+        );
+    }
+    let e = with(
+        Method::LinearKf,
+        Switches {
+            one_step_objective: Some(OneStepObjective::Vfe),
+            ..Switches::default()
+        },
+    )
+    .settings(&data)
+    .expect_err("no one-step fit");
+    assert!(
+        matches!(
+            &e,
+            MsgpError::InvalidSetting {
+                name: "one_step_objective",
+                ..
+            }
+        ),
+        "{e:?}"
+    );
 }
 
 /// A warm start continues the previous model: zero iterations give it back unchanged (same
