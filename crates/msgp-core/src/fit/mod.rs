@@ -367,10 +367,36 @@ fn fit_unchecked(
                 threads: settings.threads,
                 ..OneStepSettings::default()
             };
-            return msgp::fit_msgp(
-                episodes, &norm, normalizer, spec, settings, msgp, previous, &one_step, start,
-                progress, report,
+            // a training on the other thread, whose events reach the observer relayed, stops a
+            // step or more after the event the observer broke on: the error names that event,
+            // as a fit on one thread does
+            let mut broke_at = None;
+            let mut observed = |p: &FitProgress| {
+                let flow = progress(p);
+                if flow.is_break() && broke_at.is_none() {
+                    broke_at = Some(p.iteration);
+                }
+                flow
+            };
+            let fitted = msgp::fit_msgp(
+                episodes,
+                &norm,
+                normalizer,
+                spec,
+                settings,
+                msgp,
+                previous,
+                &one_step,
+                start,
+                &mut observed,
+                report,
             );
+            return match (fitted, broke_at) {
+                (Err(MsgpError::Stopped { .. }), Some(iteration)) => {
+                    Err(MsgpError::Stopped { iteration })
+                }
+                (fitted, _) => fitted,
+            };
         }
         MethodSettings::GpNarx(s) => (false, s),
         MethodSettings::PilcoNarx(s) => (true, s),
