@@ -45,7 +45,6 @@ use crate::error::{MsgpError, Result};
 use crate::gp::integrator::Structure;
 use crate::gp::{GpConfig, MeanFunction};
 use crate::model::Model;
-use crate::narx::NarxSpec;
 use crate::numeric::linalg::JitterLog;
 use crate::policy::PolicySpec;
 use one_step::{OneStepSettings, fit_one_step, one_step_pairs};
@@ -368,10 +367,12 @@ fn fit_unchecked(
                 threads: settings.threads,
                 ..OneStepSettings::default()
             };
-            return fit_msgp_observed(
-                episodes, &norm, normalizer, spec, settings, msgp, previous, &one_step, start,
-                progress, report,
-            );
+            return stop_named(progress, |observed| {
+                msgp::fit_msgp(
+                    episodes, &norm, normalizer, spec, settings, msgp, previous, &one_step, start,
+                    observed, report,
+                )
+            });
         }
         MethodSettings::GpNarx(s) => (false, s),
         MethodSettings::PilcoNarx(s) => (true, s),
@@ -411,44 +412,21 @@ fn fit_unchecked(
     Ok((model, report))
 }
 
-/// [`msgp::fit_msgp`], its stop named by the event the observer broke on: a training on the
-/// other thread, whose events reach the observer relayed, stops a step or more after that
-/// event, and the error names the event, as a fit on one thread does.
-#[allow(clippy::too_many_arguments)]
-fn fit_msgp_observed(
-    episodes: &[TrainingEpisode],
-    norm: &[Trajectory],
-    normalizer: Normalizer,
-    spec: NarxSpec,
-    settings: &FitSettings,
-    msgp: &MsgpSettings,
-    previous: Option<&Model>,
-    one_step: &OneStepSettings,
-    start: Instant,
+/// `fit(progress)`, its stop named by the event `progress` broke on: a training on the other
+/// thread, whose events reach the observer relayed, stops a step or more after that event, and
+/// the error names the event, as a fit on one thread does.
+fn stop_named<T>(
     progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
-    report: FitReport,
-) -> Result<(Model, FitReport)> {
+    fit: impl FnOnce(&mut dyn FnMut(&FitProgress) -> ControlFlow<()>) -> Result<T>,
+) -> Result<T> {
     let mut broke_at = None;
-    let mut observed = |p: &FitProgress| {
+    let fitted = fit(&mut |p: &FitProgress| {
         let flow = progress(p);
         if flow.is_break() && broke_at.is_none() {
             broke_at = Some(p.iteration);
         }
         flow
-    };
-    let fitted = msgp::fit_msgp(
-        episodes,
-        norm,
-        normalizer,
-        spec,
-        settings,
-        msgp,
-        previous,
-        one_step,
-        start,
-        &mut observed,
-        report,
-    );
+    });
     match (fitted, broke_at) {
         (Err(MsgpError::Stopped { .. }), Some(iteration)) => Err(MsgpError::Stopped { iteration }),
         (fitted, _) => fitted,

@@ -116,32 +116,30 @@ impl Switches {
             }
         }
         if let Some(on) = self.calibrate {
-            msgp(method, "calibrate", "only msgp fits are calibrated")?.calibrate = on;
+            msgp(method, name, "calibrate", "only msgp fits are calibrated")?.calibrate = on;
         }
         if let Some(on) = self.choose_final_budget {
             let what = "only msgp fits train on all the data after a validation tail";
-            msgp(method, "choose_final_budget", what)?.choose_final_budget = on;
+            msgp(method, name, "choose_final_budget", what)?.choose_final_budget = on;
         }
         if let Some(on) = self.blow_up_fallback {
             let what = "where an msgp fit's zero-mean recipe may retrain";
-            msgp(method, "blow_up_fallback", what)?.blow_up_fallback = on;
+            msgp(method, name, "blow_up_fallback", what)?.blow_up_fallback = on;
         }
         Ok(())
     }
 }
 
-/// `method`'s MSGP settings, or the refusal of `setting` (`what` it is) by another method.
+/// `method`'s MSGP settings, or the refusal of `setting` (`what` it is) by method `name`.
 fn msgp<'a>(
     method: &'a mut MethodSettings,
+    name: &str,
     setting: &'static str,
     what: &str,
 ) -> Result<&'a mut MsgpSettings> {
-    let name = match method {
-        MethodSettings::Msgp(s) => return Ok(s),
-        MethodSettings::GpNarx(_) => Method::GpNarx.name(),
-        MethodSettings::PilcoNarx(_) => Method::PilcoNarx.name(),
-        MethodSettings::LinearKf(_) => Method::LinearKf.name(),
-    };
+    if let MethodSettings::Msgp(s) = method {
+        return Ok(s);
+    }
     Err(MsgpError::InvalidSetting {
         name: setting,
         reason: format!("{what}; method {name} has none"),
