@@ -83,8 +83,8 @@ fn closed_loop_expected_cost_matches_monte_carlo() {
         cov: cov.clone(),
     };
     let (t0, horizon) = (2, 22);
-    let mm =
-        closed_loop_cost(&gp, &spec, &start, &policy, t0, horizon, &cost, &mut log).expect("cost");
+    let mm = closed_loop_cost(&gp, &spec, &start, &policy, (t0, horizon), &cost, &mut log)
+        .expect("cost");
 
     // Monte Carlo over the same process
     let steps = horizon - t0;

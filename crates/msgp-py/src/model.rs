@@ -251,6 +251,8 @@ impl Msgp {
         signature = (history = None, inducing = None, method = "msgp", seed = 0, iterations = None, settings = None, likelihood = None, start = None, segment_length = None),
         text_signature = "(history=(2, 2), inducing=None, method='msgp', seed=0, iterations=None, settings=None, likelihood=None, start=None, segment_length=None)"
     )]
+    // (the Python constructor's keyword arguments, one parameter each)
+    #[allow(clippy::too_many_arguments)]
     fn new(
         history: Option<&Bound<'_, PyAny>>,
         inducing: Option<i128>,

@@ -92,8 +92,7 @@ pub fn table1_plan<'py>(
     let plan = Plan::new(
         &seeds,
         &only.unwrap_or_default(),
-        &methods,
-        &likelihoods,
+        (&methods, &likelihoods),
         inducing,
         iters,
         optimizer,

@@ -135,7 +135,7 @@ def test_not_fitted():
     with pytest.raises(msgp.NotFittedError, match="not fitted yet"):
         msgp.Msgp().simulate(U, Y)
     with pytest.raises(msgp.NotFittedError):
-        msgp.Msgp().params
+        _ = msgp.Msgp().params
 
 
 def test_model_file_errors(tmp_path, small):

@@ -234,7 +234,7 @@ def test_fit_reports_progress_and_stops_on_its_exception():
     with pytest.raises(Enough):
         stopped.fit(data["u_train"], data["y_train"], progress=stop_at_third)
     with pytest.raises(msgp.NotFittedError):
-        stopped.params
+        _ = stopped.params
     with pytest.raises(msgp.InvalidInputError, match="callable"):
         msgp.Msgp(**args).fit(data["u_train"], data["y_train"], progress="loud")
 

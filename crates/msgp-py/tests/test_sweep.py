@@ -33,10 +33,10 @@ def numbers(rows):
 
 def comparable(markdown):
     """The section without its provenance lines and timing columns."""
-    lines = [l for l in markdown.splitlines() if not l.startswith(("- Command", "- Wall time"))]
+    lines = [line for line in markdown.splitlines() if not line.startswith(("- Command", "- Wall time"))]
     # calibration rows end with "| train s | iterations (kept) |"
-    return [re.sub(r"\| [^|]* \| [^|]* \|$", "| |", l) if l.startswith("| Synthetic") else l
-            for l in lines]
+    return [re.sub(r"\| [^|]* \| [^|]* \|$", "| |", line) if line.startswith("| Synthetic") else line
+            for line in lines]
 
 
 @pytest.fixture(scope="module")

@@ -53,8 +53,8 @@ def comparable(markdown, runs: Path):
     """The section without its provenance lines and the columns of measured seconds, the runs'
     folder `runs` named DIR."""
     markdown = markdown.strip().replace(str(runs), "DIR")
-    lines = [l for l in markdown.splitlines() if not l.startswith(("- Command", "- Wall time"))]
-    return [re.sub(r"\| [^|]* \|$", "| |", l) if l.startswith("| ") else l for l in lines]
+    lines = [line for line in markdown.splitlines() if not line.startswith(("- Command", "- Wall time"))]
+    return [re.sub(r"\| [^|]* \|$", "| |", line) if line.startswith("| ") else line for line in lines]
 
 
 def section(text):

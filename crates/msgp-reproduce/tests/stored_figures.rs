@@ -59,8 +59,7 @@ fn a_table1_row_keeps_its_stored_figures() {
     let plan = Plan::new(
         &[0],
         &["synthetic5".to_string()],
-        &[],
-        &[],
+        (&[], &[]),
         20,
         Some(40),
         FitOptimizer::Adam,

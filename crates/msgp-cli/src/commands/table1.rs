@@ -42,8 +42,7 @@ pub fn run(args: &Table1Args) -> anyhow::Result<()> {
     let plan = Plan::new(
         &args.common.seeds,
         &args.common.only,
-        &methods,
-        &likelihoods,
+        (&methods, &likelihoods),
         args.inducing,
         args.iters,
         args.optimizer.into(),

@@ -292,7 +292,7 @@ fn fit_episodes_from(
     previous: Option<&Model>,
     progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
 ) -> Result<(Model, FitReport)> {
-    let (model, mut report) = fit_unchecked(episodes, settings, previous, progress)?;
+    let (model, mut report) = fit_unchecked(episodes, settings, previous, progress, None)?;
     let open_loop: Vec<&Trajectory> = episodes
         .iter()
         .filter(|e| e.policy.is_none())
@@ -302,11 +302,15 @@ fn fit_episodes_from(
     Ok((model, report))
 }
 
+/// The fit without the final divergence check; an MSGP fit's choice among its recipes'
+/// models judges their divergence by `diverges` where given (the protocol's tests), else by
+/// [`check_divergence`].
 fn fit_unchecked(
     episodes: &[TrainingEpisode],
     settings: &FitSettings,
     previous: Option<&Model>,
     progress: &mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
+    diverges: Option<msgp::Diverges<'_>>,
 ) -> Result<(Model, FitReport)> {
     let start = Instant::now();
     let refs: Vec<&Trajectory> = episodes.iter().map(|e| &e.traj).collect();
@@ -367,11 +371,19 @@ fn fit_unchecked(
                 threads: settings.threads,
                 ..OneStepSettings::default()
             };
+            let fit = msgp::MsgpFit {
+                episodes,
+                norm: &norm,
+                normalizer: &normalizer,
+                spec,
+                settings,
+                msgp,
+                previous,
+                one_step: &one_step,
+                start,
+            };
             return stop_named(progress, |observed| {
-                msgp::fit_msgp(
-                    episodes, &norm, normalizer, spec, settings, msgp, previous, &one_step, start,
-                    observed, report,
-                )
+                msgp::fit_msgp(fit, observed, report, diverges)
             });
         }
         MethodSettings::GpNarx(s) => (false, s),

@@ -1662,18 +1662,24 @@ fn a_blown_up_final_training_tries_the_fallback_heads() {
     assert_eq!(alone.params, one.params);
 }
 
-/// Runs `f` with `judge` deciding which models the protocol's choice counts as diverging
-/// (`msgp::DIVERGENCE_JUDGE`), then puts the real check back.
-fn with_divergence_judge<R>(judge: msgp::DivergenceJudge, f: impl FnOnce() -> R) -> R {
-    msgp::DIVERGENCE_JUDGE.set(Some(judge));
-    let out = f();
-    msgp::DIVERGENCE_JUDGE.set(None);
-    out
+/// The fit of `traj` with `judge` deciding which models the protocol's choice counts as
+/// diverging (in place of [`check_divergence`]).
+fn fit_judged(
+    traj: &Trajectory,
+    settings: &FitSettings,
+    judge: &dyn Fn(&Model) -> Option<String>,
+) -> (Model, FitReport) {
+    let episodes = [TrainingEpisode {
+        traj: traj.clone(),
+        policy: None,
+    }];
+    let mut go_on = |_: &FitProgress| ControlFlow::Continue(());
+    fit_unchecked(&episodes, settings, None, &mut go_on, Some(judge)).expect("fit")
 }
 
 /// A judge by the model's prior mean: `mean`'s models diverge.
-fn diverging(mean: MeanFunction) -> msgp::DivergenceJudge {
-    Box::new(move |m: &Model| (m.config.mean == mean).then(|| "it runs away".to_string()))
+fn diverging(mean: MeanFunction) -> impl Fn(&Model) -> Option<String> {
+    move |m: &Model| (m.config.mean == mean).then(|| "it runs away".to_string())
 }
 
 /// Where the recipe the validation tail chose ends in a model that diverges over the training
@@ -1702,9 +1708,7 @@ fn a_model_that_diverges_gives_way_to_the_next_recipe() {
     let other = 1 - preferred;
     let preferred_mean = r0.recipes[preferred].recipe.mean;
 
-    let (model, r) = with_divergence_judge(diverging(preferred_mean), || {
-        fit(std::slice::from_ref(&traj), &adam, &mut |_| {}).expect("fit")
-    });
+    let (model, r) = fit_judged(&traj, &adam, &diverging(preferred_mean));
     assert_eq!(r.chosen_recipe, other, "{:?}", r.recipes);
     let aside = r.set_aside().expect("the preferred recipe was set aside");
     assert_eq!(aside.recipe, r0.recipes[preferred].recipe);
@@ -1729,9 +1733,7 @@ fn a_model_that_diverges_gives_way_to_the_next_recipe() {
     assert_eq!(model.params, reference.params);
 
     // every model diverges: the tail's choice, as without the check
-    let (same, r) = with_divergence_judge(Box::new(|_| Some("always".into())), || {
-        fit(std::slice::from_ref(&traj), &adam, &mut |_| {}).expect("fit")
-    });
+    let (same, r) = fit_judged(&traj, &adam, &|_| Some("always".into()));
     assert_eq!(same.params, first.params);
     assert_eq!(same.calibration, first.calibration);
     assert_eq!(r.chosen_recipe, preferred);
@@ -1742,9 +1744,7 @@ fn a_model_that_diverges_gives_way_to_the_next_recipe() {
     let lbfgs = settings(msgp(FitOptimizer::Lbfgs));
     let (_, h0) = fit(std::slice::from_ref(&traj), &lbfgs, &mut |_| {}).expect("fit");
     let head_mean = h0.recipes[h0.chosen_recipe].recipe.mean;
-    let (head, h) = with_divergence_judge(diverging(head_mean), || {
-        fit(std::slice::from_ref(&traj), &lbfgs, &mut |_| {}).expect("fit")
-    });
+    let (head, h) = fit_judged(&traj, &lbfgs, &diverging(head_mean));
     assert_eq!(h.full_data_iteration, None);
     assert_eq!(h.chosen_recipe, 1 - h0.chosen_recipe);
     assert_ne!(head.config.mean, head_mean);

@@ -148,7 +148,7 @@ pub fn filter_steps<T: MomentMatch>(
         layout.set_measured_input(&mut amu, &traj.u, t);
         let cross = acov.view((0, layout.x_slot()), (d, dy)).into_owned();
         let (pmu, psigma) = gather(&amu, &acov, &sel);
-        let up = kalman_update(gp, &pmu, &psigma, &ycov, &mm.mean, traj, t, log)?;
+        let up = kalman_update(gp, (&pmu, &psigma), &ycov, &mm.mean, traj, t, log)?;
         nll += up.nll;
         steps += 1;
 
@@ -200,8 +200,7 @@ pub(crate) struct KalmanUpdate<T: Scalar> {
 /// adjoint sweep ([`super::filter_loss_and_gradient`]), so both compute the same bits.
 pub(crate) fn kalman_update<T: Scalar>(
     gp: &PreparedGp<T>,
-    pmu: &DVector<T>,
-    psigma: &DMatrix<T>,
+    (pmu, psigma): (&DVector<T>, &DMatrix<T>),
     ycov: &DMatrix<T>,
     x_mean: &DVector<T>,
     traj: &Trajectory,

@@ -100,8 +100,7 @@ pub(crate) fn weighted_filter_loss_and_gradient(
     log: &mut JitterLog,
 ) -> Result<(LossValue<f64>, Vec<f64>)> {
     gradient_over_episodes(
-        params,
-        config,
+        (params, config),
         spec,
         episodes,
         complexity,
@@ -153,7 +152,7 @@ fn filter_adjoint(
             layout.augmented(&pred.wmu, &pred.wsig, &pred.mean, &pred.v, &pred.xcov);
         layout.set_measured_input(&mut amu, &traj.u, t);
         let (pmu, psigma) = gather(&amu, &acov, &sel);
-        let up = kalman_update(gp, &pmu, &psigma, &pred.ycov, &pred.mean, traj, t, log)?;
+        let up = kalman_update(gp, (&pmu, &psigma), &pred.ycov, &pred.mean, traj, t, log)?;
         nll += up.nll;
         recs.push(FilterRecord {
             pred,

@@ -153,8 +153,7 @@ pub(crate) fn weighted_loss_and_gradient(
     log: &mut JitterLog,
 ) -> Result<(LossValue<f64>, Vec<f64>)> {
     gradient_over_episodes(
-        params,
-        config,
+        (params, config),
         spec,
         episodes,
         complexity,
@@ -177,8 +176,7 @@ pub(crate) fn weighted_loss_and_gradient(
 /// `threads`), adds the complexity term `complexity.0` weighted by `complexity.1` and pulls the summed adjoints through the GP's
 /// preparation to the parameters ([`GpParams::to_flat`] layout).
 pub(crate) fn gradient_over_episodes(
-    params: &GpParams<f64>,
-    config: &GpConfig,
+    (params, config): (&GpParams<f64>, &GpConfig),
     spec: &NarxSpec,
     episodes: &[Episode],
     (complexity, weight): (Complexity, f64),

@@ -39,8 +39,7 @@ pub fn closed_loop_cost<T: MomentMatch>(
     spec: &NarxSpec,
     start: &StartState<T>,
     policy: &dyn FeedbackPolicy<T>,
-    t0: usize,
-    horizon: usize,
+    (t0, horizon): (usize, usize),
     cost: &SaturatingCost,
     log: &mut JitterLog,
 ) -> Result<RolloutCost<T>> {

@@ -6,6 +6,8 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 import numpy as np
 import numpy.typing as npt
 
+from .settings import FitSettings
+
 __version__: str
 
 # One trajectory: an array (n, d) or (n,) (anything numpy turns into floats); several: a list
@@ -48,7 +50,8 @@ class Msgp:
         likelihood, default 400) — `msgp fit --iters`.
     seed: seed of every random choice.
     settings: other fields of `defaults("fit", method=method)` to override (advanced; each
-        method has its own: a setting of another method is refused by name), e.g.
+        method has its own, typed in `msgp.settings`: `MsgpFitSettings`, `OneStepFitSettings`,
+        `LinearKfFitSettings`; a setting of another method is refused by name), e.g.
         `{"mean": "linear", "integrators": [{"output": 0, "order": 2}]}` declares output 0 a
         pure double integrator (`msgp fit --integrating 0:2`; add `"linear": True` for
         `0:2:linear`); `{"optimizer": "lbfgs"}` fits by L-BFGS (`msgp fit --optimizer lbfgs`).
@@ -72,7 +75,7 @@ class Msgp:
         method: str = "msgp",
         seed: int = 0,
         iterations: Optional[int] = None,
-        settings: Optional[Dict[str, Any]] = None,
+        settings: Optional[FitSettings] = None,
         likelihood: Optional[str] = None,
         start: Optional[str] = None,
         segment_length: Optional[int] = None,

@@ -325,8 +325,7 @@ impl Plan {
     pub fn new(
         seeds: &[u64],
         only: &[String],
-        methods: &[Method],
-        likelihoods: &[Likelihood],
+        (methods, likelihoods): (&[Method], &[Likelihood]),
         inducing: usize,
         iters: Option<usize>,
         optimizer: FitOptimizer,

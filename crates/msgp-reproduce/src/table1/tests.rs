@@ -21,8 +21,7 @@ fn free_run_msgp_plan(seeds: &[u64], benchmarks: &[&str]) -> Plan {
     Plan::new(
         seeds,
         &only,
-        &[Method::Msgp],
-        &[Likelihood::FreeRun],
+        (&[Method::Msgp], &[Likelihood::FreeRun]),
         10,
         None,
         FitOptimizer::Adam,
@@ -58,8 +57,7 @@ fn results_assemble_in_any_order_and_every_unit_exactly_once() {
     let plan = Plan::new(
         &[3, 1],
         &only,
-        &[Method::GpNarx, Method::Msgp],
-        &[Likelihood::Filter],
+        (&[Method::GpNarx, Method::Msgp], &[Likelihood::Filter]),
         10,
         None,
         FitOptimizer::Adam,
@@ -119,8 +117,7 @@ fn results_assemble_in_any_order_and_every_unit_exactly_once() {
     let e = Plan::new(
         &[0],
         &["x".into()],
-        &[],
-        &[],
+        (&[], &[]),
         10,
         None,
         FitOptimizer::Adam,
@@ -218,8 +215,7 @@ fn an_auto_history_unit_fits_the_history_its_training_part_chooses() {
     let plan = Plan::new(
         &[0],
         &["synthetic1".into()],
-        &[Method::GpNarx],
-        &[],
+        (&[Method::GpNarx], &[]),
         10,
         None,
         FitOptimizer::Adam,

@@ -1,0 +1,123 @@
+"""The settings a fit takes, as types: ``Msgp(settings=...)`` overrides fields of
+``msgp.defaults("fit", method=...)``, and these ``TypedDict``\\ s name every field of each
+method, with its type (a type checker then catches a misspelt or misplaced one; at run time a
+field of another method is refused by name). ``MsgpFitSettings`` for ``method="msgp"``,
+``OneStepFitSettings`` for ``"gp-narx"`` and ``"pilco-narx"``, ``LinearKfFitSettings`` for
+``"linear-kf"``. The keys are those of the Rust ``FitSettings`` (a test compares them)."""
+
+from typing import Dict, List, Literal, Optional, TypedDict, Union
+
+__all__ = [
+    "Integrator",
+    "Recipe",
+    "Segments",
+    "MsgpFitSettings",
+    "OneStepFitSettings",
+    "LinearKfFitSettings",
+    "FitSettings",
+]
+
+Mean = Literal["zero", "linear"]
+Complexity = Literal["pseudo-data-nll", "half-log-det", "neg-half-log-det", "none"]
+NoiseStart = Literal["split", "full"]
+Solver = Literal["adam", "lbfgs"]
+OneStepObjective = Literal["exact", "vfe"]
+
+
+class _Integrator(TypedDict):
+    output: int
+    order: int
+
+
+class Integrator(_Integrator, total=False):
+    """An output that integrates (``msgp fit --integrating OUTPUT:ORDER[:linear]``): output
+    ``output`` is a pure integrator of order ``order`` (1 or 2) of the others; ``linear``: its
+    GP is switched off, the linear mean carries it."""
+
+    linear: bool
+
+
+class Recipe(TypedDict):
+    """An MSGP training recipe (``alternative``): prior mean, complexity term, Adam step and
+    noise start."""
+
+    mean: Mean
+    complexity: Complexity
+    learning_rate: float
+    noise_start: NoiseStart
+
+
+class Segments(TypedDict):
+    """Training by segments of a long log: ``length`` predicted steps each, ``batch`` of them
+    per Adam step (``msgp fit --segment-length``)."""
+
+    length: int
+    batch: int
+
+
+class _Shared(TypedDict, total=False):
+    ly: int
+    """Output lags of the window."""
+    lu: int
+    """Input lags of the window."""
+    seed: int
+    """Seed of every random choice."""
+    integrators: List[Integrator]
+    """Outputs that integrate (``msgp fit --integrating``)."""
+
+
+class MsgpFitSettings(_Shared, total=False):
+    """The MSGP fit's own fields (``msgp fit --method msgp``)."""
+
+    inducing: int
+    mean: Mean
+    complexity: Complexity
+    likelihood: Literal["free-run", "filter"]
+    iterations: int
+    """Most Adam steps of the early-stopped head training."""
+    full_data_iterations: Optional[int]
+    """Length of the final training on all the data (``msgp fit --iters``); None: none."""
+    learning_rate: float
+    optimizer: Solver
+    noise_floor: float
+    noise_start: NoiseStart
+    start: Literal["one-step", "spread", "linear-kf"]
+    start_window: Union[Literal["measured"], Dict[str, Dict[str, int]]]
+    """Where a measured trajectory's rollout starts: "measured" (the paper's), or
+    ``{"smoothed": {"samples": n, "degree": d}}``."""
+    alternative: Optional[Recipe]
+    """The recipe raced against the settings' own on the validation tail; None: none."""
+    validation_fraction: float
+    eval_every: int
+    patience: int
+    refit: bool
+    frozen: List[Literal["PseudoInputs", "PseudoTargets", "Lengthscales", "SignalVar",
+                         "ProcessNoise", "ObsNoise", "LinearMean"]]
+    one_step_iterations: int
+    one_step_solver: Solver
+    one_step_objective: OneStepObjective
+    calibrate: bool
+    blow_up_fallback: bool
+    full_data_blow_up: float
+    choose_final_budget: bool
+    segments: Optional[Segments]
+
+
+class OneStepFitSettings(_Shared, total=False):
+    """A one-step GP-NARX fit's own fields (``--method gp-narx`` or ``pilco-narx``)."""
+
+    inducing: int
+    mean: Mean
+    iterations: int
+    solver: Solver
+    objective: OneStepObjective
+
+
+class LinearKfFitSettings(_Shared, total=False):
+    """The linear Kalman-filter model's own fields (``--method linear-kf``)."""
+
+    iterations: int
+
+
+FitSettings = Union[MsgpFitSettings, OneStepFitSettings, LinearKfFitSettings]
+"""The settings ``Msgp(settings=...)`` takes, by method."""
