@@ -442,9 +442,11 @@ pub struct FitArgs {
     /// Training method.
     #[arg(long, value_enum, default_value_t = MethodArg::Msgp)]
     pub method: MethodArg,
-    /// Solver iterations: on the trajectory likelihood for msgp [default: 400]; at most this
-    /// many L-BFGS iterations on the one-step marginal likelihood for gp-narx and pilco-narx
-    /// (it stops by itself when converged) [default: 300].
+    /// The most solver iterations of any one training: for msgp, of each training on the
+    /// trajectory likelihood (without it, the early-stopped run on the head stops by its tail
+    /// within 1000 and the final training on all the data runs 400); for gp-narx and
+    /// pilco-narx, L-BFGS on the one-step marginal likelihood, which stops by itself when
+    /// converged [default: 300]; for linear-kf, L-BFGS on the filter likelihood [default: 400].
     #[arg(long, value_name = "N")]
     pub iters: Option<usize>,
     /// Solver of the MSGP loss.

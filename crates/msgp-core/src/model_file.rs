@@ -411,12 +411,25 @@ impl ModelFile {
         };
         spec.validate()
             .map_err(|e| shape_err(path, e.to_string()))?;
-        let d = spec.input_dim();
-        let g = &self.gp;
-        let m = g.pseudo_inputs.len();
-        if m == 0 {
+        if self.gp.pseudo_inputs.is_empty() {
             return Err(shape_err(path, "`gp.pseudo_inputs` is empty".into()));
         }
+        let normalizer = self.normalizer_at(path, du, dy)?;
+        let params = self.params_at(path, &spec)?;
+        let calibration = self.calibration_at(path, dy)?;
+        let config = self.config_at(path)?;
+        Ok(Model {
+            method,
+            spec,
+            params,
+            config,
+            normalizer,
+            calibration,
+        })
+    }
+
+    /// The normalisation, each vector of its length, finite, the scales positive.
+    fn normalizer_at(&self, path: &Path, du: usize, dy: usize) -> Result<Normalizer> {
         let n = &self.normalization;
         for (what, v, len) in [
             ("normalization.u_mean", &n.u_mean, du),
@@ -438,6 +451,18 @@ impl ModelFile {
                 ));
             }
         }
+        Ok(Normalizer {
+            u_mean: n.u_mean.clone(),
+            u_std: n.u_std.clone(),
+            y_mean: n.y_mean.clone(),
+            y_std: n.y_std.clone(),
+        })
+    }
+
+    /// The GP's parameters, each of the window's shape and finite.
+    fn params_at(&self, path: &Path, spec: &NarxSpec) -> Result<GpParams<f64>> {
+        let (g, d, dy) = (&self.gp, spec.input_dim(), spec.dy);
+        let m = g.pseudo_inputs.len();
         let params = GpParams {
             pseudo_inputs: matrix(path, "gp.pseudo_inputs", &g.pseudo_inputs, m, d)?,
             pseudo_targets: matrix(path, "gp.pseudo_targets", &g.pseudo_targets, m, dy)?,
@@ -461,20 +486,28 @@ impl ModelFile {
         ] {
             check_finite(path, what, values)?;
         }
-        let calibration = match &g.calibration {
-            Some(c) => {
-                vector(path, "gp.calibration", c, dy)?;
-                check_finite(path, "gp.calibration", c)?;
-                if let Some(i) = c.iter().position(|v| *v < 0.0) {
-                    return Err(shape_err(
-                        path,
-                        format!("`gp.calibration` entry {i} is negative"),
-                    ));
-                }
-                c.clone()
-            }
-            None => Vec::new(),
+        Ok(params)
+    }
+
+    /// The calibration's added variances (none in files before it), each finite and ≥ 0.
+    fn calibration_at(&self, path: &Path, dy: usize) -> Result<Vec<f64>> {
+        let Some(c) = &self.gp.calibration else {
+            return Ok(Vec::new());
         };
+        vector(path, "gp.calibration", c, dy)?;
+        check_finite(path, "gp.calibration", c)?;
+        if let Some(i) = c.iter().position(|v| *v < 0.0) {
+            return Err(shape_err(
+                path,
+                format!("`gp.calibration` entry {i} is negative"),
+            ));
+        }
+        Ok(c.clone())
+    }
+
+    /// The GP's configuration: its noise floor, jitter policy and prior mean.
+    fn config_at(&self, path: &Path) -> Result<GpConfig> {
+        let g = &self.gp;
         let j = g.jitter;
         let valid = g.noise_floor.is_finite()
             && g.noise_floor >= 0.0
@@ -490,31 +523,19 @@ impl ModelFile {
                 "`gp.noise_floor` must be ≥ 0 and `gp.jitter` needs 0 < initial_relative ≤ max_relative and growth > 1".into(),
             ));
         }
-        Ok(Model {
-            method,
-            spec,
-            params,
-            config: GpConfig {
-                noise_floor: g.noise_floor,
-                jitter: JitterPolicy {
-                    initial_relative: j.initial_relative,
-                    growth: j.growth,
-                    max_relative: j.max_relative,
-                },
-                mean: if g.linear_mean.is_some() {
-                    MeanFunction::Linear
-                } else {
-                    MeanFunction::Zero
-                },
-                ..GpConfig::default()
+        Ok(GpConfig {
+            noise_floor: g.noise_floor,
+            jitter: JitterPolicy {
+                initial_relative: j.initial_relative,
+                growth: j.growth,
+                max_relative: j.max_relative,
             },
-            normalizer: Normalizer {
-                u_mean: n.u_mean.clone(),
-                u_std: n.u_std.clone(),
-                y_mean: n.y_mean.clone(),
-                y_std: n.y_std.clone(),
+            mean: if g.linear_mean.is_some() {
+                MeanFunction::Linear
+            } else {
+                MeanFunction::Zero
             },
-            calibration,
+            ..GpConfig::default()
         })
     }
 

@@ -17,6 +17,7 @@
 pub mod convert;
 pub mod data;
 pub mod error;
+pub mod fitting;
 pub mod learner;
 pub mod model;
 pub mod options;

@@ -7,18 +7,18 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use msgp_core::data::Trajectory;
-use msgp_core::fit::history::{HistoryEvent, HistorySearch, with_chosen_history};
-use msgp_core::fit::{FitOptions, FitReport, MsgpStart, OutputRange, Switches, fit_observed};
+use msgp_core::fit::{FitOptions, FitReport, MsgpStart, OutputRange, Switches};
 use msgp_core::loss::Likelihood;
 use msgp_core::model::{Method, Metrics, Model, Rollout, pool, score};
-use msgp_core::model_file::{FitRecord, ModelFile};
+use msgp_core::model_file::ModelFile;
 use msgp_core::numeric::parallel::Threads;
 use nalgebra::DMatrix;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 
 use crate::convert::{array1, array2, matrix, to_python, trajectories};
-use crate::error::{Error, Result, callable, detached, input, with_python};
+use crate::error::{Error, Result, callable, detached, input};
+use crate::fitting::{Fitted, fit_detached};
 use crate::options::{self, start_name};
 
 /// A rollout by name (`mm`, `mm-independent`, `mean`).
@@ -32,14 +32,6 @@ fn rollout(name: &str) -> Result<Rollout> {
                  \"mm-independent\" (the paper's moment matching) or \"mean\" (mean feedback)"
             ))
         })
-}
-
-/// A fitted or loaded model: the file as `msgp fit` writes it and the model it describes.
-#[derive(Debug)]
-struct Fitted {
-    file: ModelFile,
-    model: Model,
-    report: Option<FitReport>,
 }
 
 /// Gaussian-process dynamics model trained for long-term predictions (MSGP, Doerr et al.,
@@ -326,82 +318,9 @@ impl Msgp {
                 1,
             )?;
         }
-        let fitted = detached(py, move || -> Result<std::result::Result<Fitted, PyErr>> {
-            let mut raised = None;
-            // `history="auto"`: each judged candidate is a progress event of stage 0
-            let (options, choice) = match auto_history {
-                false => (options, None),
-                true => {
-                    let chosen = with_chosen_history(
-                        &options,
-                        &train,
-                        &HistorySearch::default(),
-                        &mut |event| match event {
-                            // (Ctrl-C stops the candidate's fit)
-                            HistoryEvent::Fit(_) => with_python(&mut raised, |_| Ok(())),
-                            HistoryEvent::Judged(p) => with_python(&mut raised, |py| {
-                                let Some(f) = &progress else {
-                                    return Ok(());
-                                };
-                                let d = PyDict::new(py);
-                                d.set_item("stage", 0)?;
-                                d.set_item("iteration", p.done)?;
-                                d.set_item("iterations", p.of)?;
-                                d.set_item("loss", p.scored.score)?;
-                                d.set_item("validation", None::<f64>)?;
-                                d.set_item("elapsed", p.elapsed)?;
-                                d.set_item("history", (p.scored.ly, p.scored.lu))?;
-                                f.call1(py, (d,))?;
-                                Ok(())
-                            }),
-                        },
-                    );
-                    if let Some(err) = raised.take() {
-                        return Ok(Err(err));
-                    }
-                    let (options, choice) = chosen?;
-                    (options, Some(choice))
-                }
-            };
-            let settings = options::settings(&options, overrides.as_ref(), &train)?;
-            let fitted = fit_observed(&train, &settings, &mut |p| {
-                with_python(&mut raised, |py| {
-                    let Some(f) = &progress else {
-                        return Ok(());
-                    };
-                    let d = PyDict::new(py);
-                    d.set_item("stage", p.stage)?;
-                    d.set_item("iteration", p.iteration)?;
-                    d.set_item("iterations", p.iterations)?;
-                    d.set_item("loss", p.loss)?;
-                    d.set_item("validation", p.validation)?;
-                    d.set_item("elapsed", p.elapsed)?;
-                    f.call1(py, (d,))?;
-                    Ok(())
-                })
-            });
-            if let Some(err) = raised {
-                return Ok(Err(err));
-            }
-            let (model, mut report) = fitted?;
-            report.history_choice = choice;
-            let file = ModelFile::from_fit(
-                &model,
-                &FitRecord {
-                    inputs: &inputs,
-                    outputs: &outputs,
-                    settings: &settings,
-                    report: &report,
-                    train: &train,
-                },
-            )?;
-            // predict with the model as saved, like `msgp fit`
-            let model = file.to_model()?;
-            Ok(Ok(Fitted {
-                file,
-                model,
-                report: Some(report),
-            }))
+        let names = (inputs, outputs);
+        let fitted = detached(py, move || {
+            fit_detached((options, overrides, auto_history), &train, &names, progress)
         })??;
         let diverged = fitted.file.training.diverged.clone();
         slf.try_borrow_mut()

@@ -434,30 +434,9 @@ pub fn fit_one_step(
             "{n} one-step pairs are too few to fit a GP"
         )));
     }
-    let linear_mean = match config.mean {
-        MeanFunction::Zero => DMatrix::zeros(e, d),
-        MeanFunction::Linear => {
-            let mut a = arx_linear_mean(data, config, &structure.fixed, log)?;
-            if structure.fixed.is_empty() {
-                stabilize_linear_mean(&mut a, data.output_lags);
-            }
-            a
-        }
-    };
-    // the targets the GP models: what the prior mean leaves over
-    let targets = &data.y - &data.x * linear_mean.transpose();
-    let gx = gp_inputs(&data.x, &structure.ignored);
-    let stride = n.div_ceil(settings.max_pairs.max(1));
-    let idx: Vec<usize> = (0..n).step_by(stride).collect();
-    let xs = DMatrix::from_fn(idx.len(), d, |i, k| gx[(idx[i], k)]);
-    let std: Vec<f64> = (0..d)
-        .map(|k| match structure.ignored.contains(&k) {
-            true => IGNORED_LENGTHSCALE,
-            false => column_std(&gx, k),
-        })
-        .collect();
-
-    let start = place_pseudo_inputs(&gx, m, seed)?;
+    let linear_mean = prior_mean(data, config, structure, log)?;
+    let problem = OneStep::new(data, &linear_mean, settings, config, structure);
+    let start = place_pseudo_inputs(&problem.gx, m, seed)?;
     let mm = start.nrows();
     let solver = match settings.solver {
         OneStepSolver::Lbfgs => Solver::Lbfgs(ONE_STEP_LBFGS),
@@ -466,62 +445,8 @@ pub fn fit_one_step(
             ..Adam::default()
         }),
     };
-    // each output's targets on the hyperparameters' subset, and the start of its fit
-    let subset = |a: usize| DVector::from_fn(idx.len(), |i, _| targets[(idx[i], a)]);
-    let start_hyper = |a: usize| -> Hyper {
-        let ys = subset(a);
-        let var_y = {
-            let mean = ys.mean();
-            ys.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (ys.len() as f64 - 1.0).max(1.0)
-        }
-        .max(1e-6);
-        let log_lengthscales = std.iter().map(|s| s.ln()).collect();
-        if structure.without_gp.contains(&a) {
-            // no GP: what the linear mean leaves over is noise (pseudo-targets stay zero)
-            Hyper {
-                log_lengthscales,
-                log_signal_var: NO_GP_SIGNAL_VAR.ln(),
-                log_noise: (var_y - config.noise_floor)
-                    .max(1e-3 * config.noise_floor)
-                    .ln(),
-            }
-        } else {
-            Hyper {
-                log_lengthscales,
-                log_signal_var: var_y.ln(),
-                log_noise: (0.05 * var_y).ln(),
-            }
-        }
-    };
-    // the variational sparse GP: hyperparameters of every output and the shared pseudo-inputs
-    // in one bound (with every window a pseudo-input it is the exact GP's likelihood)
     let vfe_fit = match settings.objective {
-        OneStepObjective::Vfe if mm < idx.len() => {
-            let ys = (0..e)
-                .map(|a| (!structure.without_gp.contains(&a)).then(|| subset(a)))
-                .collect();
-            let mut objective = Vfe::new(
-                &xs,
-                ys,
-                mm,
-                *config,
-                settings.pilco_penalty.then(|| std.clone()),
-            );
-            let hypers: Vec<Hyper> = (0..e).map(start_hyper).collect();
-            let x0 = objective.pack(&hypers, &start);
-            let mut active = Vec::with_capacity(x0.len());
-            for a in 0..e {
-                let gp = !structure.without_gp.contains(&a);
-                active.extend((0..d + 2).map(|k| gp && !structure.ignored.contains(&k)));
-            }
-            for k in 0..d {
-                active.extend(std::iter::repeat_n(!structure.ignored.contains(&k), mm));
-            }
-            let x = minimize_to_best(&mut objective, &solver, x0, &active, settings.iterations)?;
-            log.merge(&objective.log);
-            let hypers: Vec<Hyper> = (0..e).map(|a| objective.hyper(&x, a)).collect();
-            Some((hypers, objective.pseudo_inputs(&x)))
-        }
+        OneStepObjective::Vfe if mm < problem.idx.len() => Some(problem.vfe(&start, &solver, log)?),
         _ => None,
     };
     let pseudo = match &vfe_fit {
@@ -540,59 +465,9 @@ pub fn fit_one_step(
     // the outputs are independent fits: one per thread (faer runs sequentially), their
     // results and jitter records taken in output order, so any thread count gives the same bits
     let outputs: Vec<usize> = (0..e).collect();
-    let fit_output = |_: usize, &a: &usize| -> Result<(Hyper, DVector<f64>, JitterLog)> {
-        let mut log = JitterLog::default();
-        let h = if let Some((hypers, _)) = &vfe_fit {
-            hypers[a].clone()
-        } else if structure.without_gp.contains(&a) {
-            return Ok((start_hyper(a), DVector::zeros(mm), log));
-        } else {
-            let init = start_hyper(a);
-            let mut objective = Marginal::new(
-                &xs,
-                subset(a),
-                *config,
-                settings.pilco_penalty.then(|| std.clone()),
-            );
-            let mut active = vec![true; d + 2];
-            for &k in &structure.ignored {
-                active[k] = false;
-            }
-            let x = minimize_to_best(
-                &mut objective,
-                &solver,
-                init.to_vec(),
-                &active,
-                settings.iterations,
-            )?;
-            log.merge(&objective.log);
-            Hyper::from_vec(&x)
-        };
-        if structure.without_gp.contains(&a) {
-            return Ok((h, DVector::zeros(mm), log));
-        }
-
-        // project onto the pseudo-inputs (DTC mean)
-        let inv_l2 = h.inv_l2();
-        let sf2 = h.log_signal_var.exp();
-        let sn2 = config.noise_floor + h.log_noise.exp();
-        let yfull = DVector::from_fn(n, |i, _| targets[(i, a)]);
-        let ybar = if m >= n {
-            yfull
-        } else {
-            let kmm = kernel_matrix(&pseudo, &pseudo, &inv_l2, sf2);
-            let kmn = kernel_matrix(&pseudo, &gx, &inv_l2, sf2);
-            let a_mat = &kmm * sn2 + &kmn * kmn.transpose();
-            let ch = DenseChol::new(&a_mat, &config.jitter, "σ² K_mm + K_mn K_nm", &mut log)?;
-            let rhs = &kmn * &yfull;
-            let sol = ch.solve(&DMatrix::from_column_slice(mm, 1, rhs.as_slice()));
-            let mut kt = kmm;
-            for i in 0..mm {
-                kt[(i, i)] += sn2;
-            }
-            DVector::from_column_slice((&kt * sol).as_slice())
-        };
-        Ok((h, ybar, log))
+    let fit_output = |_: usize, &a: &usize| {
+        let vfe_hyper = vfe_fit.as_ref().map(|(hypers, _)| hypers[a].clone());
+        problem.fit_output(a, vfe_hyper, &pseudo, m, &solver)
     };
     let fits = crate::numeric::parallel::map_indexed(&outputs, settings.threads.get(), fit_output);
     for (a, fit) in fits.into_iter().enumerate() {
@@ -606,6 +481,219 @@ pub fn fit_one_step(
         params.log_process_noise[a] = h.log_noise;
     }
     Ok(params)
+}
+
+/// The GP's prior mean `A` (outputs × window): zero, or the linear ARX map by least squares
+/// (kept stable where no integrating output fixes part of it).
+fn prior_mean(
+    data: &OneStepData,
+    config: &GpConfig,
+    structure: &Structure,
+    log: &mut JitterLog,
+) -> Result<DMatrix<f64>> {
+    let (e, d) = (data.y.ncols(), data.x.ncols());
+    Ok(match config.mean {
+        MeanFunction::Zero => DMatrix::zeros(e, d),
+        MeanFunction::Linear => {
+            let mut a = arx_linear_mean(data, config, &structure.fixed, log)?;
+            if structure.fixed.is_empty() {
+                stabilize_linear_mean(&mut a, data.output_lags);
+            }
+            a
+        }
+    })
+}
+
+/// The one-step fit's problem: the targets the GP models (what the prior mean leaves over),
+/// its inputs, and the subset of pairs the hyperparameters are fitted on.
+struct OneStep<'a> {
+    targets: DMatrix<f64>,
+    /// The GP's inputs (ignored coordinates neutralised).
+    gx: DMatrix<f64>,
+    /// The pairs the hyperparameters see (every `stride`-th, at most `max_pairs`).
+    idx: Vec<usize>,
+    xs: DMatrix<f64>,
+    /// Each input's spread: the length-scales' start.
+    std: Vec<f64>,
+    settings: &'a OneStepSettings,
+    config: &'a GpConfig,
+    structure: &'a Structure,
+}
+
+impl<'a> OneStep<'a> {
+    fn new(
+        data: &OneStepData,
+        linear_mean: &DMatrix<f64>,
+        settings: &'a OneStepSettings,
+        config: &'a GpConfig,
+        structure: &'a Structure,
+    ) -> Self {
+        let (n, d) = data.x.shape();
+        let targets = &data.y - &data.x * linear_mean.transpose();
+        let gx = gp_inputs(&data.x, &structure.ignored);
+        let stride = n.div_ceil(settings.max_pairs.max(1));
+        let idx: Vec<usize> = (0..n).step_by(stride).collect();
+        let xs = DMatrix::from_fn(idx.len(), d, |i, k| gx[(idx[i], k)]);
+        let std: Vec<f64> = (0..d)
+            .map(|k| match structure.ignored.contains(&k) {
+                true => IGNORED_LENGTHSCALE,
+                false => column_std(&gx, k),
+            })
+            .collect();
+        Self {
+            targets,
+            gx,
+            idx,
+            xs,
+            std,
+            settings,
+            config,
+            structure,
+        }
+    }
+
+    /// Output `a`'s targets on the hyperparameters' subset.
+    fn subset(&self, a: usize) -> DVector<f64> {
+        DVector::from_fn(self.idx.len(), |i, _| self.targets[(self.idx[i], a)])
+    }
+
+    /// The start of output `a`'s fit: length-scales at the inputs' spread, the signal at the
+    /// targets' variance and the noise at 5 % of it (without a GP: all of it noise).
+    fn start_hyper(&self, a: usize) -> Hyper {
+        let ys = self.subset(a);
+        let var_y = {
+            let mean = ys.mean();
+            ys.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (ys.len() as f64 - 1.0).max(1.0)
+        }
+        .max(1e-6);
+        let log_lengthscales = self.std.iter().map(|s| s.ln()).collect();
+        let floor = self.config.noise_floor;
+        if self.structure.without_gp.contains(&a) {
+            // no GP: what the linear mean leaves over is noise (pseudo-targets stay zero)
+            Hyper {
+                log_lengthscales,
+                log_signal_var: NO_GP_SIGNAL_VAR.ln(),
+                log_noise: (var_y - floor).max(1e-3 * floor).ln(),
+            }
+        } else {
+            Hyper {
+                log_lengthscales,
+                log_signal_var: var_y.ln(),
+                log_noise: (0.05 * var_y).ln(),
+            }
+        }
+    }
+
+    /// The variational sparse GP from the pseudo-inputs `start`: hyperparameters of every
+    /// output and the shared pseudo-inputs in one bound (with every window a pseudo-input it
+    /// is the exact GP's likelihood).
+    fn vfe(
+        &self,
+        start: &DMatrix<f64>,
+        solver: &Solver,
+        log: &mut JitterLog,
+    ) -> Result<(Vec<Hyper>, DMatrix<f64>)> {
+        let (structure, e, d, mm) = (
+            self.structure,
+            self.targets.ncols(),
+            self.xs.ncols(),
+            start.nrows(),
+        );
+        let ys = (0..e)
+            .map(|a| (!structure.without_gp.contains(&a)).then(|| self.subset(a)))
+            .collect();
+        let penalty = self.settings.pilco_penalty.then(|| self.std.clone());
+        let mut objective = Vfe::new(&self.xs, ys, mm, *self.config, penalty);
+        let hypers: Vec<Hyper> = (0..e).map(|a| self.start_hyper(a)).collect();
+        let x0 = objective.pack(&hypers, start);
+        let mut active = Vec::with_capacity(x0.len());
+        for a in 0..e {
+            let gp = !structure.without_gp.contains(&a);
+            active.extend((0..d + 2).map(|k| gp && !structure.ignored.contains(&k)));
+        }
+        for k in 0..d {
+            active.extend(std::iter::repeat_n(!structure.ignored.contains(&k), mm));
+        }
+        let x = minimize_to_best(
+            &mut objective,
+            solver,
+            x0,
+            &active,
+            self.settings.iterations,
+        )?;
+        log.merge(&objective.log);
+        let hypers: Vec<Hyper> = (0..e).map(|a| objective.hyper(&x, a)).collect();
+        Ok((hypers, objective.pseudo_inputs(&x)))
+    }
+
+    /// Output `a`'s hyperparameters (the variational fit's `vfe_hyper`, else its own marginal
+    /// likelihood's) and pseudo-targets on `pseudo`.
+    fn fit_output(
+        &self,
+        a: usize,
+        vfe_hyper: Option<Hyper>,
+        pseudo: &DMatrix<f64>,
+        m: usize,
+        solver: &Solver,
+    ) -> Result<(Hyper, DVector<f64>, JitterLog)> {
+        let mut log = JitterLog::default();
+        let mm = pseudo.nrows();
+        let without_gp = self.structure.without_gp.contains(&a);
+        let h = match vfe_hyper {
+            Some(h) => h,
+            None if without_gp => return Ok((self.start_hyper(a), DVector::zeros(mm), log)),
+            None => {
+                let penalty = self.settings.pilco_penalty.then(|| self.std.clone());
+                let mut objective = Marginal::new(&self.xs, self.subset(a), *self.config, penalty);
+                let mut active = vec![true; self.xs.ncols() + 2];
+                for &k in &self.structure.ignored {
+                    active[k] = false;
+                }
+                let x0 = self.start_hyper(a).to_vec();
+                let iterations = self.settings.iterations;
+                let x = minimize_to_best(&mut objective, solver, x0, &active, iterations)?;
+                log.merge(&objective.log);
+                Hyper::from_vec(&x)
+            }
+        };
+        if without_gp {
+            return Ok((h, DVector::zeros(mm), log));
+        }
+        let ybar = self.project(&h, a, pseudo, m, &mut log)?;
+        Ok((h, ybar, log))
+    }
+
+    /// Output `a`'s pseudo-targets on `pseudo` under `h`: the DTC mean of all its targets
+    /// (the targets themselves where every window is a pseudo-input).
+    fn project(
+        &self,
+        h: &Hyper,
+        a: usize,
+        pseudo: &DMatrix<f64>,
+        m: usize,
+        log: &mut JitterLog,
+    ) -> Result<DVector<f64>> {
+        let n = self.targets.nrows();
+        let mm = pseudo.nrows();
+        let inv_l2 = h.inv_l2();
+        let sf2 = h.log_signal_var.exp();
+        let sn2 = self.config.noise_floor + h.log_noise.exp();
+        let yfull = DVector::from_fn(n, |i, _| self.targets[(i, a)]);
+        if m >= n {
+            return Ok(yfull);
+        }
+        let kmm = kernel_matrix(pseudo, pseudo, &inv_l2, sf2);
+        let kmn = kernel_matrix(pseudo, &self.gx, &inv_l2, sf2);
+        let a_mat = &kmm * sn2 + &kmn * kmn.transpose();
+        let ch = DenseChol::new(&a_mat, &self.config.jitter, "σ² K_mm + K_mn K_nm", log)?;
+        let rhs = &kmn * &yfull;
+        let sol = ch.solve(&DMatrix::from_column_slice(mm, 1, rhs.as_slice()));
+        let mut kt = kmm;
+        for i in 0..mm {
+            kt[(i, i)] += sn2;
+        }
+        Ok(DVector::from_column_slice((&kt * sol).as_slice()))
+    }
 }
 
 #[cfg(test)]

@@ -185,18 +185,42 @@ pub(crate) fn gradient_over_episodes(
     episode: impl Fn(&PreparedGp<f64>, &Episode, &mut GpAdjoint, &mut JitterLog) -> Result<(f64, usize)>
     + Sync,
 ) -> Result<(LossValue<f64>, Vec<f64>)> {
-    let shape: GpShape = params.shape()?;
-    let GpShape { m, d, e } = shape;
     let gp = PreparedGp::new(params, config, log)?;
-    // one adjoint accumulator per episode, summed in episode order: the result does not depend
-    // on how many threads ran the episodes
+    let (mut adj, nll, steps) =
+        summed_adjoints(&gp, params.shape()?, spec, episodes, threads, log, episode)?;
+    let comp = weight * complexity_term(params, &gp, complexity);
+    let (ybar, logdet_bar) = complexity_adjoints(params, &gp, (complexity, weight), &mut adj);
+    let gradient = pulled_through(params, config, &gp, adj, (ybar, logdet_bar));
+    Ok((
+        LossValue {
+            nll,
+            complexity: comp,
+            steps,
+        },
+        gradient.to_flat(),
+    ))
+}
+
+/// Every episode's GP adjoints (`episode` on each, up to `threads` at a time, one accumulator
+/// per episode), summed in episode order so the result does not depend on `threads`; with the
+/// summed NLL and step count.
+fn summed_adjoints(
+    gp: &PreparedGp<f64>,
+    GpShape { m, d, e }: GpShape,
+    spec: &NarxSpec,
+    episodes: &[Episode],
+    threads: Threads,
+    log: &mut JitterLog,
+    episode: impl Fn(&PreparedGp<f64>, &Episode, &mut GpAdjoint, &mut JitterLog) -> Result<(f64, usize)>
+    + Sync,
+) -> Result<(GpAdjoint, f64, usize)> {
     let run = |k: usize, ep: &Episode| -> Result<EpisodeOut> {
         ep.traj
             .check(spec)
             .map_err(|err| MsgpError::Data(format!("episode {k}: {err}")))?;
         let mut adj = GpAdjoint::zeros(m, d, e);
         let mut elog = JitterLog::default();
-        let (nll, steps) = episode(&gp, ep, &mut adj, &mut elog)?;
+        let (nll, steps) = episode(gp, ep, &mut adj, &mut elog)?;
         Ok(EpisodeOut {
             adj,
             nll,
@@ -215,7 +239,18 @@ pub(crate) fn gradient_over_episodes(
         nll += out.nll;
         steps += out.steps;
     }
-    let comp = weight * complexity_term(params, &gp, complexity);
+    Ok((adj, nll, steps))
+}
+
+/// The complexity term's adjoints (weighted by `weight`): of the pseudo-targets `ȳ` (returned,
+/// with each output's adjoint of `log|K̃|`) and of `β` (added to `adj`).
+fn complexity_adjoints(
+    params: &GpParams<f64>,
+    gp: &PreparedGp<f64>,
+    (complexity, weight): (Complexity, f64),
+    adj: &mut GpAdjoint,
+) -> (DMatrix<f64>, Vec<f64>) {
+    let (m, e) = params.pseudo_targets.shape();
     let half = 0.5 * weight;
     let mut ybar = DMatrix::<f64>::zeros(m, e);
     let mut logdet_bar = vec![0.0; e];
@@ -235,8 +270,24 @@ pub(crate) fn gradient_over_episodes(
             }
         }
     }
+    (ybar, logdet_bar)
+}
 
-    // pull through the preparation: β = K̃⁻¹ȳ, K̃⁻¹, log|K̃|, K̃ = K + σx² I
+/// The adjoints pulled through the GP's preparation (`β = K̃⁻¹ȳ`, `K̃⁻¹`, `log|K̃|`,
+/// `K̃ = K + σx² I`) to the parameters, in their own shape: log length-scales and log variances
+/// through their exponentials.
+fn pulled_through(
+    params: &GpParams<f64>,
+    config: &GpConfig,
+    gp: &PreparedGp<f64>,
+    mut adj: GpAdjoint,
+    (mut ybar, logdet_bar): (DMatrix<f64>, Vec<f64>),
+) -> GpParams<f64> {
+    let GpShape { m, d, e } = GpShape {
+        m: params.pseudo_inputs.nrows(),
+        d: params.pseudo_inputs.ncols(),
+        e: params.pseudo_targets.ncols(),
+    };
     let mut inv_l2_bar = adj.inv_l2.clone();
     let mut sf2_bar = adj.sf2.clone();
     let mut sx2_bar = adj.sx2.clone();
@@ -270,9 +321,7 @@ pub(crate) fn gradient_over_episodes(
             }
         }
     }
-    // the gradient in the parameters' own shape (log length-scales and log variances through
-    // their exponentials), flattened in the one layout of `GpParams::to_flat`
-    let gradient = GpParams {
+    GpParams {
         pseudo_inputs: adj.xbar,
         pseudo_targets: ybar,
         log_lengthscales: DMatrix::from_fn(e, d, |a, dd| {
@@ -290,13 +339,5 @@ pub(crate) fn gradient_over_episodes(
         } else {
             DMatrix::zeros(e, d)
         },
-    };
-    Ok((
-        LossValue {
-            nll,
-            complexity: comp,
-            steps,
-        },
-        gradient.to_flat(),
-    ))
+    }
 }

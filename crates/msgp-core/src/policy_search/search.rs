@@ -150,13 +150,52 @@ pub fn optimise_over(
     settings: &PolicySearchSettings,
     also_from: &[Vec<f64>],
 ) -> Result<PolicySearchResult> {
+    check_search(problems, space, typical, settings)?;
+    let threads = settings.threads.get();
+    let region = Region::new(space.start(), typical, settings.trust_region);
+    let starts = search_starts(problems, space, settings, &region, also_from)?;
+    // each start's run is independent; its best (value, gains), earliest first on ties
+    let run_start = |_: usize, start: &Vec<f64>| -> Result<Option<(f64, Vec<f64>)>> {
+        match settings.solver {
+            PolicySolver::Lbfgs => {
+                lbfgs_start(problems, space, &region.scale, start, settings.iterations)
+            }
+            PolicySolver::Adam => adam_start(problems, space, &region, settings, start),
+        }
+    };
+    let mut best: Option<(f64, Vec<f64>)> = None;
+    // reduced in start order with a strict `<`: the same answer for any thread count
+    for found in map_indexed(&starts, threads, run_start) {
+        if let Some((value, g)) = found?
+            && best.as_ref().is_none_or(|b| value < b.0)
+        {
+            best = Some((value, g));
+        }
+    }
+    let (value, g) =
+        best.ok_or_else(|| MsgpError::NonFinite("every policy-search start diverged".into()))?;
+    let policy = space.controller(&g)?;
+    let (_, steps) = mean_evaluate(problems, space, &g)?;
+    Ok(PolicySearchResult {
+        policy,
+        expected_cost: value,
+        steps,
+    })
+}
+
+/// The search's settings checked against its problems and space.
+fn check_search(
+    problems: &[PolicyProblem<'_>],
+    space: &SearchSpace,
+    typical: &[f64],
+    settings: &PolicySearchSettings,
+) -> Result<()> {
     if problems.is_empty() {
         return Err(MsgpError::InvalidSetting {
             name: "policy search starts",
             reason: "the search needs at least one start".into(),
         });
     }
-    let threads = settings.threads.get();
     space.validate()?;
     if typical.len() != space.len() || typical.iter().any(|t| !(t.is_finite() && *t > 0.0)) {
         return Err(MsgpError::InvalidSetting {
@@ -179,34 +218,61 @@ pub fn optimise_over(
             reason: "the L-BFGS policy search has no trust region; set it to 0".into(),
         });
     }
-    let x0 = space.start();
-    let scale: Vec<f64> = x0
-        .iter()
-        .zip(typical)
-        .map(|(g, t)| g.abs().max(*t))
-        .collect();
-    // the trust region as a projection of gains (identity when it is off)
-    let tr = settings.trust_region;
-    let project = |x: &mut [f64]| {
-        if tr > 0.0 {
-            for ((g, g0), s) in x.iter_mut().zip(&x0).zip(&scale) {
-                *g = g.clamp(g0 - tr * s, g0 + tr * s);
+    Ok(())
+}
+
+/// Where the search may go: around the base's parameters `x0`, each free parameter on its
+/// scale `max(|θ₀|, typical)`, within `trust` scales of `x0` where the trust region is on.
+struct Region {
+    x0: Vec<f64>,
+    scale: Vec<f64>,
+    trust: f64,
+}
+
+impl Region {
+    fn new(x0: Vec<f64>, typical: &[f64], trust: f64) -> Self {
+        let scale = x0
+            .iter()
+            .zip(typical)
+            .map(|(g, t)| g.abs().max(*t))
+            .collect();
+        Self { x0, scale, trust }
+    }
+
+    /// `x` projected into the trust region (unchanged when it is off).
+    fn project(&self, x: &mut [f64]) {
+        if self.trust > 0.0 {
+            for ((g, g0), s) in x.iter_mut().zip(&self.x0).zip(&self.scale) {
+                *g = g.clamp(g0 - self.trust * s, g0 + self.trust * s);
             }
         }
-    };
-    // `centre + spread · scale · z`, z ~ N(0, I), kept in the trust region
-    let draw = |rng: &mut StdRng, centre: &[f64], spread: f64| {
+    }
+
+    /// `centre + spread · scale · z`, z ~ N(0, I), kept in the trust region.
+    fn draw(&self, rng: &mut StdRng, centre: &[f64], spread: f64) -> Vec<f64> {
         let mut x: Vec<f64> = centre
             .iter()
-            .zip(&scale)
+            .zip(&self.scale)
             .map(|(c, s)| {
                 let z: f64 = StandardNormal.sample(rng);
                 c + spread * s * z
             })
             .collect();
-        project(&mut x);
+        self.project(&mut x);
         x
-    };
+    }
+}
+
+/// The search's starts, in order: the base's parameters, `also_from` (those that differ),
+/// the seeded perturbations, and the cheapest of the screened candidates.
+fn search_starts(
+    problems: &[PolicyProblem<'_>],
+    space: &SearchSpace,
+    settings: &PolicySearchSettings,
+    region: &Region,
+    also_from: &[Vec<f64>],
+) -> Result<Vec<Vec<f64>>> {
+    let x0 = &region.x0;
     let mut rng = StdRng::seed_from_u64(settings.seed);
     let mut starts = vec![x0.clone()];
     for extra in also_from {
@@ -220,89 +286,73 @@ pub fn optimise_over(
                 ),
             });
         }
-        if *extra != x0 {
+        if extra != x0 {
             starts.push(extra.clone());
         }
     }
     for _ in 0..settings.restarts {
-        starts.push(draw(&mut rng, &x0, settings.restart_spread));
+        starts.push(region.draw(&mut rng, x0, settings.restart_spread));
     }
     if settings.candidates > 0 {
-        let centre: Vec<f64> = if tr > 0.0 {
+        let centre: Vec<f64> = if region.trust > 0.0 {
             x0.clone()
         } else {
             vec![0.0; x0.len()]
         };
         // drawn in sequence (one stream), evaluated in parallel
         let drawn: Vec<Vec<f64>> = (0..settings.candidates)
-            .map(|_| draw(&mut rng, &centre, settings.candidate_spread))
+            .map(|_| region.draw(&mut rng, &centre, settings.candidate_spread))
             .collect();
-        starts.extend(cheapest_candidates(
-            problems,
-            space,
-            &drawn,
-            settings.candidate_starts,
-            threads,
-        ));
+        let threads = settings.threads.get();
+        let k = settings.candidate_starts;
+        starts.extend(cheapest_candidates(problems, space, &drawn, k, threads));
     }
-    // each start's Adam run is independent; its best (value, gains), earliest first on ties
-    let run_start = |_: usize, start: &Vec<f64>| -> Result<Option<(f64, Vec<f64>)>> {
-        if settings.solver == PolicySolver::Lbfgs {
-            return lbfgs_start(problems, space, &scale, start, settings.iterations);
-        }
-        let mut best: Option<(f64, Vec<f64>)> = None;
-        // optimise in scaled coordinates z = g / scale so one step size fits every gain
-        let mut objective = Scaled::new(problems, space, &scale);
-        let mut z: Vec<f64> = start.iter().zip(&scale).map(|(g, s)| g / s).collect();
-        let adam = Adam {
-            learning_rate: settings.learning_rate,
-            ..Adam::default()
-        };
-        let mut state = AdamState::new(z.len());
-        let on = vec![true; z.len()];
-        for _ in 0..settings.iterations {
-            let (value, gz) = objective.value_and_gradient(&z)?;
-            // gains whose rollout fails numerically end this start; the best so far stays
-            if value.is_nan() {
-                break;
-            }
-            if value.is_finite() && best.as_ref().is_none_or(|b| value < b.0) {
-                best = Some((value, objective.unscaled(&z)));
-            }
-            adam.step(&mut state, &mut z, &gz, &on);
-            if tr > 0.0 {
-                for ((z, g0), s) in z.iter_mut().zip(&x0).zip(&scale) {
-                    *z = z.clamp(g0 / s - tr, g0 / s + tr);
-                }
-            }
-        }
-        let g: Vec<f64> = z.iter().zip(&scale).map(|(z, s)| z * s).collect();
-        if let Ok((value, _)) = mean_evaluate(problems, space, &g)
-            && value.is_finite()
-            && best.as_ref().is_none_or(|b| value < b.0)
-        {
-            best = Some((value, g));
-        }
-        Ok(best)
-    };
+    Ok(starts)
+}
+
+/// One start's Adam run in scaled coordinates `z = g / scale` (one step size fits every
+/// gain), kept in the trust region: its best value and parameters, `None` where none was
+/// finite. Parameters whose rollout fails numerically end the run; the best so far stays.
+fn adam_start(
+    problems: &[PolicyProblem<'_>],
+    space: &SearchSpace,
+    region: &Region,
+    settings: &PolicySearchSettings,
+    start: &[f64],
+) -> Result<Option<(f64, Vec<f64>)>> {
+    let (scale, tr) = (&region.scale, region.trust);
     let mut best: Option<(f64, Vec<f64>)> = None;
-    // reduced in start order with a strict `<`: the same answer for any thread count
-    for found in map_indexed(&starts, threads, run_start) {
-        if let Some((value, g)) = found?
-            && best.as_ref().is_none_or(|b| value < b.0)
-        {
-            best = Some((value, g));
+    let mut objective = Scaled::new(problems, space, scale);
+    let mut z: Vec<f64> = start.iter().zip(scale).map(|(g, s)| g / s).collect();
+    let adam = Adam {
+        learning_rate: settings.learning_rate,
+        ..Adam::default()
+    };
+    let mut state = AdamState::new(z.len());
+    let on = vec![true; z.len()];
+    for _ in 0..settings.iterations {
+        let (value, gz) = objective.value_and_gradient(&z)?;
+        if value.is_nan() {
+            break;
+        }
+        if value.is_finite() && best.as_ref().is_none_or(|b| value < b.0) {
+            best = Some((value, objective.unscaled(&z)));
+        }
+        adam.step(&mut state, &mut z, &gz, &on);
+        if tr > 0.0 {
+            for ((z, g0), s) in z.iter_mut().zip(&region.x0).zip(scale) {
+                *z = z.clamp(g0 / s - tr, g0 / s + tr);
+            }
         }
     }
-    let (value, g) =
-        best.ok_or_else(|| MsgpError::NonFinite("every policy-search start diverged".into()))?;
-    let policy = space.controller(&g)?;
-    let (_, steps) = mean_evaluate(problems, space, &g)?;
-    Ok(PolicySearchResult {
-        policy,
-        expected_cost: value,
-        steps,
-    })
+    let g: Vec<f64> = z.iter().zip(scale).map(|(z, s)| z * s).collect();
+    if let Ok((value, _)) = mean_evaluate(problems, space, &g)
+        && value.is_finite()
+        && best.as_ref().is_none_or(|b| value < b.0)
+    {
+        best = Some((value, g));
+    }
+    Ok(best)
 }
 
 /// The search's objective in scaled coordinates `z = x / scale`; a point where a rollout

@@ -45,9 +45,11 @@ class Msgp:
         standard error of the best) — `msgp fit --history auto`; one fit per judged candidate
         (minutes for MSGP). The choice is in `report["history_choice"]` and the model file.
     inducing: pseudo-inputs; None: min(100, training windows / 2).
-    iterations: the method's own solver iterations (MSGP: trajectory likelihood, default 400;
-        baselines: one-step marginal likelihood, default 300; linear-kf: L-BFGS on the filter
-        likelihood, default 400) — `msgp fit --iters`.
+    iterations: the most solver iterations of any one training (MSGP: of each training on
+        the trajectory likelihood; without it the head's early-stopped run stops within 1000
+        and the final training on all the data runs 400; baselines: L-BFGS on the one-step
+        marginal likelihood, default 300; linear-kf: L-BFGS on the filter likelihood, default
+        400) — `msgp fit --iters`.
     seed: seed of every random choice.
     settings: other fields of `defaults("fit", method=method)` to override (advanced; each
         method has its own, typed in `msgp.settings`: `MsgpFitSettings`, `OneStepFitSettings`,

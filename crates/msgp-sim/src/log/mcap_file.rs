@@ -85,91 +85,136 @@ pub fn encode(episode: &Episode, path: &Path) -> Result<Vec<u8>, SimError> {
 }
 
 fn write_to<W: Write + Seek>(w: W, episode: &Episode, path: &Path) -> Result<(), SimError> {
-    let mcap_err = |source| SimError::Mcap {
-        path: path.to_owned(),
-        source,
-    };
-    let json_err = |source| SimError::Json {
-        context: path.display().to_string(),
-        source,
-    };
     let mut writer = mcap::WriteOptions::new()
         .compression(Some(mcap::Compression::Zstd))
         .compression_threads(0)
         .create(w)
-        .map_err(mcap_err)?;
-    let mut channel = |name: &str, schema: &str, topic: &str, latent: bool| {
-        let schema_id = writer
-            .add_schema(name, "jsonschema", schema.as_bytes())
-            .map_err(mcap_err)?;
-        let mut meta = BTreeMap::new();
-        if latent {
-            meta.insert("latent".to_owned(), "true".to_owned());
-        }
-        writer
-            .add_channel(schema_id, topic, "json", &meta)
-            .map_err(mcap_err)
-    };
-    let ch_meas = channel(
-        "msgp.pendulum.Measurement",
-        MEASUREMENT_SCHEMA,
-        TOPIC_MEASUREMENT,
-        false,
-    )?;
-    let ch_cmd = channel(
-        "msgp.pendulum.Command",
-        COMMAND_SCHEMA,
-        TOPIC_COMMAND,
-        false,
-    )?;
-    let ch_lat = channel("msgp.pendulum.Latent", LATENT_SCHEMA, TOPIC_LATENT, true)?;
-    let scene_err = |what: &'static str, message: String| SimError::Scene {
-        path: path.to_owned(),
-        what,
-        message,
-    };
-    let mut foxglove_channel =
-        |topic: &str, what: &'static str, schema: Option<foxglove::Schema>, encoding: String| {
-            let schema = schema.ok_or_else(|| scene_err(what, "the schema is missing".into()))?;
-            let schema_id = writer
-                .add_schema(&schema.name, &schema.encoding, &schema.data)
-                .map_err(mcap_err)?;
-            writer
-                .add_channel(schema_id, topic, &encoding, &BTreeMap::new())
-                .map_err(mcap_err)
-        };
-    let ch_tf = foxglove_channel(
-        scene::TOPIC_TRANSFORMS,
-        "FrameTransforms",
-        foxglove::messages::FrameTransforms::get_schema(),
-        foxglove::messages::FrameTransforms::get_message_encoding(),
-    )?;
-    let ch_scene = foxglove_channel(
-        scene::TOPIC_SCENE,
-        "SceneUpdate",
-        foxglove::messages::SceneUpdate::get_schema(),
-        foxglove::messages::SceneUpdate::get_message_encoding(),
-    )?;
-    let protobuf = |what: &'static str, msg: &dyn Fn(&mut Vec<u8>) -> Result<(), String>| {
-        let mut buf = Vec::new();
-        msg(&mut buf).map_err(|e| scene_err(what, e))?;
-        Ok::<_, SimError>(buf)
-    };
-
+        .map_err(mcap_err(path))?;
+    let channels = Channels::add(&mut writer, path)?;
     let mut metadata = BTreeMap::new();
     metadata.insert("format_version".to_owned(), FORMAT_VERSION.to_owned());
     metadata.insert(
         "episode".to_owned(),
-        serde_json::to_string(&episode.info).map_err(json_err)?,
+        serde_json::to_string(&episode.info).map_err(json_err(path))?,
     );
     writer
         .write_metadata(&mcap::records::Metadata {
             name: METADATA_NAME.to_owned(),
             metadata,
         })
-        .map_err(mcap_err)?;
-
+        .map_err(mcap_err(path))?;
     for s in &episode.samples {
+        channels.write_sample(&mut writer, s, episode, path)?;
+    }
+    writer.finish().map_err(mcap_err(path))?;
+    Ok(())
+}
+
+/// An MCAP failure on `path`.
+fn mcap_err(path: &Path) -> impl Fn(mcap::McapError) -> SimError + '_ {
+    move |source| SimError::Mcap {
+        path: path.to_owned(),
+        source,
+    }
+}
+
+/// A JSON failure on `path`.
+fn json_err(path: &Path) -> impl Fn(serde_json::Error) -> SimError + '_ {
+    move |source| SimError::Json {
+        context: path.display().to_string(),
+        source,
+    }
+}
+
+/// A failure to encode the 3D scene's `what` on `path`.
+fn scene_err(path: &Path, what: &'static str, message: String) -> SimError {
+    SimError::Scene {
+        path: path.to_owned(),
+        what,
+        message,
+    }
+}
+
+/// The episode's channels: its signals (JSON) and the 3D scene (Foxglove's protobuf).
+struct Channels {
+    measurement: u16,
+    command: u16,
+    latent: u16,
+    transforms: u16,
+    scene: u16,
+}
+
+impl Channels {
+    /// Adds every channel (and its schema) to `writer`.
+    fn add<W: Write + Seek>(writer: &mut mcap::Writer<W>, path: &Path) -> Result<Self, SimError> {
+        let mut channel = |name: &str, schema: &str, topic: &str, latent: bool| {
+            let schema_id = writer
+                .add_schema(name, "jsonschema", schema.as_bytes())
+                .map_err(mcap_err(path))?;
+            let mut meta = BTreeMap::new();
+            if latent {
+                meta.insert("latent".to_owned(), "true".to_owned());
+            }
+            writer
+                .add_channel(schema_id, topic, "json", &meta)
+                .map_err(mcap_err(path))
+        };
+        let measurement = channel(
+            "msgp.pendulum.Measurement",
+            MEASUREMENT_SCHEMA,
+            TOPIC_MEASUREMENT,
+            false,
+        )?;
+        let command = channel(
+            "msgp.pendulum.Command",
+            COMMAND_SCHEMA,
+            TOPIC_COMMAND,
+            false,
+        )?;
+        let latent = channel("msgp.pendulum.Latent", LATENT_SCHEMA, TOPIC_LATENT, true)?;
+        let mut foxglove_channel = |topic: &str,
+                                    what: &'static str,
+                                    schema: Option<foxglove::Schema>,
+                                    encoding: String| {
+            let schema =
+                schema.ok_or_else(|| scene_err(path, what, "the schema is missing".into()))?;
+            let schema_id = writer
+                .add_schema(&schema.name, &schema.encoding, &schema.data)
+                .map_err(mcap_err(path))?;
+            writer
+                .add_channel(schema_id, topic, &encoding, &BTreeMap::new())
+                .map_err(mcap_err(path))
+        };
+        let transforms = foxglove_channel(
+            scene::TOPIC_TRANSFORMS,
+            "FrameTransforms",
+            foxglove::messages::FrameTransforms::get_schema(),
+            foxglove::messages::FrameTransforms::get_message_encoding(),
+        )?;
+        let scene = foxglove_channel(
+            scene::TOPIC_SCENE,
+            "SceneUpdate",
+            foxglove::messages::SceneUpdate::get_schema(),
+            foxglove::messages::SceneUpdate::get_message_encoding(),
+        )?;
+        Ok(Self {
+            measurement,
+            command,
+            latent,
+            transforms,
+            scene,
+        })
+    }
+
+    /// One sample's messages: measurement, command, latent state and the scene's transforms
+    /// (the scene itself with the episode's first sample).
+    fn write_sample<W: Write + Seek>(
+        &self,
+        writer: &mut mcap::Writer<W>,
+        s: &Sample,
+        episode: &Episode,
+        path: &Path,
+    ) -> Result<(), SimError> {
         let time_ns = time_to_ns(s.t);
         // Sequence numbers are u32 in MCAP; they wrap after ~2.7 years at 50 Hz.
         let sequence = s.step as u32;
@@ -179,53 +224,55 @@ fn write_to<W: Write + Seek>(w: W, episode: &Episode, path: &Path) -> Result<(),
             log_time: time_ns,
             publish_time: time_ns,
         };
+        let json = json_err(path);
         let meas = serde_json::to_vec(&MeasurementMsg {
             step: s.step,
             t: s.t,
             theta: s.measurement.theta,
             x: s.measurement.x,
         })
-        .map_err(json_err)?;
+        .map_err(&json)?;
         let cmd = serde_json::to_vec(&CommandMsg {
             step: s.step,
             t: s.t,
             acceleration: s.command,
         })
-        .map_err(json_err)?;
+        .map_err(&json)?;
         let lat = serde_json::to_vec(&LatentMsg {
             step: s.step,
             t: s.t,
             state: s.latent,
         })
-        .map_err(json_err)?;
-        writer
-            .write_to_known_channel(&header(ch_meas), &meas)
-            .map_err(mcap_err)?;
-        writer
-            .write_to_known_channel(&header(ch_cmd), &cmd)
-            .map_err(mcap_err)?;
-        writer
-            .write_to_known_channel(&header(ch_lat), &lat)
-            .map_err(mcap_err)?;
+        .map_err(&json)?;
+        let protobuf = |what: &'static str, msg: &dyn Fn(&mut Vec<u8>) -> Result<(), String>| {
+            let mut buf = Vec::new();
+            msg(&mut buf).map_err(|e| scene_err(path, what, e))?;
+            Ok::<_, SimError>(buf)
+        };
         let tf = scene::transforms(s.t, &s.latent);
         let tf = protobuf("FrameTransforms", &|b| {
             tf.encode(b).map_err(|e| e.to_string())
         })?;
-        writer
-            .write_to_known_channel(&header(ch_tf), &tf)
-            .map_err(mcap_err)?;
+        let mut messages = vec![
+            (self.measurement, meas),
+            (self.command, cmd),
+            (self.latent, lat),
+            (self.transforms, tf),
+        ];
         if s.step == episode.samples[0].step {
             let update = scene::scene(&episode.info.params, s.t);
             let update = protobuf("SceneUpdate", &|b| {
                 update.encode(b).map_err(|e| e.to_string())
             })?;
-            writer
-                .write_to_known_channel(&header(ch_scene), &update)
-                .map_err(mcap_err)?;
+            messages.push((self.scene, update));
         }
+        for (channel, data) in messages {
+            writer
+                .write_to_known_channel(&header(channel), &data)
+                .map_err(mcap_err(path))?;
+        }
+        Ok(())
     }
-    writer.finish().map_err(mcap_err)?;
-    Ok(())
 }
 
 /// Nanoseconds for a non-negative time in seconds.
