@@ -3,8 +3,8 @@
 //! The proxy of a final training ([`super::calibration`]) is the same recipe trained from its
 //! start on the head, without a tail, for the final training's length. The recipe's early-stopped
 //! training on the head starts from the same parameters, on the same episodes, with the same
-//! solver: its first iterates *are* the proxy's (bit for bit without segments; with segments
-//! the batches are drawn by the head's seed instead of a seed of their own). A [`ProxyWatch`]
+//! solver: its first iterates *are* the proxy's, bit for bit (with segments a proxy draws its
+//! batches by its head's seed, whether read off the head or trained on its own). A [`ProxyWatch`]
 //! rides along that training and keeps what the proxy's own run would return (its iterate of
 //! lowest training loss, or with batches the mean of its second half; its blow-up test; its
 //! snapshots at the checkpoints), and the head's training goes on past its early stop, without

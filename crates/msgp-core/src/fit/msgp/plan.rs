@@ -119,11 +119,11 @@ impl Plan {
     }
 
     /// Whether the observer sees `step` where trainings run side by side: the line of
-    /// trainings the model comes from (the first head, the final trainings, the fallback
-    /// heads and the calibration's own judge), not the heads racing it or the proxies.
+    /// trainings the model comes from (the first head, the final trainings, the first fallback
+    /// head and the calibration's own judge), not the heads racing them or the proxies.
     pub fn main_line(&self, step: Step) -> bool {
         match step {
-            Step::Head(k) => k == 0 || k >= self.racing,
+            Step::Head(k) => k == 0 || self.fallbacks.first() == Some(&k),
             Step::Final(_) | Step::InnerHead(_) => true,
             Step::Proxy(_) => false,
         }

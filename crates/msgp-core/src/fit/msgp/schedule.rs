@@ -151,12 +151,17 @@ impl Scheduler<'_, '_> {
                 }
                 match rx.recv() {
                     Ok(Message::Progress(p, answer)) => {
-                        let flow = match shared.stop.load(Ordering::Relaxed) {
+                        // (once the drive is ending, a step's late events are not shown)
+                        let flow = match shared.stop.load(Ordering::Relaxed) || ending.over() {
                             true => ControlFlow::Break(()),
                             false => (self.progress)(&p),
                         };
-                        if flow.is_break() {
-                            shared.stop.store(true, Ordering::Relaxed);
+                        // the observer's stop ends the drive, whichever step it saw
+                        if flow.is_break() && !shared.stop.swap(true, Ordering::Relaxed) {
+                            let stop = MsgpError::Stopped {
+                                iteration: p.iteration,
+                            };
+                            ending.stopped.get_or_insert(stop);
                         }
                         // (a closed answer: the step has gone, and the stop flag says why)
                         let _ = answer.send(flow);

@@ -7,7 +7,7 @@
 //! probably need, for a scheduler with a worker to spare.
 
 use super::budget::{LengthScore, choose_budget};
-use super::outcomes::{Outcomes, Trained};
+use super::outcomes::{FinalTraining, Outcomes, Trained};
 use super::plan::{Next, Plan, Step};
 use crate::error::{MsgpError, Result};
 use crate::fit::RecipeOutcome;
@@ -234,7 +234,9 @@ impl Walk {
                 .iter()
                 .find(|h| judge.diverges(h.k, &h.params).is_none())
         {
-            self.outcome(chosen.k).diverged = Some(why);
+            if let Some(outcome) = self.outcome(chosen.k) {
+                outcome.diverged = Some(why);
+            }
             chosen = stable.clone();
         }
         self.selection(chosen, None)
@@ -256,21 +258,21 @@ impl Walk {
         while i < candidates.len() {
             let head = candidates[i].clone();
             let c = head.k;
-            let Some(trained) = o.finals[c].as_mut() else {
-                return Ok(Next::Run(vec![Step::Final(c)]));
-            };
-            if let Err(e) = &mut trained.outcome {
-                return Err(std::mem::replace(e, MsgpError::NonFinite(String::new())));
-            }
-            let Some(trained) = o.finals[c].as_ref() else {
-                continue;
+            let trained = match o.finals[c].as_mut() {
+                None => return Ok(Next::Run(vec![Step::Final(c)])),
+                Some(FinalTraining {
+                    outcome: Err(e), ..
+                }) => return Err(std::mem::replace(e, MsgpError::NonFinite(String::new()))),
+                Some(trained) => &*trained,
             };
             let completed = trained.outcome.as_ref().ok().cloned().flatten();
             let Some((params, iteration)) = completed else {
                 // blown up: the fallback heads, after the first candidate
                 let failed = trained.report.full_data_failed.clone();
                 self.finals_tried.push(c);
-                self.outcome(c).final_failed = failed.clone();
+                if let Some(outcome) = self.outcome(c) {
+                    outcome.final_failed = failed.clone();
+                }
                 if i == 0 {
                     self.full_data_failed = failed;
                     if c == 0 && !plan.fallbacks.is_empty() {
@@ -315,7 +317,9 @@ impl Walk {
                 .collect();
             match why {
                 Some(why) if !untried.is_empty() => {
-                    self.outcome(c).diverged = Some(why);
+                    if let Some(outcome) = self.outcome(c) {
+                        outcome.diverged = Some(why);
+                    }
                     set_aside.get_or_insert((Head { params, ..kept.0 }, kept.1, kept.2, kept.3));
                     candidates.extend(untried);
                     i += 1;
@@ -374,10 +378,11 @@ impl Walk {
         }
     }
 
-    /// The report's outcome of recipe `k` (one per head trained, in the recipes' order).
-    fn outcome(&mut self, k: usize) -> &mut RecipeOutcome {
-        let i = self.heads_run.iter().position(|&h| h == k).unwrap_or(0);
-        &mut self.recipes[i]
+    /// The report's outcome of recipe `k` (one per head trained, in the recipes' order; a
+    /// recipe with a model has trained its head).
+    fn outcome(&mut self, k: usize) -> Option<&mut RecipeOutcome> {
+        let i = self.heads_run.iter().position(|&h| h == k)?;
+        self.recipes.get_mut(i)
     }
 }
 
@@ -392,7 +397,7 @@ fn placeholder() -> Trained {
 
 #[cfg(test)]
 mod tests {
-    use super::super::outcomes::{FinalTraining, HeadRun};
+    use super::super::outcomes::HeadRun;
     use super::*;
     use crate::fit::{FitReport, MsgpSettings};
     use crate::gp::GpShape;

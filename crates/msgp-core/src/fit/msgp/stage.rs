@@ -96,6 +96,10 @@ pub(super) struct Stage<'a, 'p> {
     /// Whether a head at its early stop, with its best validation NLL, can still be chosen:
     /// where not, it drops its proxy instead of training on for it.
     pub proxy_ahead: Option<&'a dyn Fn(f64) -> bool>,
+    /// The stage whose batches (with segments) this run draws, where not its own: a proxy
+    /// trained on its own draws its head's, so that it is the proxy read off the head's
+    /// training, bit for bit, whichever of the two the schedule ran.
+    pub batches_of: Option<u8>,
 }
 
 impl Stage<'_, '_> {
@@ -326,7 +330,7 @@ impl Stage<'_, '_> {
                 (Some(s), FitOptimizer::Adam) => Batches::new(
                     episodes.len(),
                     s.batch,
-                    self.settings.seed ^ (u64::from(stage) << 32),
+                    self.settings.seed ^ (u64::from(self.batches_of.unwrap_or(stage)) << 32),
                 ),
                 _ => None,
             },

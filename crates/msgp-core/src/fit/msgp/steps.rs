@@ -145,6 +145,7 @@ impl Runner<'_> {
             snapshots: Vec::new(),
             proxy_watch: None,
             proxy_ahead: None,
+            batches_of: None,
         }
     }
 
@@ -164,6 +165,10 @@ impl Runner<'_> {
         let mut stage = self.stage(k, settings, observer, &mut own);
         if recipe.choose_final_budget {
             stage.checkpoints = final_budgets(n);
+        }
+        if init.is_some() {
+            // a proxy: its head's batches
+            stage.batches_of = Some(self.plan.stage(Step::Head(k)));
         }
         let stage_number = match init {
             Some(_) => 4,
