@@ -233,7 +233,8 @@ fn write_report(report: &mut FitReport, selection: &Selection, o: &Outcomes) {
     if let Some(f) = &selection.final_training {
         report.full_data_iteration = Some(f.iteration);
         (report.final_budget, report.final_budgets) = f.budgets.clone();
-        if let Some(p) = o.proxies[selection.recipe].as_ref().filter(|_| f.proxied) {
+        // (a proxy counts where the plan has one and its final training is the model)
+        if let Some(p) = o.proxies[selection.recipe].as_ref() {
             report.iterations_run += p.report.iterations_run;
             report.jitter.merge(&p.report.jitter);
         }

@@ -42,8 +42,6 @@ pub(super) struct FinalChoice {
     /// The proxy's model standing for it (the chosen length's), where a proxy ran and
     /// completed: the calibration's judge.
     pub proxy: Option<(GpParams<f64>, usize)>,
-    /// Whether a proxy was needed for it (then its training counts in the report).
-    pub proxied: bool,
 }
 
 /// The model the protocol ends in and what the report says of the choice.
@@ -164,8 +162,8 @@ struct Walk {
 /// A final model with its head and final training: accepted, or set aside for diverging.
 type Kept = (Head, usize, (Option<usize>, Vec<LengthScore>), FinalProxy);
 
-/// A kept final model's proxy: its model (the chosen length's), and whether one was needed.
-type FinalProxy = (Option<(GpParams<f64>, usize)>, bool);
+/// A kept final model's proxy model (the chosen length's), where one completed.
+type FinalProxy = Option<(GpParams<f64>, usize)>;
 
 impl Walk {
     /// The heads `ks` (all with outcomes) in the tail's order (a stable sort: ties to the
@@ -303,12 +301,7 @@ impl Walk {
             });
             let (params, iteration, budgets, proxy_model) =
                 shorter.unwrap_or((params, iteration, (None, Vec::new()), proxy_model));
-            let kept: Kept = (
-                head,
-                iteration,
-                budgets,
-                (proxy_model, plan.proxy_iterations.is_some()),
-            );
+            let kept: Kept = (head, iteration, budgets, proxy_model);
             let why = judge.diverges(c, &params);
             let untried: Vec<Head> = raced
                 .iter()
@@ -354,8 +347,7 @@ impl Walk {
         let final_training = FinalChoice {
             iteration,
             budgets,
-            proxy: proxy.0,
-            proxied: proxy.1,
+            proxy,
         };
         let mut selection = self.selection(model, Some(final_training));
         selection.head = head;
