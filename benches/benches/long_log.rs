@@ -13,7 +13,7 @@ use std::time::Duration;
 use criterion::{Criterion, SamplingMode, criterion_group, criterion_main};
 use msgp_core::data::Trajectory;
 use msgp_core::data::synthetic::SyntheticSystem;
-use msgp_core::fit::{FitOptions, fit};
+use msgp_core::fit::{FitOptions, Overrides, fit};
 use msgp_core::loss::{Complexity, loss_and_gradient};
 use msgp_core::model::Method;
 use msgp_core::numeric::linalg::JitterLog;
@@ -61,9 +61,12 @@ fn bench_step(c: &mut Criterion) {
     let (model, _) = {
         let head = vec![log.slice(0, 600)];
         let options = FitOptions {
-            inducing: Some(100),
-            iterations: Some(20),
             segment_length: Some(0),
+            overrides: Overrides {
+                inducing: Some(100),
+                iterations: Some(20),
+                ..Overrides::default()
+            },
             ..FitOptions::new(Method::Msgp, 2, 1)
         };
         fit(

@@ -6,8 +6,7 @@ use std::path::PathBuf;
 use msgp_core::data::Trajectory;
 use msgp_core::data::dataset::{Dataset, Selection};
 use msgp_core::data::table::TimeSource;
-use msgp_core::fit::{FitOptimizer, FitOptions, Switches, fit};
-use msgp_core::gp::MeanFunction;
+use msgp_core::fit::{FitOptimizer, FitOptions, Overrides, fit};
 use msgp_core::model::Method;
 use msgp_core::numeric::parallel::Threads;
 use msgp_sim::learn::episode_trajectory;
@@ -126,17 +125,16 @@ fn a_model_fitted_on_a_simulator_log_predicts_another_excitation() {
         method: Method::LinearKf,
         ly: 3,
         lu: 3,
-        inducing: Some(50),
-        iterations: Some(100),
         seed: 0,
-        mean: Some(MeanFunction::Linear),
         integrators: Vec::new(),
         optimizer: FitOptimizer::Adam,
-        likelihood: Default::default(),
         start: Default::default(),
         threads: Threads::available(),
         segment_length: None,
-        switches: Switches::default(),
+        overrides: Overrides {
+            iterations: Some(100),
+            ..Overrides::default()
+        },
     }
     .settings(&train)
     .expect("settings");

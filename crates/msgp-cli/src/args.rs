@@ -482,12 +482,6 @@ pub struct FitArgs {
     /// (`docs/experiments/2026-12-05-a-fallback-with-a-linear-mean.md`, "A fallback with a linear mean").
     #[arg(long)]
     pub no_blow_up_fallback: bool,
-    /// msgp: let the held-out tail shorten the final training on all the data: 200, 100 or
-    /// 50 iterations instead of 400 where the same training on the first 80 % alone simulates
-    /// the tail with an RMSE at least 10 % lower (off by default; `docs/experiments/2026-12-05-how-long-the-final-training-is.md`, "How long
-    /// the final training is").
-    #[arg(long)]
-    pub choose_final_length: bool,
     /// Prior mean of the GP [default: msgp trains a zero-mean and a linear-mean recipe and
     /// keeps the one with the lower validation NLL; the baselines: zero].
     #[arg(long, value_enum)]

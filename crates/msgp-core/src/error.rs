@@ -31,6 +31,10 @@ pub enum MsgpError {
         /// Why it is invalid.
         reason: String,
     },
+    /// Settings given by name ([`crate::overlay`]) that the settings type does not take: an
+    /// unknown key or a value of the wrong type, named by its dotted path.
+    #[error("{0}")]
+    Overrides(String),
     /// Data that cannot be used (too short, non-finite, ...).
     #[error("bad data: {0}")]
     Data(String),

@@ -47,6 +47,7 @@ pub mod moments;
 pub mod narx;
 pub mod numeric;
 pub mod optim;
+pub mod overlay;
 pub mod plant;
 pub mod policy;
 pub mod policy_file;

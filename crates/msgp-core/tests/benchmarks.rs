@@ -227,62 +227,6 @@ fn msgp_reaches_paper_accuracy_on_drives_and_furnace() {
     }
 }
 
-/// Actuator (seed 0): trained on all its data for the whole 400 steps (the default), the chosen
-/// zero-mean recipe simulates the test part at 0.7024 (seeds 1–2: 0.78 and 0.77, a mean above
-/// the paper's MSGP, 0.7124). With the final training's length chosen on the validation tail
-/// (`MsgpSettings::choose_final_budget`, off by default: it hurts furnace), its proxy on the head
-/// simulates the tail at 0.397 (normalised) after 50 steps against 0.648 after 400, so the final
-/// training stops at 50: 0.6253, below the paper's GP-NARX (0.6376) too, with 2σ coverage 0.97.
-#[test]
-fn actuator_trains_on_all_its_data_for_as_long_as_its_tail_says() {
-    let Some(dir) = real_data() else { return };
-    let bench = RealSeries::Actuator.load(&dir).expect("load");
-    let fitted = |choose: bool| {
-        let mut settings = FitSettings {
-            ly: bench.ly,
-            lu: bench.lu,
-            seed: 0,
-            ..FitSettings::new(Method::Msgp)
-        };
-        if let Some(m) = settings.msgp_mut() {
-            m.choose_final_budget = choose;
-        }
-        let (model, report) =
-            fit(std::slice::from_ref(&bench.train), &settings, &mut |_| {}).expect("fit");
-        assert_eq!(report.diverged, None);
-        let m = model.evaluate(&bench.test).expect("evaluate");
-        println!(
-            "actuator (choose the length: {choose}): RMSE {:.4}, NLL {:.3}, 2σ coverage {:.3}, \
-             lengths {:?}, chosen {:?}, {:.1} s",
-            m.rmse,
-            m.nll,
-            m.coverage_2sigma,
-            report.final_budgets,
-            report.final_budget,
-            report.train_seconds
-        );
-        (m, report)
-    };
-    let (m, report) = fitted(true);
-    assert_eq!(report.final_budget, Some(50), "{:?}", report.final_budgets);
-    assert!(report.full_data_iteration.is_some_and(|i| i <= 50));
-    assert!(m.rmse <= 0.7124, "actuator RMSE {}", m.rmse);
-    assert!(
-        m.coverage_2sigma >= 0.9,
-        "2σ coverage {}",
-        m.coverage_2sigma
-    );
-    let (whole, report) = fitted(false);
-    assert_eq!(report.final_budget, None);
-    assert!(report.final_budgets.is_empty());
-    assert!(
-        whole.rmse > m.rmse,
-        "the whole length: {} against {}",
-        whole.rmse,
-        m.rmse
-    );
-}
-
 /// Ballbeam (seed 0): the one-step fit that starts the training explains the next output by the
 /// past outputs (the input lags get length-scales of 55–110 in normalised units), and from that
 /// start the zero-mean recipe's final training on all the data blows up, so the head's model
@@ -445,7 +389,7 @@ fn lbfgs_lowers_the_msgp_training_loss_faster_than_adam() {
 /// training, 2.04 after), which the fit now scales inside the unit circle.
 #[test]
 fn a_linear_mean_on_drives_does_not_diverge() {
-    use msgp_core::fit::FitOptions;
+    use msgp_core::fit::{FitOptions, Overrides};
     use msgp_core::gp::MeanFunction;
     let Some(dir) = real_data() else { return };
     let bench = RealSeries::Drives.load(&dir).expect("load drives");
@@ -453,17 +397,16 @@ fn a_linear_mean_on_drives_does_not_diverge() {
         method: Method::Msgp,
         ly: bench.ly,
         lu: bench.lu,
-        inducing: None,
-        iterations: None,
         seed: 0,
-        mean: Some(MeanFunction::Linear),
         integrators: Vec::new(),
         optimizer: FitOptimizer::Adam,
-        likelihood: Default::default(),
         start: Default::default(),
         threads: Default::default(),
         segment_length: None,
-        switches: Default::default(),
+        overrides: Overrides {
+            mean: Some(MeanFunction::Linear),
+            ..Overrides::default()
+        },
     }
     .settings(std::slice::from_ref(&bench.train))
     .expect("settings");

@@ -305,92 +305,23 @@ pub fn to_python<'py, T: serde::Serialize>(py: Python<'py>, v: &T) -> PyResult<B
     from_json(py, &value)
 }
 
-/// Overlays `user` on `base` (both JSON objects), recursing into nested objects; a key that
-/// `base` does not have is refused with the list of known keys. `path` prefixes key names.
-pub fn overlay(base: &mut Value, user: &Value, path: &str) -> Result<()> {
-    let (Value::Object(b), Value::Object(u)) = (&mut *base, user) else {
-        *base = user.clone();
-        return Ok(());
-    };
-    for (k, v) in u {
-        let name = if path.is_empty() {
-            k.clone()
-        } else {
-            format!("{path}.{k}")
-        };
-        match b.get_mut(k) {
-            Some(slot @ Value::Object(_)) if v.is_object() => overlay(slot, v, &name)?,
-            Some(slot) => *slot = v.clone(),
-            None => {
-                let known: Vec<&str> = b.keys().map(String::as_str).collect();
-                return Err(input(format!(
-                    "unknown setting `{name}` (known: {})",
-                    known.join(", ")
-                )));
-            }
-        }
-    }
-    Ok(())
-}
-
-/// Every leaf of the JSON object `user` as (dotted path, an object holding only that leaf).
-fn singles(user: &Value) -> Vec<(String, Value)> {
-    let Value::Object(map) = user else {
-        return Vec::new();
-    };
-    let mut out = Vec::new();
-    for (k, v) in map {
-        let inner = if v.is_object() && v.as_object().is_some_and(|o| !o.is_empty()) {
-            singles(v)
-        } else {
-            vec![(String::new(), v.clone())]
-        };
-        for (path, leaf) in inner {
-            let mut wrapped = Map::new();
-            wrapped.insert(k.clone(), leaf);
-            let name = if path.is_empty() {
-                k.clone()
-            } else {
-                format!("{k}.{path}")
-            };
-            out.push((name, Value::Object(wrapped)));
-        }
-    }
-    out
-}
-
-/// `base` (a serialised settings struct) with `user` overlaid, deserialised; a value of the
-/// wrong type is reported with its dotted name. `what` names the argument in messages.
-pub fn merged<T: serde::de::DeserializeOwned>(base: &Value, user: &Value, what: &str) -> Result<T> {
-    let mut full = base.clone();
-    overlay(&mut full, user, "").map_err(|e| input(format!("{what}: {e}")))?;
-    serde_json::from_value(full).map_err(|e| {
-        // name the culprit: apply the user's settings one at a time
-        for (name, single) in singles(user) {
-            let mut one = base.clone();
-            if overlay(&mut one, &single, "").is_ok()
-                && let Err(e) = serde_json::from_value::<T>(one)
-            {
-                return input(format!("{what}.{name}: {e}"));
-            }
-        }
-        input(format!("{what}: {e}"))
-    })
-}
-
-/// `base` with `user` (a dict, or None) overlaid, checked by deserialising; `what` names the
-/// argument in messages.
+/// `base` with `user` (a dict, or None) laid over it ([`msgp_core::overlay::merged`]); `what`
+/// names the argument in messages.
 pub fn with_overrides<T>(base: &T, user: Option<&Bound<'_, PyAny>>, what: &str) -> Result<T>
 where
     T: serde::Serialize + serde::de::DeserializeOwned,
 {
-    let value = serde_json::to_value(base)
-        .map_err(|e| Error::Panic(format!("cannot describe the {what} defaults: {e}")))?;
     let Some(obj) = user.filter(|o| !o.is_none()) else {
+        let value = serde_json::to_value(base)
+            .map_err(|e| Error::Panic(format!("cannot describe the {what} defaults: {e}")))?;
         return serde_json::from_value(value).map_err(|e| input(format!("{what}: {e}")));
     };
     if obj.cast::<PyDict>().is_err() {
         return Err(input(format!("{what} must be a dict, got {obj}")));
     }
-    merged(&value, &to_json(obj, what)?, what)
+    Ok(msgp_core::overlay::merged(
+        base,
+        &to_json(obj, what)?,
+        what,
+    )?)
 }

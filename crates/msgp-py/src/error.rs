@@ -134,7 +134,10 @@ enum Kind {
 
 fn core_kind(e: &CoreError) -> Kind {
     match e {
-        CoreError::Shape(_) | CoreError::InvalidSetting { .. } | CoreError::Data(_) => Kind::Input,
+        CoreError::Shape(_)
+        | CoreError::InvalidSetting { .. }
+        | CoreError::Overrides(_)
+        | CoreError::Data(_) => Kind::Input,
         CoreError::NotPositiveDefinite { .. } | CoreError::NonFinite(_) => Kind::Numerical,
         CoreError::File { .. } | CoreError::FileAt { .. } | CoreError::ModelVersion { .. } => {
             Kind::ModelFile

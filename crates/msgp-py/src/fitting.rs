@@ -25,7 +25,7 @@ pub struct Fitted {
 /// (each judged candidate a progress event of stage 0), then the fit, its model as saved.
 /// The outer error is the fit's; the inner one an exception `progress` raised (or Ctrl-C).
 pub fn fit_detached(
-    (options, overrides, auto_history): (FitOptions, Option<serde_json::Value>, bool),
+    (options, auto_history): (FitOptions, bool),
     train: &[Trajectory],
     (inputs, outputs): &(Vec<String>, Vec<String>),
     progress: Option<Py<PyAny>>,
@@ -64,7 +64,7 @@ pub fn fit_detached(
             (options, Some(choice))
         }
     };
-    let settings = options::settings(&options, overrides.as_ref(), train)?;
+    let settings = options::settings(&options, train)?;
     let fitted = fit_observed(train, &settings, &mut |p| {
         with_python(&mut raised, |py| {
             let Some(f) = &progress else {

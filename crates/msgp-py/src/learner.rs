@@ -21,8 +21,9 @@ use msgp_core::policy_file::{PolicyFile, Prediction, TaskRecord};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
-use crate::convert::{array1, array2, matrix, to_json, to_python, with_overrides};
+use crate::convert::{array1, array2, matrix, to_json, to_python};
 use crate::error::{Error, Result, callable, detached, input, with_python};
+use crate::options::loop_settings;
 use crate::options::uint;
 
 /// A Python object as the loop's plant; the first exception it raised is kept.
@@ -262,7 +263,7 @@ pub fn learn_on_plant<'py>(
         seed,
         ..LearnerSettings::for_plant(&spec)
     };
-    let mut s: LearnerSettings = with_overrides(&defaults, settings, "settings")?;
+    let mut s = loop_settings(&defaults, settings, |s| &mut s.fit)?;
     s.seed = seed;
     let threads = Threads::from_env().map_err(Error::Core)?;
     s.fit.threads = threads;

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use msgp_core::data::Trajectory;
-use msgp_core::fit::{FitOptions, FitReport, MsgpStart, OutputRange, Switches};
+use msgp_core::fit::{FitOptions, FitReport, MsgpStart, OutputRange, Overrides, Switches};
 use msgp_core::loss::Likelihood;
 use msgp_core::model::{Method, Metrics, Model, Rollout, pool, score};
 use msgp_core::model_file::ModelFile;
@@ -43,8 +43,6 @@ pub struct Msgp {
     /// `history="auto"`: each fit chooses the history from its training data first
     /// ([`with_chosen_history`]); `options` then hold the last choice.
     auto_history: bool,
-    /// Other `FitSettings` fields given by the user (a JSON object), applied after `options`.
-    overrides: Option<serde_json::Value>,
     /// Shared so that long calls hold no borrow of the object while the GIL is released.
     fitted: Option<Arc<Fitted>>,
 }
@@ -77,21 +75,12 @@ impl Msgp {
                 method: model.method,
                 ly: model.spec.ly,
                 lu: model.spec.lu,
-                inducing: Some(model.params.pseudo_inputs.nrows()),
-                iterations,
                 seed: file.training.seed,
-                mean: Some(model.config.mean),
                 integrators: Vec::new(),
                 optimizer: file
                     .training
                     .settings
                     .get("optimizer")
-                    .and_then(|v| serde_json::from_value(v.clone()).ok())
-                    .unwrap_or_default(),
-                likelihood: file
-                    .training
-                    .settings
-                    .get("likelihood")
                     .and_then(|v| serde_json::from_value(v.clone()).ok())
                     .unwrap_or_default(),
                 start: file
@@ -102,9 +91,23 @@ impl Msgp {
                     .unwrap_or_default(),
                 threads: Threads::default(),
                 segment_length: None,
-                switches: Switches::default(),
+                overrides: Overrides {
+                    iterations,
+                    // (a linear-kf model's idle pseudo-input is no GP's)
+                    inducing: (model.method != Method::LinearKf)
+                        .then(|| model.params.pseudo_inputs.nrows()),
+                    mean: Some(model.config.mean),
+                    likelihood: (model.method == Method::Msgp).then(|| {
+                        file.training
+                            .settings
+                            .get("likelihood")
+                            .and_then(|v| serde_json::from_value(v.clone()).ok())
+                            .unwrap_or_default()
+                    }),
+                    switches: Switches::default(),
+                    settings: options::recorded_overrides(model.method, &file.training.settings),
+                },
             },
-            overrides: options::recorded_overrides(model.method, &file.training.settings),
             auto_history: false,
             fitted: Some(Arc::new(Fitted {
                 file,
@@ -266,10 +269,15 @@ impl Msgp {
             start,
             segment_length,
         )?;
-        let overrides = options::user_overrides(options.method, settings)?;
+        let options = FitOptions {
+            overrides: Overrides {
+                settings: options::user_overrides(options.method, settings)?,
+                ..options.overrides
+            },
+            ..options
+        };
         Ok(Self {
             options,
-            overrides,
             auto_history,
             fitted: None,
         })
@@ -291,9 +299,9 @@ impl Msgp {
     ) -> PyResult<Bound<'py, Self>> {
         let py = slf.py();
         let progress = callable(progress, "one training iteration's dict")?;
-        let (options, overrides, auto_history) = {
+        let (options, auto_history) = {
             let me = slf.try_borrow().map_err(|e| Error::Busy(e.to_string()))?;
-            (me.options.clone(), me.overrides.clone(), me.auto_history)
+            (me.options.clone(), me.auto_history)
         };
         let train = trajectories(u, y)?;
         let (du, dy) = train.first().map_or((0, 0), |t| (t.u.ncols(), t.y.ncols()));
@@ -320,7 +328,7 @@ impl Msgp {
         }
         let names = (inputs, outputs);
         let fitted = detached(py, move || {
-            fit_detached((options, overrides, auto_history), &train, &names, progress)
+            fit_detached((options, auto_history), &train, &names, progress)
         })??;
         let diverged = fitted.file.training.diverged.clone();
         slf.try_borrow_mut()
@@ -510,14 +518,14 @@ impl Msgp {
     fn inducing(&self) -> Option<usize> {
         match &self.fitted {
             Some(f) => Some(f.model.params.pseudo_inputs.nrows()),
-            None => self.options.inducing,
+            None => self.options.overrides.inducing,
         }
     }
 
     /// Adam iterations (None: the method's default).
     #[getter]
     fn iterations(&self) -> Option<usize> {
-        self.options.iterations
+        self.options.overrides.iterations
     }
 
     /// Seed of every random choice of the fit.
@@ -531,7 +539,8 @@ impl Msgp {
     /// its file records.
     #[getter]
     fn likelihood(&self) -> Option<&'static str> {
-        (self.options.method == Method::Msgp).then(|| self.options.likelihood.name())
+        (self.options.method == Method::Msgp)
+            .then(|| self.options.overrides.likelihood.unwrap_or_default().name())
     }
 
     /// `max(l_y, l_u)`: samples that start a simulation; predictions begin at this index.
@@ -599,9 +608,7 @@ impl Msgp {
     /// The fit's report (iterations_run, best_iteration, history of (iteration, training loss,
     /// validation NLL), train_seconds, jitter; MSGP: recipes, chosen_recipe and
     /// full_data_iteration, the iterate of the final training on all the data that the model
-    /// is, or full_data_failed; final_budget, the length of that training, and final_budgets,
-    /// the lengths considered, each with its proxy's RMSE on the validation tail (normalised
-    /// units); calibration, the output-variance calibration: added_std
+    /// is, or full_data_failed; calibration, the output-variance calibration: added_std
     /// per output, original units, and its judge; history_choice, with history="auto": the
     /// chosen ly, lu and every candidate's score); None for a loaded model.
     #[getter]
@@ -639,13 +646,14 @@ impl Msgp {
             opt(self.inducing()),
             o.method.name(),
             o.seed,
-            opt(o.iterations)
+            opt(o.overrides.iterations)
         );
-        if o.method == Method::Msgp && o.likelihood != Likelihood::default() {
-            s.insert_str(
-                s.len() - 1,
-                &format!(", likelihood='{}'", o.likelihood.name()),
-            );
+        if let Some(l) = o
+            .overrides
+            .likelihood
+            .filter(|l| *l != Likelihood::default())
+        {
+            s.insert_str(s.len() - 1, &format!(", likelihood='{}'", l.name()));
         }
         if o.method == Method::Msgp && o.start != MsgpStart::default() {
             s.insert_str(s.len() - 1, &format!(", start='{}'", start_name(o.start)));
@@ -680,19 +688,19 @@ impl Msgp {
             }
             None => {
                 let o = &me.options;
-                let settings = match &me.overrides {
+                let settings = match &o.overrides.settings {
                     Some(v) => crate::convert::from_json(py, v)?,
                     None => py.None().into_bound(py),
                 };
                 let msgp = o.method == Method::Msgp;
-                let likelihood = msgp.then(|| o.likelihood.name());
+                let likelihood = o.overrides.likelihood.map(|l| l.name());
                 let start = msgp.then_some(start_name(o.start));
                 let args = (
                     (o.ly, o.lu),
-                    o.inducing,
+                    o.overrides.inducing,
                     o.method.name(),
                     o.seed,
-                    o.iterations,
+                    o.overrides.iterations,
                     settings,
                     likelihood,
                     start,

@@ -4,15 +4,14 @@
 //! method's setting named as such), and both into a fit's [`FitSettings`] at fit time.
 
 use msgp_core::data::Trajectory;
-use msgp_core::fit::{FitOptimizer, FitOptions, FitSettings, MsgpStart, Switches};
+use msgp_core::fit::{FitOptimizer, FitOptions, FitSettings, MsgpStart, Overrides};
 use msgp_core::loss::Likelihood;
 use msgp_core::model::Method;
 use msgp_core::numeric::parallel::Threads;
 use pyo3::prelude::*;
 use pyo3::types::{PyList, PyTuple};
 
-use crate::convert::with_overrides;
-use crate::error::{Error, Result, input};
+use crate::error::{Result, input};
 
 /// Settings that the constructor's own arguments set.
 const OWN_SETTINGS: [(&str, &str); 8] = [
@@ -131,7 +130,7 @@ pub fn fit_options(
              method {method:?} has its own fit"
         )));
     }
-    let likelihood = self::likelihood(m, likelihood)?.unwrap_or_default();
+    let likelihood = self::likelihood(m, likelihood)?;
     let start = self::start(m, start)?;
     let auto_history = history
         .and_then(|h| h.extract::<String>().ok())
@@ -169,18 +168,21 @@ pub fn fit_options(
         method: m,
         ly,
         lu,
-        inducing,
-        iterations,
         seed,
-        mean: None,
         integrators: Vec::new(),
         optimizer: FitOptimizer::Adam,
-        likelihood,
         start,
         threads: Threads::default(),
         segment_length,
-        switches: Switches::default(),
+        overrides: Overrides {
+            inducing,
+            iterations,
+            likelihood,
+            ..Overrides::default()
+        },
     };
+    // what the method does not have shows now, not at the fit
+    options.overrides.apply(FitSettings::new(m))?;
     Ok((options, auto_history))
 }
 
@@ -236,31 +238,25 @@ pub fn user_overrides(
                 }
             }
             // checked now against the method's defaults, so mistakes show at construction
-            let _: FitSettings = with_overrides(&FitSettings::new(m), Some(s), "settings")?;
+            let by_name = Overrides {
+                settings: Some(user.clone()),
+                ..Overrides::default()
+            };
+            by_name.apply(FitSettings::new(m))?;
             Some(user)
         }
     })
 }
 
-/// Settings for `train`: exactly `msgp fit`'s, then the user's other settings; threads
-/// from `MSGP_THREADS` at the time of the call, as `msgp fit` takes them.
-pub fn settings(
-    options: &FitOptions,
-    overrides: Option<&serde_json::Value>,
-    train: &[Trajectory],
-) -> Result<FitSettings> {
-    let threads = Threads::from_env()?;
-    let settings = options.settings(train)?;
-    let Some(user) = overrides else {
-        return Ok(FitSettings {
-            threads,
-            ..settings
-        });
+/// Settings for `train`: exactly `msgp fit`'s for the same options, resolved once
+/// ([`FitOptions::settings`]: the method's base, the arguments, then the `settings` dict);
+/// threads from `MSGP_THREADS` at the time of the call, as `msgp fit` takes them.
+pub fn settings(options: &FitOptions, train: &[Trajectory]) -> Result<FitSettings> {
+    let options = FitOptions {
+        threads: Threads::from_env()?,
+        ..options.clone()
     };
-    let value = serde_json::to_value(&settings)
-        .map_err(|e| Error::Panic(format!("cannot describe the settings: {e}")))?;
-    let merged: FitSettings = crate::convert::merged(&value, user, "settings")?;
-    Ok(FitSettings { threads, ..merged })
+    Ok(options.settings(train)?)
 }
 
 /// The settings a model file records that the constructor's arguments do not carry (the
@@ -284,7 +280,59 @@ pub fn recorded_overrides(
         .map(|(k, v)| (k.clone(), v.clone()))
         .collect();
     let kept = serde_json::Value::Object(kept);
-    crate::convert::merged::<FitSettings>(&defaults, &kept, "settings")
+    let by_name = Overrides {
+        settings: Some(kept.clone()),
+        ..Overrides::default()
+    };
+    by_name
+        .apply(FitSettings::new(method))
         .is_ok()
         .then_some(kept)
+}
+
+/// A learning loop's settings: `defaults` with the user's `settings` dict, its `"fit"` entry
+/// resolved as a fit's settings by name ([`Overrides::apply`], as `Msgp(settings=...)`
+/// resolves them) and the rest laid over the loop's own; `fit` reaches the loop's fit.
+pub fn loop_settings<T>(
+    defaults: &T,
+    settings: Option<&Bound<'_, PyAny>>,
+    fit: fn(&mut T) -> &mut FitSettings,
+) -> Result<T>
+where
+    T: serde::Serialize + serde::de::DeserializeOwned + Clone,
+{
+    let Some(user) = settings.filter(|s| !s.is_none()) else {
+        return Ok(defaults.clone());
+    };
+    let mut user = crate::convert::to_json(user, "settings")?;
+    let Some(obj) = user.as_object_mut() else {
+        return Err(input(format!("settings must be a dict, got {user}")));
+    };
+    let fit_user = obj.remove("fit");
+    let mut s: T = msgp_core::overlay::merged(defaults, &user, "settings")?;
+    if let Some(fit_user) = fit_user {
+        let by_name = Overrides {
+            settings: Some(fit_user),
+            ..Overrides::default()
+        };
+        let resolved = by_name.apply(fit(&mut s).clone()).map_err(|e| match e {
+            msgp_core::MsgpError::Overrides(m) => input(under_fit(&m)),
+            e => e.into(),
+        })?;
+        *fit(&mut s) = resolved;
+    }
+    Ok(s)
+}
+
+/// A message of the fit's settings by name ([`msgp_core::overlay`]: "settings: unknown setting
+/// `x` …", "settings.x: …") with its key named under `fit`, as the loop's dict holds it.
+fn under_fit(message: &str) -> String {
+    const UNKNOWN: &str = "settings: unknown setting `";
+    if let Some(rest) = message.strip_prefix(UNKNOWN) {
+        return format!("{UNKNOWN}fit.{rest}");
+    }
+    match message.strip_prefix("settings.") {
+        Some(rest) => format!("settings.fit.{rest}"),
+        None => message.to_string(),
+    }
 }

@@ -3,8 +3,10 @@
 
 use msgp_core::data::{NoiseScale, SyntheticSystem};
 use msgp_core::fit::FitSettings;
+use msgp_core::learner::LoopModel;
 use msgp_core::numeric::parallel::Threads;
 use msgp_sim::learn::{LearnEvent, LearnSettings, episode_trajectory, learn_policy_observed};
+use msgp_sim::plant_tasks::PlantTask;
 use msgp_sim::{
     Controller, Episode, EpisodeConfig, ExcitationConfig, PendulumParams, PidPdGains, PidPdPolicy,
     RandomExcitation, StabilityCriteria, run_episode as run_sim_episode,
@@ -16,6 +18,7 @@ use pyo3::types::{PyDict, PyList, PyString};
 
 use crate::convert::{array1, array2, to_json, to_python, with_overrides};
 use crate::error::{Error, Result, callable, detached, input, with_python};
+use crate::options::loop_settings;
 use crate::options::{count, uint};
 
 fn noise_scale(noise: &str) -> Result<NoiseScale> {
@@ -57,8 +60,9 @@ pub fn synthetic_system<'py>(
 
 /// The default values of a group of settings as a dict: "pendulum" (plant parameters),
 /// "stability" (stability-test criteria), "learn" (policy-learning loop; `method` picks the
-/// model's defaults, as `learn_policy(method)` uses them), "fit" (model fit; `method` picks
-/// the method's own settings, as `Msgp(method=...)` uses them).
+/// model's defaults, as `learn_policy(method)` uses them), "learner" (the loop on a plant, as
+/// `learn_policy(env=...)` takes its `settings`: the named Pendulum-v1 task's), "fit" (model
+/// fit; `method` picks the method's own settings, as `Msgp(method=...)` uses them).
 #[pyfunction]
 #[pyo3(signature = (what, *, method = None, likelihood = None))]
 pub fn defaults<'py>(
@@ -92,8 +96,15 @@ pub fn defaults<'py>(
             let m = crate::options::method(method.unwrap_or("msgp"))?;
             to_python(py, &FitSettings::new(m))
         }
+        "learner" => {
+            let preset = PlantTask::PendulumV1
+                .settings(LoopModel::MsgpFilter, 0)
+                .map_err(Error::from)?;
+            to_python(py, &preset)
+        }
         other => Err(input(format!(
-            "no defaults for {other:?}: expected \"pendulum\", \"stability\", \"learn\" or \"fit\""
+            "no defaults for {other:?}: expected \"pendulum\", \"stability\", \"learn\", \
+             \"learner\" or \"fit\""
         ))
         .into()),
     }
@@ -305,8 +316,7 @@ pub fn learn_policy<'py>(
             .into());
         }
     }
-    let base: LearnSettings =
-        with_overrides(&LearnSettings::for_model(m, l), settings, "settings")?;
+    let base = loop_settings(&LearnSettings::for_model(m, l), settings, |s| &mut s.fit)?;
     let mut s = LearnSettings {
         iterations,
         seed,

@@ -66,3 +66,24 @@ def test_frozen_groups_and_integrators_use_the_rust_names():
 def test_a_field_of_another_method_is_refused_by_name():
     with pytest.raises(msgp.InvalidInputError, match="objective"):
         msgp.Msgp(method="msgp", settings={"objective": "exact"})
+
+
+@pytest.mark.parametrize(
+    ("what", "cls", "nested"),
+    [
+        ("learner", typed.LearnerSettings, {"excitation": typed.Excitation}),
+        ("learn", typed.PendulumLearnSettings, {"excitation": typed.PendulumExcitation}),
+    ],
+)
+def test_the_typed_loop_settings_are_the_rust_fields(what, cls, nested):
+    defaults = msgp.defaults(what)
+    assert keys(cls) == set(defaults)
+    assert keys(typed.PolicySearchSettings) == set(defaults["search"])
+    admits_the_defaults(typed.PolicySearchSettings, defaults["search"])
+    for field, inner in nested.items():
+        assert keys(inner) == set(defaults[field])
+    # the loop's fit: the method's own settings, under its serialised tag
+    fit = dict(defaults["fit"])
+    by_tag = {"Msgp": "msgp", "GpNarx": "gp-narx", "PilcoNarx": "pilco-narx", "LinearKf": "linear-kf"}
+    assert keys(BY_METHOD[by_tag[fit.pop("method")]]) == set(fit)
+

@@ -317,12 +317,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     let m = model.evaluate(&bench.test)?;
     let mf = model.evaluate_as(&bench.test, msgp_core::model::Rollout::MeanFeedback)?;
-    if !report.final_budgets.is_empty() {
-        eprintln!(
-            "final budgets (length, tail RMSE) {:?}",
-            report.final_budgets
-        );
-    }
     if !report.recipes.is_empty() {
         eprintln!(
             "recipes {:?} chose {}",

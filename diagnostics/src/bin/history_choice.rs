@@ -13,13 +13,17 @@ use std::path::PathBuf;
 
 use msgp_core::data::Benchmark;
 use msgp_core::data::real::RealSeries;
-use msgp_core::fit::{FitOptions, HistorySearch, choose_history, fit};
+use msgp_core::fit::{FitOptions, HistorySearch, Overrides, choose_history, fit};
 use msgp_core::model::{Method, Rollout};
 
 fn options(method: Method, ly: usize, lu: usize) -> FitOptions {
     let inducing = std::env::args().find_map(|a| a.strip_prefix("inducing=")?.parse().ok());
     FitOptions {
-        inducing,
+        overrides: Overrides {
+            // (the linear-kf judge has no GP)
+            inducing: inducing.filter(|_| method != Method::LinearKf),
+            ..Overrides::default()
+        },
         ..FitOptions::new(method, ly, lu)
     }
 }

@@ -5,7 +5,7 @@ use std::time::Instant;
 use crate::args::DemoArgs;
 use anyhow::Context;
 use msgp_core::data::{NoiseScale, SyntheticSystem};
-use msgp_core::fit::{FitSettings, fit};
+use msgp_core::fit::{FitSettings, Overrides, fit};
 use msgp_core::model::Method;
 use msgp_core::numeric::parallel::Threads;
 
@@ -34,18 +34,20 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         "method    test RMSE   NLL/step  2σ coverage  train time  (paper RMSE)",
     )?;
     for (method, paper_rmse) in [(Method::GpNarx, paper.0), (Method::Msgp, paper.1)] {
-        let mut settings = FitSettings {
+        let base = FitSettings {
             ly: bench.ly,
             lu: bench.lu,
             seed: args.seed,
             threads: Threads::from_env()?,
             ..FitSettings::new(method)
+        };
+        let settings = Overrides {
+            inducing: Some(args.inducing),
+            // `--iters` are MSGP's; the baseline runs its default
+            iterations: args.iters.filter(|_| method == Method::Msgp),
+            ..Overrides::default()
         }
-        .with_inducing(args.inducing);
-        // `--iters` are MSGP's; the baseline runs its default
-        if let (Method::Msgp, Some(n)) = (method, args.iters) {
-            settings = settings.with_solver_iterations(n);
-        }
+        .apply(base)?;
         let started = Instant::now();
         let mut last_print = Instant::now();
         let (model, report) = fit(std::slice::from_ref(&bench.train), &settings, &mut |p| {

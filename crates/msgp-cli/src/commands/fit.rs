@@ -9,8 +9,9 @@ use msgp_core::MsgpError;
 use msgp_core::data::Trajectory;
 use msgp_core::fit::calibration::Judge;
 use msgp_core::fit::history::{HistoryChoice, HistoryEvent, HistorySearch, with_chosen_history};
-use msgp_core::fit::{FitOptimizer, FitOptions, FitProgress, FitReport, MsgpStart, Switches, fit};
-use msgp_core::loss::Likelihood;
+use msgp_core::fit::{
+    FitOptimizer, FitOptions, FitProgress, FitReport, MsgpStart, Overrides, Switches, fit,
+};
 use msgp_core::model::Method;
 use msgp_core::model_file::{FitRecord, ModelFile};
 use msgp_core::numeric::parallel::Threads;
@@ -56,13 +57,6 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         bail!("no training samples: raise --train or --train-frac");
     }
     let method = Method::from(args.method);
-    if let (Some(l), false) = (args.likelihood, method == Method::Msgp) {
-        bail!(
-            "--likelihood {}: the likelihood of an MSGP fit; --method {} has its own",
-            Likelihood::from(l).name(),
-            method.name()
-        );
-    }
     if let (Some(_), false) = (args.segment_length, method == Method::Msgp) {
         bail!(
             "--segment-length: segments of the trajectory likelihood, an MSGP fit's; \
@@ -87,21 +81,23 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         method,
         ly: given.ly,
         lu: given.lu,
-        inducing: args.inducing,
-        iterations: args.iters,
         seed: args.seed,
-        mean: args.mean.map(Into::into),
         integrators: args.integrating.clone(),
         optimizer: args.optimizer.into(),
-        likelihood: args.likelihood.map_or(Likelihood::default(), Into::into),
         start: args.start.map_or(MsgpStart::default(), Into::into),
         threads: Threads::from_env()?,
         segment_length: args.segment_length,
-        switches: Switches {
-            one_step_objective: args.one_step.map(Into::into),
-            calibrate: args.no_calibration.then_some(false),
-            choose_final_budget: args.choose_final_length.then_some(true),
-            blow_up_fallback: args.no_blow_up_fallback.then_some(false),
+        overrides: Overrides {
+            iterations: args.iters,
+            inducing: args.inducing,
+            mean: args.mean.map(Into::into),
+            likelihood: args.likelihood.map(Into::into),
+            switches: Switches {
+                one_step_objective: args.one_step.map(Into::into),
+                calibrate: args.no_calibration.then_some(false),
+                blow_up_fallback: args.no_blow_up_fallback.then_some(false),
+            },
+            settings: None,
         },
     };
     let (options, history_choice) = match args.history {
@@ -115,7 +111,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let warmup = ly.max(lu);
     check_lengths(&train, warmup, "training")?;
     check_lengths(&test, warmup, "test")?;
-    let settings = options.settings(&trajs).map_err(flagged_switch)?;
+    let settings = options.settings(&trajs).map_err(flagged)?;
     warnings.extend(options.history_warning(&trajs));
     warnings.extend(options.inducing_warning(&trajs));
     for w in &warnings {
@@ -202,8 +198,6 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             "best_iteration": report.best_iteration,
             "full_data_iteration": report.full_data_iteration,
             "full_data_failed": report.full_data_failed,
-            "final_budget": report.final_budget,
-            "final_budgets": report.final_budgets,
             "chosen_recipe": report.chosen_recipe,
             "recipes": report.recipes,
             "calibration": report.calibration,
@@ -406,30 +400,7 @@ pub fn kept(report: &FitReport) -> String {
         ),
         (None, None, _) => format!("kept iteration {}", report.best_iteration),
     };
-    kept + &budget(report) + &set_aside
-}
-
-/// How long the final training was, where the proxy chose it
-/// ([`msgp_core::fit::MsgpSettings::choose_final_budget`]); empty otherwise.
-fn budget(report: &FitReport) -> String {
-    let Some(chosen) = report.final_budget else {
-        return String::new();
-    };
-    let scores: Vec<String> = report
-        .final_budgets
-        .iter()
-        .map(|(n, r)| match r {
-            Some(r) => format!("{n}: {r:.3}"),
-            None => format!("{n}: failed"),
-        })
-        .collect();
-    format!(
-        "; its length, {chosen} iterations, chosen by the proxy of each length (the same \
-         training on the head) simulating the validation tail, a shorter one only where its \
-         RMSE is at least {:.0} % lower (normalised: {})",
-        100.0 * msgp_core::fit::CLEARLY_BETTER,
-        scores.join(", ")
-    )
+    kept + &set_aside
 }
 
 /// The output-variance calibration of an MSGP fit, in words ([`msgp_core::fit::calibration`]);
@@ -462,14 +433,17 @@ pub fn calibrated(report: &FitReport, outputs: &[String]) -> Option<String> {
     ))
 }
 
-/// A switch of the fit that the method does not have, named by its flag
-/// ([`msgp_core::fit::Switches`]); other errors as they are.
-fn flagged_switch(e: MsgpError) -> anyhow::Error {
+/// A setting the method does not have (or one out of range), named by its flag
+/// ([`msgp_core::fit::Overrides`]); other errors as they are.
+fn flagged(e: MsgpError) -> anyhow::Error {
     let flag = match &e {
         MsgpError::InvalidSetting { name, .. } => match *name {
+            "iterations" => "--iters",
+            "inducing" => "--inducing",
+            "mean" => "--mean",
+            "likelihood" => "--likelihood",
             "one_step_objective" => "--one-step",
             "calibrate" => "--no-calibration",
-            "choose_final_budget" => "--choose-final-length",
             "blow_up_fallback" => "--no-blow-up-fallback",
             _ => return e.into(),
         },

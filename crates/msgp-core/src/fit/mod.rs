@@ -20,19 +20,21 @@ mod msgp;
 pub mod one_step;
 mod options;
 mod proxy_watch;
+pub mod resolve;
 pub mod segments;
 mod settings;
 mod vfe;
 
 pub use divergence::{DIVERGENCE_RANGES, OutputRange, check_divergence};
 pub use history::{HistoryChoice, HistoryScore, HistorySearch, choose_history};
-pub use options::{FEW_INDUCING, FitOptions, MANY_GP_INPUTS, Switches};
+pub use options::{FEW_INDUCING, FitOptions, MANY_GP_INPUTS};
+pub use resolve::{Overrides, Switches};
 pub use segments::{LONG_LOG_WINDOWS, Segments};
 pub use settings::{
-    CLEARLY_BETTER, DEFAULT_FULL_DATA_BLOW_UP, DEFAULT_FULL_DATA_ITERATIONS, DEFAULT_MAX_INDUCING,
+    DEFAULT_FULL_DATA_BLOW_UP, DEFAULT_FULL_DATA_ITERATIONS, DEFAULT_MAX_INDUCING,
     DEFAULT_ONE_STEP_ITERATIONS, FIT_LBFGS, FitOptimizer, FitSettings, LINEAR_RECIPE,
     LinearKfSettings, MethodSettings, MsgpSettings, MsgpStart, NoiseStart, OneStepFitSettings,
-    OneStepObjective, OneStepSolver, Recipe, SHORTEST_FINAL_BUDGET, final_budgets,
+    OneStepObjective, OneStepSolver, Recipe,
 };
 
 use std::ops::ControlFlow;
@@ -52,8 +54,8 @@ use one_step::{OneStepSettings, fit_one_step, one_step_pairs};
 /// One line of fit progress.
 #[derive(Clone, Copy, Debug)]
 pub struct FitProgress {
-    /// 1: training with early stopping on the held-out tail; 2: refit on all training data
-    /// ([`MsgpSettings::refit`], [`MsgpSettings::full_data_iterations`]); 3: training the
+    /// 1: training with early stopping on the held-out tail; 2: the final training on all the
+    /// training data ([`MsgpSettings::full_data_iterations`]); 3: training the
     /// alternative recipe ([`MsgpSettings::alternative`]). On two or more threads the final
     /// training on all the data may start while the alternative recipe still trains, for the
     /// recipe leading at that moment; if the other one overtakes it, stage 2 starts again at
@@ -115,15 +117,6 @@ pub struct FitReport {
     /// the head is returned then).
     #[serde(default)]
     pub full_data_failed: Option<String>,
-    /// MSGP with [`MsgpSettings::choose_final_budget`]: the length of the final training
-    /// chosen (`None` where no choice was made: no final training kept, or no proxy).
-    #[serde(default)]
-    pub final_budget: Option<usize>,
-    /// … and each length considered, longest first, with the free-simulation RMSE of the
-    /// validation tail (pooled over the outputs, normalised units) under the proxy trained for
-    /// as long (`None` where that simulation failed).
-    #[serde(default)]
-    pub final_budgets: Vec<(usize, Option<f64>)>,
     /// MSGP with the final training and [`MsgpSettings::calibrate`]: the output-variance
     /// calibration of the returned model ([`calibration`]).
     #[serde(default)]

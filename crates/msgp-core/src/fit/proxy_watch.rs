@@ -6,8 +6,7 @@
 //! solver: its first iterates *are* the proxy's, bit for bit (with segments a proxy draws its
 //! batches by its head's seed, whether read off the head or trained on its own). A [`ProxyWatch`]
 //! rides along that training and keeps what the proxy's own run would return (its iterate of
-//! lowest training loss, or with batches the mean of its second half; its blow-up test; its
-//! snapshots at the checkpoints), and the head's training goes on past its early stop, without
+//! lowest training loss, or with batches the mean of its second half; its blow-up test), and the head's training goes on past its early stop, without
 //! further validation checks, until the proxy's length is reached. The separate proxy run of
 //! up to 400 iterations is then not needed: on a short log it was the longer of the two
 //! threads' last stages.
@@ -25,8 +24,6 @@ pub(super) struct ProxyOutcome {
     pub failed: Option<String>,
     /// A numerical stop inside the proxy's length that still left a model.
     pub numerical_stop: Option<String>,
-    /// `(checkpoint, iterate of lowest loss so far, its iteration)`, as the proxy's own run.
-    pub snapshots: Vec<(usize, Vec<f64>, usize)>,
 }
 
 /// Watches a training's iterates as the proxy of `iterations` steps would.
@@ -34,34 +31,24 @@ pub(super) struct ProxyWatch {
     iterations: usize,
     batched: bool,
     blow_up: Option<BlowUp>,
-    checkpoints: Vec<usize>,
     best: (f64, Vec<f64>, usize),
     average: Option<(Vec<f64>, usize)>,
     good: Option<Iterate>,
-    snapshots: Vec<(usize, Vec<f64>, usize)>,
     blown: Option<String>,
     failure: Option<String>,
     done: bool,
 }
 
 impl ProxyWatch {
-    /// A proxy of `iterations` steps, batched or not, with the blow-up limit `blow_up` and the
-    /// snapshot `checkpoints`.
-    pub fn new(
-        iterations: usize,
-        batched: bool,
-        blow_up: Option<f64>,
-        checkpoints: Vec<usize>,
-    ) -> Self {
+    /// A proxy of `iterations` steps, batched or not, with the blow-up limit `blow_up`.
+    pub fn new(iterations: usize, batched: bool, blow_up: Option<f64>) -> Self {
         Self {
             iterations,
             batched,
             blow_up: blow_up.map(BlowUp::new),
-            checkpoints,
             best: (f64::INFINITY, Vec::new(), 0),
             average: None,
             good: None,
-            snapshots: Vec::new(),
             blown: None,
             failure: None,
             done: false,
@@ -87,9 +74,6 @@ impl ProxyWatch {
         if !self.batched && loss < self.best.0 {
             self.best = (loss, x.to_vec(), it);
         }
-        if self.best.0.is_finite() && self.checkpoints.contains(&it) {
-            self.snapshots.push((it, self.best.1.clone(), self.best.2));
-        }
         if let Some(why) = self.blow_up.as_mut().and_then(|w| w.observe(it, loss)) {
             self.blown = Some(why);
             self.done = true;
@@ -114,7 +98,6 @@ impl ProxyWatch {
             outcome: None,
             failed: self.blown,
             numerical_stop: None,
-            snapshots: Vec::new(),
         };
         if out.failed.is_some() {
             return out;
@@ -147,7 +130,6 @@ impl ProxyWatch {
             },
             (None, None) => None,
         };
-        out.snapshots = self.snapshots;
         out
     }
 }
@@ -158,23 +140,22 @@ mod tests {
 
     #[test]
     fn the_watch_keeps_what_the_proxys_own_run_keeps() {
-        // unbatched: the iterate of lowest loss within the length, a snapshot at a checkpoint
-        let mut w = ProxyWatch::new(4, false, None, vec![2]);
+        // unbatched: the iterate of lowest loss within the length
+        let mut w = ProxyWatch::new(4, false, None);
         for (it, loss) in [3.0, 2.0, 2.5, 1.0, 1.5, 0.1].into_iter().enumerate() {
             w.observe(it, loss, &[it as f64]);
         }
         assert!(w.done());
         let out = w.finish();
         assert_eq!(out.outcome, Some((vec![3.0], 3)));
-        assert_eq!(out.snapshots, vec![(2, vec![1.0], 1)]);
         // batched: the mean of the second half (iterations 2..=4)
-        let mut w = ProxyWatch::new(4, true, None, Vec::new());
+        let mut w = ProxyWatch::new(4, true, None);
         for it in 0..6 {
             w.observe(it, 1.0, &[it as f64]);
         }
         assert_eq!(w.finish().outcome, Some((vec![3.0], 4)));
         // a blow-up after Adam's first steps: no model, and why
-        let mut w = ProxyWatch::new(40, false, Some(5.0), Vec::new());
+        let mut w = ProxyWatch::new(40, false, Some(5.0));
         for it in 0..20 {
             w.observe(it, if it == 15 { 10.0 } else { 1.0 }, &[0.0]);
         }
@@ -183,14 +164,14 @@ mod tests {
         assert!(out.outcome.is_none());
         assert!(out.failed.expect("blown").contains("iteration 15"));
         // a numerical failure inside the length keeps the best so far; after it, nothing
-        let mut w = ProxyWatch::new(10, false, None, Vec::new());
+        let mut w = ProxyWatch::new(10, false, None);
         w.observe(0, 2.0, &[0.0]);
         w.observe(1, 1.0, &[1.0]);
         w.failed("not positive definite".into());
         let out = w.finish();
         assert_eq!(out.outcome, Some((vec![1.0], 1)));
         assert!(out.numerical_stop.is_some());
-        let mut w = ProxyWatch::new(1, false, None, Vec::new());
+        let mut w = ProxyWatch::new(1, false, None);
         w.observe(0, 2.0, &[0.0]);
         w.observe(1, 1.0, &[1.0]);
         w.failed("later".into());

@@ -97,8 +97,6 @@ pub struct MsgpSettings {
     /// exact GP's).
     #[serde(default = "OneStepObjective::exact")]
     pub one_step_objective: OneStepObjective,
-    /// After early stopping, refit on all training data for the chosen number of iterations.
-    pub refit: bool,
     /// After the validation tail has chosen the recipe, train the chosen recipe once more from
     /// its start on *all* the training data (the tail included) for this many solver
     /// iterations (at most [`MsgpSettings::iterations`]) and return its iterate of lowest
@@ -145,49 +143,11 @@ pub struct MsgpSettings {
     /// value, a negative one ends every final training at its 11th iteration).
     #[serde(default = "default_full_data_blow_up")]
     pub full_data_blow_up: f64,
-    /// With the final training and a validation tail: how long the final training is, chosen
-    /// among [`final_budgets`] of [`MsgpSettings::full_data_iterations`] (400, 200, 100, 50) by
-    /// the free-simulation RMSE of the validation tail under the final training's proxy (the
-    /// same recipe trained on the head alone for as long, [`super::calibration`]): the whole
-    /// length, unless a shorter one's RMSE is at least 10 % lower (then the lowest of those).
-    /// The model is the final training's iterate of lowest training loss within the chosen
-    /// length, and the proxy's iterate at that length judges its calibration. Off by default
-    /// (the whole `full_data_iterations`): on actuator it takes the test RMSE from 0.75 to
-    /// 0.62 (seeds 0–2), but on furnace's 30-sample tail the proxy's verdict does not carry
-    /// over to the final training (1.196 → 1.206, its 2σ coverage 0.91 → 0.56), and three
-    /// variants of the rule moved other rows for the worse (`docs/experiments/2026-12-05-how-long-the-final-training-is.md`, "How long the
-    /// final training is").
-    #[serde(default)]
-    pub choose_final_budget: bool,
     /// Train on segments of the training trajectories, a random batch of them per Adam step
     /// ([`super::segments`]); `None`: every trajectory whole (records before 2026-12-06).
     #[serde(default)]
     pub segments: Option<Segments>,
 }
-
-/// The lengths of the final training [`MsgpSettings::choose_final_budget`] chooses among:
-/// `iterations`, then halved while at least [`SHORTEST_FINAL_BUDGET`], longest first.
-pub fn final_budgets(iterations: usize) -> Vec<usize> {
-    let mut budgets = vec![iterations];
-    let mut b = iterations / 2;
-    while b >= SHORTEST_FINAL_BUDGET {
-        budgets.push(b);
-        b /= 2;
-    }
-    budgets
-}
-
-/// How much lower a shorter final training's proxy must put the validation tail's RMSE than
-/// the whole length's proxy to replace it ([`MsgpSettings::choose_final_budget`]): by 10 %. Set
-/// after seeing Table 1's test figures: actuator's shorter lengths were 22–39 % lower, while
-/// all but one of the fits a shorter length made worse were 1–5 % lower (`docs/experiments/2026-12-05-how-long-the-final-training-is.md`,
-/// "How long the final training is").
-pub const CLEARLY_BETTER: f64 = 0.1;
-
-/// The shortest final training [`MsgpSettings::choose_final_budget`] considers: 50 Adam steps.
-/// At the zero-mean recipe's step (0.002) no parameter can have moved by more than about 0.1
-/// (log scale) in fewer, so a shorter final training is still its start.
-pub const SHORTEST_FINAL_BUDGET: usize = 50;
 
 fn default_full_data_blow_up() -> f64 {
     DEFAULT_FULL_DATA_BLOW_UP
@@ -343,7 +303,6 @@ impl Default for MsgpSettings {
             one_step_iterations: DEFAULT_ONE_STEP_ITERATIONS,
             one_step_solver: OneStepSolver::Adam,
             one_step_objective: OneStepObjective::Exact,
-            refit: false,
             full_data_iterations: Some(DEFAULT_FULL_DATA_ITERATIONS),
             start_window: StartWindow::Measured,
             noise_start: NoiseStart::Split,
@@ -352,7 +311,6 @@ impl Default for MsgpSettings {
             calibrate: true,
             blow_up_fallback: true,
             full_data_blow_up: DEFAULT_FULL_DATA_BLOW_UP,
-            choose_final_budget: false,
             segments: None,
         }
     }
@@ -671,5 +629,5 @@ pub const FIT_LBFGS: Lbfgs = Lbfgs {
     patience: 5,
 };
 
-/// Upper bound of the default number of pseudo-inputs ([`super::FitOptions::inducing`]).
+/// Upper bound of the default number of pseudo-inputs ([`super::FitOptions::base`]).
 pub const DEFAULT_MAX_INDUCING: usize = 100;

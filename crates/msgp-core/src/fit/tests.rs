@@ -20,17 +20,31 @@ fn options(method: Method, inducing: Option<usize>, iterations: Option<usize>) -
         method,
         ly: 2,
         lu: 3,
-        inducing,
-        iterations,
         seed: 7,
-        mean: Some(MeanFunction::Zero),
         integrators: Vec::new(),
         optimizer: FitOptimizer::Adam,
-        likelihood: Likelihood::FreeRun,
         start: MsgpStart::OneStep,
         threads: Threads::default(),
         segment_length: None,
-        switches: Switches::default(),
+        overrides: Overrides {
+            inducing,
+            iterations,
+            // (only a GP has a prior mean to choose, only MSGP a likelihood)
+            mean: (method != Method::LinearKf).then_some(MeanFunction::Zero),
+            likelihood: (method == Method::Msgp).then_some(Likelihood::FreeRun),
+            ..Overrides::default()
+        },
+    }
+}
+
+/// `options` with the mean `mean` (`None`: the protocol's choice between recipes).
+fn with_mean(options: FitOptions, mean: Option<MeanFunction>) -> FitOptions {
+    FitOptions {
+        overrides: Overrides {
+            mean,
+            ..options.overrides
+        },
+        ..options
     }
 }
 
@@ -40,14 +54,20 @@ fn options(method: Method, inducing: Option<usize>, iterations: Option<usize>) -
 #[test]
 fn switches_turn_their_settings_and_other_methods_refuse_them() {
     let data = [traj(200)];
-    let with = |method, switches| FitOptions {
-        switches,
-        ..options(method, None, None)
+    let with = |method, switches| {
+        let o = options(method, None, None);
+        FitOptions {
+            overrides: Overrides {
+                switches,
+                likelihood: None,
+                ..o.overrides
+            },
+            ..o
+        }
     };
     let all = Switches {
         one_step_objective: Some(OneStepObjective::Vfe),
         calibrate: Some(false),
-        choose_final_budget: Some(true),
         blow_up_fallback: Some(false),
     };
     let plain = with(Method::Msgp, Switches::default())
@@ -57,18 +77,14 @@ fn switches_turn_their_settings_and_other_methods_refuse_them() {
     let (MethodSettings::Msgp(p), MethodSettings::Msgp(t)) = (&plain.method, &turned.method) else {
         panic!("msgp settings");
     };
-    assert_eq!(
-        (p.calibrate, p.choose_final_budget, p.blow_up_fallback),
-        (true, false, true)
-    );
+    assert_eq!((p.calibrate, p.blow_up_fallback), (true, true));
     let expected = MsgpSettings {
         one_step_objective: OneStepObjective::Vfe,
         calibrate: false,
-        choose_final_budget: true,
         blow_up_fallback: false,
         ..p.clone()
     };
-    assert_eq!(*t, expected, "only the switched settings move");
+    assert_eq!(t, &expected, "only the switched settings move");
     assert_ne!(p.one_step_objective, OneStepObjective::Vfe);
     let narx = with(
         Method::GpNarx,
@@ -93,13 +109,6 @@ fn switches_turn_their_settings_and_other_methods_refuse_them() {
                 ..Switches::default()
             },
             "calibrate",
-        ),
-        (
-            Switches {
-                choose_final_budget: Some(true),
-                ..Switches::default()
-            },
-            "choose_final_budget",
         ),
         (
             Switches {
@@ -666,7 +675,7 @@ fn options_default_inducing_and_iterations() {
             ..one_step(5, 300)
         })
     );
-    let s = options(Method::LinearKf, Some(5), Some(12))
+    let s = options(Method::LinearKf, None, Some(12))
         .settings(&[traj(40)])
         .expect("settings");
     assert_eq!(
@@ -674,6 +683,20 @@ fn options_default_inducing_and_iterations() {
         MethodSettings::LinearKf(LinearKfSettings { iterations: 12 })
     );
     assert_eq!(s.inducing(), None);
+    // a linear-kf model has no GP: pseudo-inputs asked for are refused, not ignored
+    let e = options(Method::LinearKf, Some(5), Some(12))
+        .settings(&[traj(40)])
+        .expect_err("no pseudo-inputs");
+    assert!(
+        matches!(
+            e,
+            MsgpError::InvalidSetting {
+                name: "inducing",
+                ..
+            }
+        ),
+        "{e:?}"
+    );
 }
 
 #[test]
@@ -704,8 +727,8 @@ fn options_refuse_bad_input_clearly() {
 }
 
 /// The settings serialise flat: the shared keys, `method` and the method's own keys only; an
-/// MSGP record has the keys of format 1.1 and `likelihood`, and every method's record reads back
-/// equal.
+/// MSGP record has the keys of format 1.1 (but `refit`) and later ones (but
+/// `choose_final_budget`; both removed 2026-12-07), and every method's record reads back equal.
 #[test]
 fn settings_serialise_with_the_methods_own_keys() {
     let keys = |s: &FitSettings| {
@@ -732,7 +755,6 @@ fn settings_serialise_with_the_methods_own_keys() {
         "one_step_iterations",
         "optimizer",
         "patience",
-        "refit",
         "start_window",
         "validation_fraction",
     ];
@@ -747,7 +769,6 @@ fn settings_serialise_with_the_methods_own_keys() {
     msgp_1_2.push("calibrate");
     msgp_1_2.push("blow_up_fallback");
     msgp_1_2.push("full_data_blow_up");
-    msgp_1_2.push("choose_final_budget");
     msgp_1_2.push("segments");
     assert_eq!(keys(&FitSettings::new(Method::Msgp)), with(&msgp_1_2));
     for m in [Method::GpNarx, Method::PilcoNarx] {
@@ -1190,43 +1211,51 @@ fn the_protocol_keeps_the_recipe_with_the_better_validation_nll() {
     );
     assert_eq!(alone.config.mean, MeanFunction::Zero);
     // a mean chosen in the options: no alternative
-    let chosen = FitOptions {
-        ly: 2,
-        lu: 1,
-        mean: Some(MeanFunction::Zero),
-        ..options(Method::Msgp, Some(12), Some(10))
-    }
+    let chosen = with_mean(
+        FitOptions {
+            ly: 2,
+            lu: 1,
+            ..options(Method::Msgp, Some(12), Some(10))
+        },
+        Some(MeanFunction::Zero),
+    )
     .settings(std::slice::from_ref(&traj))
     .expect("settings");
     assert_eq!(chosen.msgp().expect("msgp").alternative, None);
-    let auto = FitOptions {
-        ly: 2,
-        lu: 1,
-        mean: None,
-        ..options(Method::Msgp, Some(12), Some(10))
-    }
+    let auto = with_mean(
+        FitOptions {
+            ly: 2,
+            lu: 1,
+            ..options(Method::Msgp, Some(12), Some(10))
+        },
+        None,
+    )
     .settings(std::slice::from_ref(&traj))
     .expect("settings");
     assert_eq!(auto.msgp().expect("msgp").alternative, Some(LINEAR_RECIPE));
-    let linear = FitOptions {
-        ly: 2,
-        lu: 1,
-        mean: Some(MeanFunction::Linear),
-        ..options(Method::Msgp, Some(12), Some(10))
-    }
+    let linear = with_mean(
+        FitOptions {
+            ly: 2,
+            lu: 1,
+            ..options(Method::Msgp, Some(12), Some(10))
+        },
+        Some(MeanFunction::Linear),
+    )
     .settings(std::slice::from_ref(&traj))
     .expect("settings");
     let linear = linear.msgp().expect("msgp");
     assert_eq!((linear.recipe(), linear.alternative), (LINEAR_RECIPE, None));
     // the linear-kf start: the linear recipe alone, without being asked for the mean; a zero
     // mean is refused by name
-    let from_kalman = FitOptions {
-        ly: 2,
-        lu: 1,
-        mean: None,
-        start: MsgpStart::LinearKf,
-        ..options(Method::Msgp, Some(12), Some(10))
-    };
+    let from_kalman = with_mean(
+        FitOptions {
+            ly: 2,
+            lu: 1,
+            start: MsgpStart::LinearKf,
+            ..options(Method::Msgp, Some(12), Some(10))
+        },
+        None,
+    );
     let s = from_kalman
         .settings(std::slice::from_ref(&traj))
         .expect("settings");
@@ -1235,12 +1264,9 @@ fn the_protocol_keeps_the_recipe_with_the_better_validation_nll() {
         (s.recipe(), s.alternative, s.start),
         (LINEAR_RECIPE, None, MsgpStart::LinearKf)
     );
-    let zero = FitOptions {
-        mean: Some(MeanFunction::Zero),
-        ..from_kalman
-    }
-    .settings(std::slice::from_ref(&traj))
-    .expect_err("a zero mean");
+    let zero = with_mean(from_kalman, Some(MeanFunction::Zero))
+        .settings(std::slice::from_ref(&traj))
+        .expect_err("a zero mean");
     assert!(zero.to_string().contains("linear-kf start"), "{zero}");
 }
 
@@ -1335,96 +1361,41 @@ fn the_chosen_recipe_trains_again_on_all_the_data() {
     assert_eq!((r.full_data_iteration, r.full_data_failed), (None, None));
 }
 
-/// The final training is as long as its proxy (the same recipe on the head) says, among the
-/// halvings of its iterations down to 50 (here 100: its proxy simulates the validation tail
-/// with an RMSE 28 % below the whole length's); the model is then bit for bit the recipe's
-/// training alone on all the data for that long, and its proxy's iterate at that length
-/// judges the calibration. Off, the whole length.
+/// The final training is the chosen recipe trained alone on all the data for its whole
+/// length, bit for bit, its proxy's iterate judging the calibration.
 #[test]
-fn the_final_training_is_as_long_as_its_proxy_simulates_the_tail_best() {
+fn the_final_training_is_the_recipe_trained_alone_on_all_the_data() {
     const FINAL: usize = 200;
     let traj = long_memory_plant(0.1);
-    let msgp = |choose: bool| MsgpSettings {
+    let msgp = MsgpSettings {
         inducing: 12,
         iterations: FINAL,
         validation_fraction: 0.2,
         full_data_iterations: Some(FINAL),
-        choose_final_budget: choose,
         ..MsgpSettings::default()
     };
     let settings = |m: MsgpSettings| ly2_lu1(Threads::default(), m);
-    let alone = |recipe: Recipe, iterations: usize| {
-        let m = MsgpSettings {
-            iterations,
-            validation_fraction: 0.0,
-            full_data_iterations: None,
-            alternative: None,
-            ..msgp(false).with_recipe(recipe)
-        };
-        fit(std::slice::from_ref(&traj), &settings(m), &mut |_| {})
-            .expect("fit alone")
-            .0
-    };
-    assert_eq!(final_budgets(FINAL), [200, 100, 50]);
-    assert_eq!(final_budgets(400), [400, 200, 100, 50]);
-    assert_eq!(final_budgets(99), [99]);
-    assert_eq!(final_budgets(30), [30]);
-
     let (model, r) = fit(
         std::slice::from_ref(&traj),
-        &settings(msgp(true)),
+        &settings(msgp.clone()),
         &mut |_| {},
     )
     .expect("fit");
-    let lengths: Vec<usize> = r.final_budgets.iter().map(|b| b.0).collect();
-    assert_eq!(lengths, [200, 100, 50], "{r:?}");
-    let scores: Vec<f64> = r
-        .final_budgets
-        .iter()
-        .map(|b| b.1.expect("every proxy simulated the tail"))
-        .collect();
-    assert!(
-        scores.iter().all(|s| s.is_finite() && *s > 0.0),
-        "{scores:?}"
-    );
-    // the longest, or the lowest of those at least 10 % below it; here a shorter one
-    let chosen = r.final_budget.expect("a length was chosen");
-    eprintln!("final budgets {:?}, chosen {chosen}", r.final_budgets);
-    let expected = (1..scores.len())
-        .filter(|&k| scores[k] <= 0.9 * scores[0])
-        .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))
-        .map_or(lengths[0], |k| lengths[k]);
-    assert_eq!(chosen, expected, "{scores:?}");
-    assert_ne!(
-        chosen, FINAL,
-        "the test asks for a shorter length: {scores:?}"
-    );
     let recipe = r.recipes[r.chosen_recipe].recipe;
-    let kept = r.full_data_iteration.expect("the final training ran");
-    assert!(kept <= chosen, "{kept} > {chosen}");
-    assert_eq!(model.params, alone(recipe, chosen).params);
+    let alone = MsgpSettings {
+        iterations: FINAL,
+        validation_fraction: 0.0,
+        full_data_iterations: None,
+        alternative: None,
+        ..msgp.with_recipe(recipe)
+    };
+    let (whole, _) =
+        fit(std::slice::from_ref(&traj), &settings(alone), &mut |_| {}).expect("fit alone");
+    assert!(r.full_data_iteration.is_some_and(|k| k <= FINAL), "{r:?}");
+    assert_eq!(model.params, whole.params);
     match r.calibration.as_ref().map(|c| c.judge) {
-        Some(calibration::Judge::Proxy { iteration }) => assert!(iteration <= chosen),
+        Some(calibration::Judge::Proxy { iteration }) => assert!(iteration <= FINAL),
         other => panic!("the proxy judges the calibration: {other:?}"),
-    }
-    // the scores differ between lengths: the choice is not the default by construction
-    assert!(
-        scores.iter().any(|s| *s != scores[0]),
-        "the proxies simulate the tail alike: {scores:?}"
-    );
-
-    // off: the whole length, and no choice recorded
-    let (whole, r_off) = fit(
-        std::slice::from_ref(&traj),
-        &settings(msgp(false)),
-        &mut |_| {},
-    )
-    .expect("fit");
-    assert!(r_off.final_budgets.is_empty());
-    assert_eq!(r_off.chosen_recipe, r.chosen_recipe);
-    assert_eq!(whole.params, alone(recipe, FINAL).params);
-    if chosen != FINAL {
-        assert_ne!(whole.params, model.params);
     }
 }
 

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use super::LearnerSettings;
 use crate::error::{MsgpError, Result};
-use crate::fit::LinearKfSettings;
+use crate::fit::{LinearKfSettings, Overrides};
 use crate::loss::Likelihood;
 use crate::model::Method;
 
@@ -85,11 +85,14 @@ pub fn with_model(mut settings: LearnerSettings, model: LoopModel) -> Result<Lea
                 LoopModel::Msgp => Likelihood::FreeRun,
                 _ => Likelihood::Filter,
             };
-            settings
-                .fit
-                .msgp_mut()
-                .ok_or_else(|| msgp_only(model.name()))?
-                .likelihood = likelihood;
+            if settings.fit.msgp().is_none() {
+                return Err(msgp_only(model.name()));
+            }
+            let likelihood = Overrides {
+                likelihood: Some(likelihood),
+                ..Overrides::default()
+            };
+            settings.fit = likelihood.apply(settings.fit)?;
         }
         LoopModel::GpNarx => {
             settings.fit = settings

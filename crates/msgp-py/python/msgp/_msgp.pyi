@@ -6,7 +6,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 import numpy as np
 import numpy.typing as npt
 
-from .settings import FitSettings
+from .settings import FitSettings, LearnerSettings, PendulumLearnSettings
 
 __version__: str
 
@@ -188,7 +188,9 @@ def synthetic_system(k: int, seed: int = 0, noise: str = "std") -> Dict[str, Any
 def defaults(
     what: str, *, method: Optional[str] = None, likelihood: Optional[str] = None
 ) -> Dict[str, Any]:
-    """Defaults of "pendulum", "stability", "learn" or "fit" settings; for "learn" and "fit",
+    """Defaults of "pendulum", "stability", "learn", "learner" or "fit" settings ("learner":
+    the loop on a plant, `learn_policy(env=...)`'s, as the named Pendulum-v1 task sets it); for
+    "learn" and "fit",
     those of the model `method` ("msgp" when None; a "linear-kf" loop warm-starts and searches
     over 10 s; a method's fit settings are the shared ones and its own); for "learn" with
     method "msgp", `likelihood` ("free-run" or "filter") picks that loop's defaults (the
@@ -223,7 +225,7 @@ def learn_policy(
     *,
     likelihood: Optional[str] = None,
     params: Optional[Dict[str, Any]] = None,
-    settings: Optional[Dict[str, Any]] = None,
+    settings: Optional[PendulumLearnSettings] = None,
     progress: Optional[Callable[[Dict[str, Any]], Any]] = None,
 ) -> List[Dict[str, Any]]:
     """PILCO with MSGP, GP-NARX or linear-kf models on the simulated pendulum; one report per
@@ -253,7 +255,7 @@ def learn_on_plant(
     spec: Dict[str, Any],
     task: Dict[str, Any],
     *,
-    settings: Optional[Dict[str, Any]] = None,
+    settings: Optional[LearnerSettings] = None,
     seed: int = 0,
     progress: Optional[Callable[[Dict[str, Any]], Any]] = None,
 ) -> Dict[str, Any]:

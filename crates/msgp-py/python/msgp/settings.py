@@ -1,9 +1,13 @@
-"""The settings a fit takes, as types: ``Msgp(settings=...)`` overrides fields of
-``msgp.defaults("fit", method=...)``, and these ``TypedDict``\\ s name every field of each
-method, with its type (a type checker then catches a misspelt or misplaced one; at run time a
-field of another method is refused by name). ``MsgpFitSettings`` for ``method="msgp"``,
-``OneStepFitSettings`` for ``"gp-narx"`` and ``"pilco-narx"``, ``LinearKfFitSettings`` for
-``"linear-kf"``. The keys are those of the Rust ``FitSettings`` (a test compares them)."""
+"""The settings a fit and a learning loop take, as types: ``Msgp(settings=...)`` overrides
+fields of ``msgp.defaults("fit", method=...)``, and these ``TypedDict``\\ s name every field
+of each method, with its type (a type checker then catches a misspelt or misplaced one; at run
+time a field of another method is refused by name). ``MsgpFitSettings`` for
+``method="msgp"``, ``OneStepFitSettings`` for ``"gp-narx"`` and ``"pilco-narx"``,
+``LinearKfFitSettings`` for ``"linear-kf"``. ``learn_policy(env=..., settings=...)`` takes
+``LearnerSettings`` (over ``msgp.defaults("learner")``, whose ``fit`` is a ``FitSettings``
+resolved as ``Msgp``'s), ``learn_policy(settings=...)`` on the built-in pendulum
+``PendulumLearnSettings`` (over ``msgp.defaults("learn")``). The keys are those of the Rust
+settings (a test compares them)."""
 
 from typing import Dict, List, Literal, Optional, TypedDict, Union
 
@@ -15,6 +19,10 @@ __all__ = [
     "OneStepFitSettings",
     "LinearKfFitSettings",
     "FitSettings",
+    "Excitation",
+    "PolicySearchSettings",
+    "LearnerSettings",
+    "PendulumLearnSettings",
 ]
 
 Mean = Literal["zero", "linear"]
@@ -90,7 +98,6 @@ class MsgpFitSettings(_Shared, total=False):
     validation_fraction: float
     eval_every: int
     patience: int
-    refit: bool
     frozen: List[Literal["PseudoInputs", "PseudoTargets", "Lengthscales", "SignalVar",
                          "ProcessNoise", "ObsNoise", "LinearMean"]]
     one_step_iterations: int
@@ -99,7 +106,6 @@ class MsgpFitSettings(_Shared, total=False):
     calibrate: bool
     blow_up_fallback: bool
     full_data_blow_up: float
-    choose_final_budget: bool
     segments: Optional[Segments]
 
 
@@ -121,3 +127,74 @@ class LinearKfFitSettings(_Shared, total=False):
 
 FitSettings = Union[MsgpFitSettings, OneStepFitSettings, LinearKfFitSettings]
 """The settings ``Msgp(settings=...)`` takes, by method."""
+
+
+class Excitation(TypedDict, total=False):
+    """The random episodes' multisine, relative to each command's range."""
+
+    components: int
+    min_hz: float
+    max_hz: float
+    rms_fraction: float
+    """Root-mean-square of each command as a fraction of half its range."""
+
+
+class PolicySearchSettings(TypedDict, total=False):
+    """The policy search on the model's predicted rollouts."""
+
+    iterations: int
+    learning_rate: float
+    restarts: int
+    restart_spread: float
+    seed: int
+    candidates: int
+    candidate_spread: float
+    candidate_starts: int
+    trust_region: float
+    solver: Solver
+
+
+class LearnerSettings(TypedDict, total=False):
+    """The loop on a plant or Gymnasium environment (``learn_policy(env=..., settings=...)``)."""
+
+    iterations: int
+    random_rollouts: int
+    excitation: Excitation
+    seed: int
+    fit: FitSettings
+    search: PolicySearchSettings
+    evaluation_episodes: int
+    prequential_choice: bool
+    """Search on the GP model only while it predicts unseen episodes better than its linear
+    part (MSGP only)."""
+    ff_segment: Optional[int]
+    warm_start: Optional[int]
+    search_from_first: bool
+
+
+class PendulumExcitation(TypedDict, total=False):
+    """The built-in pendulum's random excitation."""
+
+    components: int
+    min_hz: float
+    max_hz: float
+    rms: float
+
+
+class PendulumLearnSettings(TypedDict, total=False):
+    """The loop on the built-in pendulum (``learn_policy(settings=...)`` without ``env``)."""
+
+    iterations: int
+    random_rollouts: int
+    excitation: PendulumExcitation
+    episode_seconds: float
+    policy_horizon_seconds: float
+    seed: int
+    fit: FitSettings
+    search: PolicySearchSettings
+    cost_widths: List[float]
+    evaluation_episodes: int
+    prequential_choice: bool
+    ff_segment: Optional[int]
+    gain_scale: List[float]
+    warm_start: Optional[int]

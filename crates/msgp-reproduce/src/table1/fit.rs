@@ -9,7 +9,7 @@ use msgp_core::data::{Benchmark, NoiseScale, SyntheticSystem, Trajectory};
 use msgp_core::fit::history::{
     HistoryChoice, HistoryEvent, HistorySearch, choose_history_observed,
 };
-use msgp_core::fit::{FitOptions, FitProgress, FitSettings, OutputRange, fit};
+use msgp_core::fit::{FitOptions, FitProgress, FitSettings, OutputRange, Overrides, fit};
 use msgp_core::loss::Likelihood;
 use msgp_core::model::{Method, Metrics, Rollout, Simulation, score};
 use msgp_core::numeric::parallel::Threads;
@@ -63,23 +63,17 @@ pub fn fit_unit_simulated(
     let (ly, lu) = chosen
         .as_ref()
         .map_or((bench.ly, bench.lu), |c| (c.ly, c.lu));
-    let mut settings = FitSettings {
+    let mut base = FitSettings {
         ly,
         lu,
         seed: unit.seed,
         threads,
         ..FitSettings::new(method)
-    }
-    .with_inducing(plan.inducing);
-    if let Some(msgp) = settings.msgp_mut() {
+    };
+    if let Some(msgp) = base.msgp_mut() {
         msgp.optimizer = plan.optimizer;
-        if unit.column == Column::MsgpFilter {
-            msgp.likelihood = Likelihood::Filter;
-        }
     }
-    if let (Some(n), Method::Msgp) = (plan.iters, method) {
-        settings = settings.with_solver_iterations(n);
-    }
+    let settings = overrides(plan, unit).apply(base)?;
     let (model, report) = fit(std::slice::from_ref(&bench.train), &settings, progress)?;
     // the moment-matching simulation is scored and held against the test outputs; a simulation
     // that fails numerically is a diverged cell (scored +∞), not the end of the table
@@ -128,6 +122,18 @@ pub fn fit_unit_simulated(
     Ok((cell, bench.test, simulated))
 }
 
+/// What `unit`'s fit changes of its method's defaults: the plan's pseudo-inputs, its
+/// iterations (MSGP's), the filter column's likelihood.
+fn overrides(plan: &Plan, unit: &Unit) -> Overrides {
+    let msgp = unit.column.method() == Method::Msgp;
+    Overrides {
+        inducing: Some(plan.inducing),
+        iterations: plan.iters.filter(|_| msgp),
+        likelihood: (unit.column == Column::MsgpFilter).then_some(Likelihood::Filter),
+        ..Overrides::default()
+    }
+}
+
 /// The history of `unit`'s fit chosen on `bench`'s training part alone, as `msgp fit
 /// --history auto` chooses it: the judge is the unit's own fit (its method, likelihood,
 /// pseudo-inputs, iterations, solver and seed), `progress` sees each candidate's fit.
@@ -138,18 +144,12 @@ fn search_history(
     threads: Threads,
     progress: &mut dyn FnMut(&FitProgress),
 ) -> Result<HistoryChoice> {
-    let method = unit.column.method();
     let judge = FitOptions {
-        inducing: Some(plan.inducing),
-        iterations: plan.iters.filter(|_| method == Method::Msgp),
         seed: unit.seed,
         optimizer: plan.optimizer,
-        likelihood: match unit.column {
-            Column::MsgpFilter => Likelihood::Filter,
-            _ => Likelihood::FreeRun,
-        },
         threads,
-        ..FitOptions::new(method, bench.ly, bench.lu)
+        overrides: overrides(plan, unit),
+        ..FitOptions::new(unit.column.method(), bench.ly, bench.lu)
     };
     Ok(choose_history_observed(
         std::slice::from_ref(&bench.train),

@@ -1,7 +1,7 @@
 //! Tests of the Table 1 reproduction.
 
 use msgp_core::fit::history::HistorySearch;
-use msgp_core::fit::{FitOptions, FitSettings, fit};
+use msgp_core::fit::{FitOptions, FitSettings, Overrides, fit};
 use msgp_core::model::{Rollout, score};
 use msgp_core::numeric::parallel::Threads;
 
@@ -229,7 +229,10 @@ fn an_auto_history_unit_fits_the_history_its_training_part_chooses() {
     let (cell, test, _) = fit_unit_simulated(&plan, &unit, threads, &mut |_| {}).expect("fitted");
     let bench = benchmark(&task("synthetic1").expect("task"), 0, Path::new("")).expect("data");
     let judge = FitOptions {
-        inducing: Some(10),
+        overrides: Overrides {
+            inducing: Some(10),
+            ..Overrides::default()
+        },
         threads,
         ..FitOptions::new(Method::GpNarx, 1, 1)
     };

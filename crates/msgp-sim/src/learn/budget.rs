@@ -8,7 +8,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use msgp_core::fit::{FitSettings, MethodSettings};
+use msgp_core::MsgpError;
+use msgp_core::fit::{FitSettings, Overrides};
 use msgp_core::gp::MeanFunction;
 use msgp_core::loss::Likelihood;
 use msgp_core::model::Method;
@@ -34,13 +35,13 @@ pub struct Budget {
     /// From the second iteration on, continue the previous model for this many solver
     /// iterations; 0: always from scratch (`None`: the model's default).
     pub warm_start: Option<usize>,
-    /// Pseudo-inputs of the model (`None`: the model's default).
+    /// Pseudo-inputs of a GP model (`None`: the model's default; linear-kf has no GP).
     pub inducing: Option<usize>,
     /// Adam steps of each policy optimisation start (`None`: the model's default).
     pub search_iters: Option<usize>,
     /// Random gain candidates screened on the model before each policy optimisation.
     pub candidates: usize,
-    /// Prior mean of the GP model.
+    /// Prior mean of a GP model (a linear-kf model is its linear mean).
     pub mean: MeanFunction,
     /// Horizon of the predicted rollouts the gains are optimised on \[s\] (`None`: the
     /// model's default).
@@ -66,6 +67,20 @@ impl Default for Budget {
             policy_horizon: None,
             cost_widths: d.cost_widths.to_vec(),
         }
+    }
+}
+
+/// A setting the fit's resolver refused, named as the budget's option.
+fn flagged(e: MsgpError) -> SimError {
+    match e {
+        MsgpError::InvalidSetting { name, reason } => invalid(
+            match name {
+                "iterations" => "fit-iters",
+                other => other,
+            },
+            reason,
+        ),
+        other => other.into(),
     }
 }
 
@@ -120,48 +135,30 @@ impl Budget {
                 "must be at least 1 (the first model needs data)",
             ));
         }
-        if self.inducing == Some(0) {
-            return Err(invalid("inducing", "must be at least 1"));
-        }
-        if let (Some(l), false) = (self.likelihood, method == Method::Msgp) {
-            return Err(invalid(
-                "likelihood",
-                format!(
-                    "{}: the likelihood of an MSGP fit; the {} model has its own",
-                    l.name(),
-                    method.name()
-                ),
-            ));
-        }
         let d = LearnSettings::for_model(method, self.likelihood);
         let threads = Threads::from_env()?;
-        let fit = FitSettings {
-            // a linear-kf model has the linear mean whatever `mean` says
+        let base = FitSettings {
+            // the end effector integrates the command only under a linear mean (a linear-kf
+            // model is one)
             integrators: match (method, self.mean) {
                 (Method::LinearKf, _) | (_, MeanFunction::Linear) => d.fit.integrators.clone(),
-                _ => Vec::new(),
+                (_, MeanFunction::Zero) => Vec::new(),
             },
             threads,
             ..d.fit.clone()
         };
-        let mut fit = match self.inducing {
-            Some(m) => fit.with_inducing(m),
-            None => fit,
-        };
-        match &mut fit.method {
-            MethodSettings::Msgp(s) => {
-                s.mean = self.mean;
-                if let Some(l) = self.likelihood {
-                    s.likelihood = l;
-                }
-            }
-            MethodSettings::GpNarx(s) | MethodSettings::PilcoNarx(s) => s.mean = self.mean,
-            MethodSettings::LinearKf(_) => {}
+        // one budget serves every model of a table: its GP's size and mean are the GP models'
+        // (a linear-kf model has no GP and is its linear mean)
+        let gp = method != Method::LinearKf;
+        let fit = Overrides {
+            iterations: self.fit_iters,
+            inducing: self.inducing.filter(|_| gp),
+            mean: Some(self.mean).filter(|_| gp),
+            likelihood: self.likelihood,
+            ..Overrides::default()
         }
-        let fit = match self.fit_iters {
-            Some(n) => fit.with_solver_iterations(n),
-            None => fit,
-        };
+        .apply(base)
+        .map_err(flagged)?;
         Ok(LearnSettings {
             iterations,
             random_rollouts: self.random_rollouts,
@@ -215,7 +212,7 @@ mod tests {
 
     #[test]
     fn options_out_of_range_name_the_option() {
-        let cases: [(Budget, Method, &str); 4] = [
+        let cases: [(Budget, Method, &str); 6] = [
             (
                 Budget {
                     episode_seconds: -1.0,
@@ -248,6 +245,23 @@ mod tests {
                 Method::Msgp,
                 "random-rollouts: must be at least 1",
             ),
+            // the fit's own options, refused by the fit's resolver and named as the budget's
+            (
+                Budget {
+                    inducing: Some(0),
+                    ..Budget::default()
+                },
+                Method::Msgp,
+                "inducing: need at least one pseudo-input",
+            ),
+            (
+                Budget {
+                    likelihood: Some(Likelihood::FreeRun),
+                    ..Budget::default()
+                },
+                Method::LinearKf,
+                "likelihood: free-run: the likelihood of an MSGP fit",
+            ),
         ];
         for (budget, method, expected) in cases {
             let e = budget
@@ -255,6 +269,25 @@ mod tests {
                 .expect_err("out of range")
                 .to_string();
             assert!(e.contains(expected), "{e:?} lacks {expected:?}");
+        }
+    }
+
+    /// One budget serves every model of a table: its pseudo-inputs and mean reach the GP
+    /// models and pass over linear-kf, which has no GP.
+    #[test]
+    fn a_budgets_gp_options_are_the_gp_models() {
+        let budget = Budget {
+            inducing: Some(12),
+            mean: MeanFunction::Zero,
+            ..Budget::default()
+        };
+        let kf = budget.settings(Method::LinearKf, 0, 1).expect("linear-kf");
+        assert_eq!(kf.fit, LearnSettings::for_model(Method::LinearKf, None).fit);
+        for method in [Method::Msgp, Method::GpNarx] {
+            let s = budget.settings(method, 0, 1).expect("a GP model");
+            assert_eq!(s.fit.inducing(), Some(12));
+            assert_eq!(s.fit.mean(), MeanFunction::Zero);
+            assert!(s.fit.integrators.is_empty(), "{method:?}");
         }
     }
 

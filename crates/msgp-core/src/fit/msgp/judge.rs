@@ -1,19 +1,16 @@
 //! The choice's [`Judge`] of models, as a fit runs it: the divergence check over the
-//! feed-forward training trajectories and the simulation of the validation tails, each
-//! computed once per model (the choice is read again after every step).
+//! feed-forward training trajectories, computed once per model (the choice is read again
+//! after every step).
 
 use std::cell::RefCell;
 
 use super::super::divergence::check_divergence;
-use super::budget::tail_rmse;
 use super::plan::Plan;
 use super::selection::Judge;
 use crate::data::{Normalizer, Trajectory};
-use crate::error::Result;
 use crate::gp::GpParams;
 use crate::model::{Method, Model};
 use crate::narx::NarxSpec;
-use crate::rollout::Episode;
 
 /// A model's key: its recipe and its parameters' bits.
 type Key = (usize, Vec<u64>);
@@ -25,28 +22,23 @@ pub(super) struct Checks<'a> {
     pub normalizer: &'a Normalizer,
     /// The feed-forward training trajectories (normalised).
     pub open_loop: Vec<&'a Trajectory>,
-    pub tails: &'a [Episode],
     diverged: RefCell<Vec<(Key, Option<String>)>>,
-    rmses: RefCell<Vec<(Key, f64)>>,
 }
 
 impl<'a> Checks<'a> {
-    /// The judge of `plan`'s models over `open_loop` and `tails`.
+    /// The judge of `plan`'s models over `open_loop`.
     pub fn new(
         plan: &'a Plan,
         spec: NarxSpec,
         normalizer: &'a Normalizer,
         open_loop: Vec<&'a Trajectory>,
-        tails: &'a [Episode],
     ) -> Self {
         Self {
             plan,
             spec,
             normalizer,
             open_loop,
-            tails,
             diverged: RefCell::new(Vec::new()),
-            rmses: RefCell::new(Vec::new()),
         }
     }
 
@@ -76,15 +68,5 @@ impl Judge for Checks<'_> {
         let why = check_divergence(&self.model(k, params), &self.open_loop);
         self.diverged.borrow_mut().push((key, why.clone()));
         why
-    }
-
-    fn tail_rmse(&self, k: usize, params: &GpParams<f64>) -> Result<f64> {
-        let key = key(k, params);
-        if let Some((_, r)) = self.rmses.borrow().iter().find(|(c, _)| *c == key) {
-            return Ok(*r);
-        }
-        let r = tail_rmse(params, &self.plan.config(k), &self.spec, self.tails)?;
-        self.rmses.borrow_mut().push((key, r));
-        Ok(r)
     }
 }

@@ -1,6 +1,6 @@
 //! MSGP training (paper section 3): the one-step sparse GP-NARX fit as the start, then Adam or
 //! L-BFGS on the trajectory likelihood ([`crate::loss`]) with its exact adjoint gradient, early
-//! stopping on a held-out tail of the training data, and an optional refit on all of it. With
+//! stopping on a held-out tail of the training data. With
 //! an alternative recipe ([`MsgpSettings::alternative`]) both recipes train this way and the one
 //! with the lower validation NLL is chosen; with [`MsgpSettings::full_data_iterations`] (the
 //! default) the chosen recipe then trains once more from its start on all the training data,
@@ -27,7 +27,6 @@
 //! is a function of its steps' outcomes ([`selection::decide`]), and a [`schedule::Scheduler`]
 //! that runs the steps the choice asks for, side by side where there are threads for it.
 
-mod budget;
 mod judge;
 mod objective;
 mod outcomes;
@@ -105,7 +104,7 @@ pub(super) fn fit_msgp(
         .filter(|e| e.policy.is_none())
         .map(|e| &e.traj)
         .collect();
-    let checks = Checks::new(&plan, fit.spec, fit.normalizer, open_loop, &data.tails);
+    let checks = Checks::new(&plan, fit.spec, fit.normalizer, open_loop);
     let replaced = judge.map(|j| Replaced { checks: &checks, j });
     let judged: &dyn Judge = match &replaced {
         Some(r) => r,
@@ -141,10 +140,6 @@ struct Replaced<'c, 'j> {
 impl Judge for Replaced<'_, '_> {
     fn diverges(&self, k: usize, params: &GpParams<f64>) -> Option<String> {
         (self.j)(&self.checks.model(k, params))
-    }
-
-    fn tail_rmse(&self, k: usize, params: &GpParams<f64>) -> Result<f64> {
-        self.checks.tail_rmse(k, params)
     }
 }
 
@@ -232,7 +227,6 @@ fn write_report(report: &mut FitReport, selection: &Selection, o: &Outcomes) {
         .clone_from(&selection.full_data_failed);
     if let Some(f) = &selection.final_training {
         report.full_data_iteration = Some(f.iteration);
-        (report.final_budget, report.final_budgets) = f.budgets.clone();
         // (a proxy counts where the plan has one and its final training is the model)
         if let Some(p) = o.proxies[selection.recipe].as_ref() {
             report.iterations_run += p.report.iterations_run;

@@ -27,10 +27,6 @@ pub(super) struct FinalTraining {
     pub outcome: Result<Option<(GpParams<f64>, usize)>>,
     /// The report of this training alone.
     pub report: FitReport,
-    /// With [`super::super::MsgpSettings::choose_final_budget`], where it completed: at each
-    /// length of [`super::super::final_budgets`] reached, `(length, its iterate of lowest loss
-    /// so far, that iterate)`.
-    pub snapshots: Vec<(usize, GpParams<f64>, usize)>,
 }
 
 impl FinalTraining {
@@ -39,7 +35,6 @@ impl FinalTraining {
         Self {
             outcome: Ok(None),
             report: FitReport::default(),
-            snapshots: Vec::new(),
         }
     }
 }

@@ -85,8 +85,7 @@ impl Plan {
                 recipes.push(fallback);
             }
         }
-        let proxy_iterations =
-            final_iterations.filter(|_| msgp.calibrate || msgp.choose_final_budget);
+        let proxy_iterations = final_iterations.filter(|_| msgp.calibrate);
         Self {
             recipes,
             racing,

@@ -6,7 +6,6 @@
 //! one diverges, the first that did stands. [`likely`] names the steps the choice will
 //! probably need, for a scheduler with a worker to spare.
 
-use super::budget::{LengthScore, choose_budget};
 use super::outcomes::{FinalTraining, Outcomes, Trained};
 use super::plan::{Next, Plan, Step};
 use crate::error::{MsgpError, Result};
@@ -19,8 +18,6 @@ pub(super) trait Judge {
     /// Why recipe `k`'s model with `params` diverges over the feed-forward training
     /// trajectories, or `None`.
     fn diverges(&self, k: usize, params: &GpParams<f64>) -> Option<String>;
-    /// The RMSE of recipe `k`'s model with `params` on the validation tails (normalised).
-    fn tail_rmse(&self, k: usize, params: &GpParams<f64>) -> Result<f64>;
 }
 
 /// A head the tail has judged: its recipe, validation NLL, parameters and kept iteration.
@@ -37,10 +34,8 @@ struct Head {
 pub(super) struct FinalChoice {
     /// The final training's kept iteration.
     pub iteration: usize,
-    /// The length kept where shorter than the whole, and every length's proxy RMSE.
-    pub budgets: (Option<usize>, Vec<LengthScore>),
-    /// The proxy's model standing for it (the chosen length's), where a proxy ran and
-    /// completed: the calibration's judge.
+    /// The proxy's model standing for it, where a proxy ran and completed: the
+    /// calibration's judge.
     pub proxy: Option<(GpParams<f64>, usize)>,
 }
 
@@ -160,9 +155,9 @@ struct Walk {
 }
 
 /// A final model with its head and final training: accepted, or set aside for diverging.
-type Kept = (Head, usize, (Option<usize>, Vec<LengthScore>), FinalProxy);
+type Kept = (Head, usize, FinalProxy);
 
-/// A kept final model's proxy model (the chosen length's), where one completed.
+/// A kept final model's proxy model, where one completed.
 type FinalProxy = Option<(GpParams<f64>, usize)>;
 
 impl Walk {
@@ -289,19 +284,7 @@ impl Walk {
             };
             self.finals_tried.push(c);
             let proxy_model = proxy.and_then(|p| p.outcome.as_ref().ok().cloned().flatten());
-            let choice = match proxy {
-                Some(p) if !trained.snapshots.is_empty() => {
-                    choose_budget(&trained.snapshots, p, &|x| judge.tail_rmse(c, x))?
-                }
-                _ => None,
-            };
-            let shorter = choice.and_then(|(length, scores, proxy_iterate)| {
-                let (_, p, it) = trained.snapshots.iter().find(|s| s.0 == length)?;
-                Some((p.clone(), *it, (Some(length), scores), Some(proxy_iterate)))
-            });
-            let (params, iteration, budgets, proxy_model) =
-                shorter.unwrap_or((params, iteration, (None, Vec::new()), proxy_model));
-            let kept: Kept = (head, iteration, budgets, proxy_model);
+            let kept: Kept = (head, iteration, proxy_model);
             let why = judge.diverges(c, &params);
             let untried: Vec<Head> = raced
                 .iter()
@@ -313,14 +296,14 @@ impl Walk {
                     if let Some(outcome) = self.outcome(c) {
                         outcome.diverged = Some(why);
                     }
-                    set_aside.get_or_insert((Head { params, ..kept.0 }, kept.1, kept.2, kept.3));
+                    set_aside.get_or_insert((Head { params, ..kept.0 }, kept.1, kept.2));
                     candidates.extend(untried);
                     i += 1;
                     continue;
                 }
                 // (the first set aside stands, below)
                 Some(_) if set_aside.is_some() => {}
-                _ => accepted = Some((Head { params, ..kept.0 }, kept.1, kept.2, kept.3)),
+                _ => accepted = Some((Head { params, ..kept.0 }, kept.1, kept.2)),
             }
             break;
         }
@@ -337,18 +320,14 @@ impl Walk {
     }
 
     /// The selection of an accepted final model (its parameters in the head's place).
-    fn kept_final(self, o: &Outcomes, (model, iteration, budgets, proxy): Kept) -> Selection {
+    fn kept_final(self, o: &Outcomes, (model, iteration, proxy): Kept) -> Selection {
         let k = model.k;
         let head = o.heads[k]
             .as_ref()
             .and_then(|h| h.trained.as_ref().ok())
             .map(|t| t.0.clone())
             .unwrap_or_else(|| model.params.clone());
-        let final_training = FinalChoice {
-            iteration,
-            budgets,
-            proxy,
-        };
+        let final_training = FinalChoice { iteration, proxy };
         let mut selection = self.selection(model, Some(final_training));
         selection.head = head;
         selection.full_data_failed = None;
@@ -429,7 +408,6 @@ mod tests {
         FinalTraining {
             outcome: Ok(Some((params(100.0 + k as f64), 400))),
             report: FitReport::default(),
-            snapshots: Vec::new(),
         }
     }
 
@@ -440,7 +418,6 @@ mod tests {
                 full_data_failed: Some("blew up".into()),
                 ..FitReport::default()
             },
-            snapshots: Vec::new(),
         }
     }
 
@@ -451,10 +428,6 @@ mod tests {
         fn diverges(&self, k: usize, params: &GpParams<f64>) -> Option<String> {
             let is_final = params.to_flat()[0] >= 100.0;
             (is_final && self.0.contains(&k)).then(|| format!("recipe {k} runs away"))
-        }
-
-        fn tail_rmse(&self, _: usize, _: &GpParams<f64>) -> Result<f64> {
-            Ok(1.0)
         }
     }
 

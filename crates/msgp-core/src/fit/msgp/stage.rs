@@ -34,43 +34,25 @@ use nalgebra::{DMatrix, DVector};
 /// itself when converged, after 10–60 on the pendulum loop's data).
 const KALMAN_START_ITERATIONS: usize = 300;
 
-/// One recipe's head training: its start (or `previous`'s parameters), the solver with early
-/// stopping on `tails`, the optional refit on `all_eps`. Returns the parameters, the chosen
-/// iteration and the best validation NLL per step (`+∞` without tails), and its start
-/// (without `previous`).
+/// One recipe's head training: its start (or `previous`'s parameters) and the solver with
+/// early stopping on `tails`. Returns the parameters, the chosen iteration and the best
+/// validation NLL per step (`+∞` without tails), and its start (without `previous`).
 pub(super) fn train_recipe(
     stage: &mut Stage<'_, '_>,
     previous: Option<&Model>,
-    data: (&[Episode], &[Episode], &[Episode]),
+    (heads, tails): (&[Episode], &[Episode]),
     stage_number: u8,
 ) -> (Result<Trained>, Option<GpParams<f64>>) {
-    let (head_eps, all_eps, tails) = data;
     let init = match previous {
         Some(p) => p.params.clone(),
-        None => match stage.start_params(head_eps) {
+        None => match stage.start_params(heads) {
             Ok(init) => init,
             Err(e) => return (Err(e), None),
         },
     };
     let head_start = previous.is_none().then(|| init.clone());
     let iterations = stage.msgp.iterations;
-    let trained = stage
-        .train(init, head_eps, tails, iterations, stage_number, None)
-        .and_then(|(chosen, best_iteration, validation)| {
-            if !stage.msgp.refit || tails.is_empty() {
-                return Ok((chosen, best_iteration, validation));
-            }
-            // the same number of iterations on the whole training data
-            let init = match previous {
-                Some(p) => p.params.clone(),
-                None => stage.start_params(all_eps)?,
-            };
-            let chosen = match best_iteration {
-                0 => init,
-                n => stage.train(init, all_eps, &[], n, 2, None)?.0,
-            };
-            Ok((chosen, best_iteration, validation))
-        });
+    let trained = stage.train(init, heads, tails, iterations, stage_number, None);
     (trained, head_start)
 }
 
@@ -84,12 +66,6 @@ pub(super) struct Stage<'a, 'p> {
     pub start: Instant,
     pub progress: &'p mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
     pub report: &'a mut FitReport,
-    /// Iterations at which a training without a validation tail keeps a snapshot of its
-    /// iterate of lowest loss so far, into `snapshots` (the final training and its proxy, for
-    /// [`MsgpSettings::choose_final_budget`]).
-    pub checkpoints: Vec<usize>,
-    /// `(checkpoint, flat parameters, their iteration)`, in the order reached.
-    pub snapshots: Vec<(usize, Vec<f64>, usize)>,
     /// The calibration's proxy, read off a training with a validation tail, which then goes on
     /// past its early stop until the proxy's length ([`super::super::proxy_watch`]).
     pub proxy_watch: Option<ProxyWatch>,
@@ -257,7 +233,6 @@ impl Stage<'_, '_> {
             msgp: self.msgp,
             start: self.start,
             proxy_ahead: self.proxy_ahead,
-            checkpoints: std::mem::take(&mut self.checkpoints),
             proxy_watch: self.proxy_watch.take(),
         };
         let mut run = Training::new(context, &init, tails, (iterations, stage), blow_up, batched)?;
@@ -273,8 +248,6 @@ impl Stage<'_, '_> {
         let leftovers = run.leftovers();
         self.report.jitter.merge(&objective.log);
         let (last_x, _) = last_x?;
-        self.checkpoints = leftovers.checkpoints;
-        self.snapshots = leftovers.snapshots;
         self.proxy_watch = leftovers.watch;
         leftovers.result.finish(
             self.report,

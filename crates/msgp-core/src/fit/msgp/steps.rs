@@ -6,14 +6,12 @@ use std::time::Instant;
 
 use super::super::one_step::OneStepSettings;
 use super::super::proxy_watch::{ProxyOutcome, ProxyWatch};
-use super::super::{
-    FitOptimizer, FitProgress, FitReport, FitSettings, MsgpSettings, final_budgets,
-};
+use super::super::{FitOptimizer, FitProgress, FitReport, FitSettings, MsgpSettings};
 use super::outcomes::{FinalTraining, HeadRun, StepOutcome};
 use super::plan::{Plan, Step};
 use super::stage::{Stage, train_recipe};
 use crate::data::Normalizer;
-use crate::error::{MsgpError, Result};
+use crate::error::MsgpError;
 use crate::gp::GpParams;
 use crate::model::Model;
 use crate::narx::NarxSpec;
@@ -68,12 +66,8 @@ impl Runner<'_> {
                 let (heads, tails) = (&data.inner.0, &data.inner.1);
                 let mut report = FitReport::default();
                 let mut stage = self.stage(k, &settings, how.observer, &mut report);
-                let (trained, start) = train_recipe(
-                    &mut stage,
-                    None,
-                    (heads, heads, tails),
-                    self.plan.stage(step),
-                );
+                let (trained, start) =
+                    train_recipe(&mut stage, None, (heads, tails), self.plan.stage(step));
                 StepOutcome::Head(Box::new(HeadRun {
                     trained,
                     report,
@@ -106,7 +100,7 @@ impl Runner<'_> {
         let (trained, start) = train_recipe(
             &mut stage,
             self.previous,
-            (&data.heads, &data.all, &data.tails),
+            (&data.heads, &data.tails),
             self.plan.stage(step),
         );
         let watched = stage.proxy_watch.take().filter(|w| w.done());
@@ -141,8 +135,6 @@ impl Runner<'_> {
             start: self.start,
             progress: observer,
             report,
-            checkpoints: Vec::new(),
-            snapshots: Vec::new(),
             proxy_watch: None,
             proxy_ahead: None,
             batches_of: None,
@@ -163,9 +155,6 @@ impl Runner<'_> {
         let n = iterations.min(recipe.iterations);
         let mut own = FitReport::default();
         let mut stage = self.stage(k, settings, observer, &mut own);
-        if recipe.choose_final_budget {
-            stage.checkpoints = final_budgets(n);
-        }
         if init.is_some() {
             // a proxy: its head's batches
             stage.batches_of = Some(self.plan.stage(Step::Head(k)));
@@ -181,7 +170,6 @@ impl Runner<'_> {
         let blow_up = Some(recipe.full_data_blow_up);
         let trained =
             init.and_then(|init| stage.train(init, episodes, &[], n, stage_number, blow_up));
-        let raw = std::mem::take(&mut stage.snapshots);
         let outcome = match trained {
             // a blow-up: the head's model stands (`train` wrote why into the report)
             Ok(_) if own.full_data_failed.is_some() => Ok(None),
@@ -194,27 +182,10 @@ impl Runner<'_> {
             }
         };
         FinalTraining {
-            snapshots: completed_snapshots(&outcome, &raw),
             outcome,
             report: own,
         }
     }
-}
-
-/// The snapshots of a training that completed with `outcome`, as parameters.
-fn completed_snapshots(
-    outcome: &Result<Option<(GpParams<f64>, usize)>>,
-    raw: &[(usize, Vec<f64>, usize)],
-) -> Vec<(usize, GpParams<f64>, usize)> {
-    let Ok(Some((params, _))) = outcome else {
-        return Vec::new();
-    };
-    let Ok(shape) = params.shape() else {
-        return Vec::new();
-    };
-    raw.iter()
-        .filter_map(|(b, x, it)| Some((*b, GpParams::from_flat(shape, x).ok()?, *it)))
-        .collect()
 }
 
 /// The watch of `recipe`'s proxy of `iterations` steps ([`super::super::proxy_watch`]), as
@@ -225,10 +196,6 @@ fn proxy_watch(recipe: &MsgpSettings, iterations: usize) -> ProxyWatch {
         n,
         recipe.segments.is_some() && recipe.optimizer == FitOptimizer::Adam,
         Some(recipe.full_data_blow_up),
-        match recipe.choose_final_budget {
-            true => final_budgets(n),
-            false => Vec::new(),
-        },
     )
 }
 
@@ -238,14 +205,6 @@ fn read_proxy(read: ProxyOutcome, start: &GpParams<f64>) -> FinalTraining {
     let shape = start.shape().ok();
     let params = |x: &[f64]| shape.and_then(|s| GpParams::from_flat(s, x).ok());
     let outcome = read.outcome.and_then(|(x, it)| Some((params(&x)?, it)));
-    let snapshots = match &outcome {
-        Some(_) => read
-            .snapshots
-            .iter()
-            .filter_map(|(b, x, it)| Some((*b, params(x)?, *it)))
-            .collect(),
-        None => Vec::new(),
-    };
     FinalTraining {
         outcome: Ok(outcome),
         report: FitReport {
@@ -253,6 +212,5 @@ fn read_proxy(read: ProxyOutcome, start: &GpParams<f64>) -> FinalTraining {
             numerical_stop: read.numerical_stop,
             ..FitReport::default()
         },
-        snapshots,
     }
 }

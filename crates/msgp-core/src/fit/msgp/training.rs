@@ -1,6 +1,6 @@
 //! What a training run keeps track of, iteration by iteration ([`Training`]): the best
 //! iterate (by validation NLL, or by training loss without a tail), early stopping, the
-//! snapshots at the checkpoints, the blow-up test, the proxy it carries and the observer.
+//! blow-up test, the proxy it carries and the observer.
 
 use std::ops::ControlFlow;
 use std::time::Instant;
@@ -32,8 +32,6 @@ pub(super) struct Training<'s> {
     stage: u8,
     batched: bool,
     shape: GpShape,
-    checkpoints: Vec<usize>,
-    snapshots: Vec<(usize, Vec<f64>, usize)>,
     blow_up: Option<BlowUp>,
     /// Past the early stop, the training goes on only for the proxy it carries.
     watch: Option<ProxyWatch>,
@@ -60,14 +58,12 @@ pub(super) struct Ending {
 
 /// What goes back to the stage.
 pub(super) struct Leftovers {
-    pub checkpoints: Vec<usize>,
-    pub snapshots: Vec<(usize, Vec<f64>, usize)>,
     pub watch: Option<ProxyWatch>,
     pub result: Ending,
 }
 
 /// What a training run reports to and is set by: the stage's report, observer, model and
-/// recipe, its checkpoints and the proxy it may carry.
+/// recipe, and the proxy it may carry.
 pub(super) struct Context<'s> {
     pub report: &'s mut FitReport,
     pub progress: &'s mut dyn FnMut(&FitProgress) -> ControlFlow<()>,
@@ -76,7 +72,6 @@ pub(super) struct Context<'s> {
     pub msgp: &'s MsgpSettings,
     pub start: Instant,
     pub proxy_ahead: Option<&'s dyn Fn(f64) -> bool>,
-    pub checkpoints: Vec<usize>,
     pub proxy_watch: Option<ProxyWatch>,
 }
 
@@ -100,7 +95,6 @@ impl<'s> Training<'s> {
             false => stage.proxy_watch,
         };
         Ok(Self {
-            checkpoints: stage.checkpoints,
             report: stage.report,
             progress: stage.progress,
             tails,
@@ -114,7 +108,6 @@ impl<'s> Training<'s> {
             stage: stage_number,
             batched,
             shape: init.shape()?,
-            snapshots: Vec::new(),
             blow_up: blow_up.map(BlowUp::new),
             watch,
             end: Ending {
@@ -178,7 +171,7 @@ impl<'s> Training<'s> {
     /// Keeps what a run without a tail returns: the iterate of lowest training loss (Adam's
     /// steps at the loop's step size throw the loss up now and then, by up to 2.7 nats per
     /// step on the loop's data, for tens of iterations, also at the last), or with batches,
-    /// whose loss is too noisy for that, the mean of the second half; and the snapshots.
+    /// whose loss is too noisy for that, the mean of the second half.
     fn keep(&mut self, it: usize, loss: f64, x: &[f64]) {
         let end = &mut self.end;
         if !end.frozen {
@@ -193,9 +186,6 @@ impl<'s> Training<'s> {
         }
         if !tails && !self.batched && loss < end.best.0 {
             end.best = (loss, x.to_vec(), it);
-        }
-        if !tails && end.best.0.is_finite() && self.checkpoints.contains(&it) {
-            self.snapshots.push((it, end.best.1.clone(), end.best.2));
         }
     }
 
@@ -227,8 +217,6 @@ impl<'s> Training<'s> {
     /// What goes back to the stage once the solver has stopped.
     pub fn leftovers(self) -> Leftovers {
         Leftovers {
-            checkpoints: self.checkpoints,
-            snapshots: self.snapshots,
             watch: self.watch,
             result: self.end,
         }
