@@ -22,8 +22,9 @@ use crate::render::output::{out, out_json};
 use crate::render::plot::plot;
 use crate::render::progress::FitBar;
 use crate::render::report::{metrics_json, metrics_line, trajectories};
-use msgp_core::data::dataset::{Dataset, Split, check_lengths, split};
-use msgp_core::model::pool;
+use msgp_core::data::dataset::{Dataset, Part, Split, check_lengths, split};
+use msgp_core::fit::FitSettings;
+use msgp_core::model::{Metrics, Model, pool};
 
 /// `<stem>.model.json` in the current folder.
 fn default_model_path(data: &Path) -> PathBuf {
@@ -42,10 +43,94 @@ fn files(paths: &[PathBuf]) -> String {
         .join(", ")
 }
 
+/// A finished fit as `msgp fit` reports it: the model, its report and settings, the file as
+/// written, and the model as saved scored on the test part.
+struct Fitted {
+    method: Method,
+    model: Model,
+    report: FitReport,
+    file: ModelFile,
+    model_path: PathBuf,
+    metrics: Option<Metrics>,
+    n_train: usize,
+    n_test: usize,
+    warnings: Vec<String>,
+}
+
 /// Runs `msgp fit`.
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let data = Dataset::load(&args.data.data, &args.data.selection())?;
+    let (train, test) = parts(args, &data)?;
+    let trajs: Vec<Trajectory> = train.iter().map(|p| p.traj.clone()).collect();
+    let (options, history_choice) = match args.history {
+        FitHistory::Given(h) => (options(args, h)?, None),
+        FitHistory::Auto => {
+            // (the search's judge: these options with each candidate's history)
+            let judge = options(args, HistoryArg { ly: 1, lu: 1 })?;
+            let (options, choice) = choose(&judge, &trajs, args.quiet || args.json)?;
+            (options, Some(choice))
+        }
+    };
+    let warmup = options.ly.max(options.lu);
+    check_lengths(&train, warmup, "training")?;
+    check_lengths(&test, warmup, "test")?;
+    let settings = options.settings(&trajs).map_err(flagged)?;
     let mut warnings = data.warnings.clone();
+    warnings.extend(options.history_warning(&trajs));
+    warnings.extend(options.inducing_warning(&trajs));
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
+    let (model, mut report) = train_model(args, &settings, &trajs)?;
+    report.history_choice = history_choice;
+    let file = ModelFile::from_fit(
+        &model,
+        &FitRecord {
+            inputs: &data.inputs,
+            outputs: &data.outputs,
+            settings: &settings,
+            report: &report,
+            train: &trajs,
+        },
+    )?;
+    let model_path = args
+        .out
+        .clone()
+        .unwrap_or_else(|| default_model_path(&args.data.data[0]));
+    file.write(&model_path)
+        .with_context(|| format!("cannot write the model to {}", model_path.display()))?;
+    // score with the model as saved, so `msgp eval` reproduces these numbers exactly
+    let sims = file.to_model()?.simulate_parts(&test)?;
+    let metrics = pool(
+        &sims.iter().map(|s| s.metrics).collect::<Vec<_>>(),
+        data.outputs.len(),
+    );
+    if let Some(p) = &args.plot {
+        if sims.is_empty() {
+            bail!("--plot needs a test part (lower --train or --train-frac)");
+        }
+        let title = format!("{} free simulation", settings.method().name());
+        plot(p, &title, &data.outputs, &sims)?;
+    }
+    let fitted = Fitted {
+        method: settings.method(),
+        model,
+        report,
+        file,
+        model_path,
+        metrics,
+        n_train: trajs.iter().map(Trajectory::len).sum(),
+        n_test: test.iter().map(|p| p.traj.len()).sum(),
+        warnings,
+    };
+    match args.json {
+        true => out_json(&summary_json(args, &data, &fitted)),
+        false => out(&summary_text(args, &data, &fitted)),
+    }
+}
+
+/// The training and test parts of `data` as the options split it.
+fn parts(args: &FitArgs, data: &Dataset) -> anyhow::Result<(Vec<Part>, Vec<Part>)> {
     let how = match (args.train, args.train_frac) {
         (Some(n), _) => Split::Count(n),
         (None, Some(f)) if f > 0.0 && f <= 1.0 => Split::Fraction(f),
@@ -56,6 +141,13 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     if train.is_empty() {
         bail!("no training samples: raise --train or --train-frac");
     }
+    Ok((train, test))
+}
+
+/// The fit's options from the flags, with history `history`: the same as the Python
+/// `msgp.Msgp` makes of the same choices. MSGP's own choices of the options (its start, its
+/// segments) are refused by another method here; the overrides' by the resolver.
+fn options(args: &FitArgs, history: HistoryArg) -> anyhow::Result<FitOptions> {
     let method = Method::from(args.method);
     if let (Some(_), false) = (args.segment_length, method == Method::Msgp) {
         bail!(
@@ -70,17 +162,10 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             method.name()
         );
     }
-    let trajs: Vec<Trajectory> = train.iter().map(|p| p.traj.clone()).collect();
-    let given = match args.history {
-        FitHistory::Given(h) => h,
-        // (the search's judge: these options with each candidate's history)
-        FitHistory::Auto => HistoryArg { ly: 1, lu: 1 },
-    };
-    // the same settings as the Python `msgp.Msgp` for the same options
-    let options = FitOptions {
+    Ok(FitOptions {
         method,
-        ly: given.ly,
-        lu: given.lu,
+        ly: history.ly,
+        lu: history.lu,
         seed: args.seed,
         integrators: args.integrating.clone(),
         optimizer: args.optimizer.into(),
@@ -99,133 +184,102 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             },
             settings: None,
         },
-    };
-    let (options, history_choice) = match args.history {
-        FitHistory::Given(_) => (options, None),
-        FitHistory::Auto => {
-            let (options, choice) = choose(&options, &trajs, args.quiet || args.json)?;
-            (options, Some(choice))
-        }
-    };
-    let (ly, lu) = (options.ly, options.lu);
-    let warmup = ly.max(lu);
-    check_lengths(&train, warmup, "training")?;
-    check_lengths(&test, warmup, "test")?;
-    let settings = options.settings(&trajs).map_err(flagged)?;
-    warnings.extend(options.history_warning(&trajs));
-    warnings.extend(options.inducing_warning(&trajs));
-    for w in &warnings {
-        eprintln!("warning: {w}");
-    }
-    let n_train: usize = trajs.iter().map(Trajectory::len).sum();
-    let label = format!(
-        "{} on {}",
-        method.name(),
-        args.data.data[0]
-            .file_name()
-            .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+    })
+}
+
+/// The fit of `trajs` under `settings`, its progress on a bar; a diverging model is a
+/// warning (it is saved for inspection and says so itself), a failed fit an error.
+fn train_model(
+    args: &FitArgs,
+    settings: &FitSettings,
+    trajs: &[Trajectory],
+) -> anyhow::Result<(Model, FitReport)> {
+    let method = settings.method();
+    let file_name = args.data.data[0]
+        .file_name()
+        .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+    let mut bar = FitBar::new(
+        &format!("{} on {file_name}", method.name()),
+        args.quiet || args.json,
     );
-    let mut bar = FitBar::new(&label, args.quiet || args.json);
-    let (model, mut report) = match fit(&trajs, &settings, &mut |p: &FitProgress| bar.update(p)) {
+    let (model, report) = match fit(trajs, settings, &mut |p: &FitProgress| bar.update(p)) {
         Ok(r) => r,
         Err(e) => {
             bar.abandon();
+            let n_train: usize = trajs.iter().map(Trajectory::len).sum();
             return Err(e).context(format!(
-                "fitting {} on {} ({n_train} training samples, history l_y={ly}, l_u={lu})",
+                "fitting {} on {} ({n_train} training samples, history l_y={}, l_u={})",
                 method.name(),
-                files(&args.data.data)
+                files(&args.data.data),
+                settings.ly,
+                settings.lu
             ));
         }
     };
-    report.history_choice = history_choice;
-    // what the model has (a linear-kf model has one idle pseudo-input and no GP)
-    let inducing = model.params.pseudo_inputs.nrows();
     bar.finish(&format!("trained in {:.1} s", report.train_seconds));
     if let Some(why) = &report.diverged {
-        // a warning, not an error: the model is saved for inspection, and says so itself
         eprintln!("warning: the fitted model diverges: {why}");
     }
-    let file = ModelFile::from_fit(
-        &model,
-        &FitRecord {
-            inputs: &data.inputs,
-            outputs: &data.outputs,
-            settings: &settings,
-            report: &report,
-            train: &trajs,
-        },
-    )?;
-    let model_path = args
-        .out
-        .clone()
-        .unwrap_or_else(|| default_model_path(&args.data.data[0]));
-    file.write(&model_path)
-        .with_context(|| format!("cannot write the model to {}", model_path.display()))?;
-    // score with the model as saved, so `msgp eval` reproduces these numbers exactly
-    let saved = file.to_model()?;
-    let sims = saved.simulate_parts(&test)?;
-    let metrics = pool(
-        &sims.iter().map(|s| s.metrics).collect::<Vec<_>>(),
-        data.outputs.len(),
-    );
-    if let Some(p) = &args.plot {
-        if sims.is_empty() {
-            bail!("--plot needs a test part (lower --train or --train-frac)");
-        }
-        plot(
-            p,
-            &format!("{} free simulation", method.name()),
-            &data.outputs,
-            &sims,
-        )?;
-    }
-    let n_test: usize = test.iter().map(|p| p.traj.len()).sum();
-    if args.json {
-        let mut v = json!({
-            "command": "fit",
-            "method": method.name(),
-            "n_train": n_train,
-            "n_test": n_test,
-            "trajectories": data.parts.len(),
-            "inputs": data.inputs,
-            "outputs": data.outputs,
-            "history": [ly, lu],
-            "history_choice": report.history_choice,
-            "inducing": inducing,
-            "seed": args.seed,
-            "train_seconds": report.train_seconds,
-            "iterations_run": report.iterations_run,
-            "best_iteration": report.best_iteration,
-            "full_data_iteration": report.full_data_iteration,
-            "full_data_failed": report.full_data_failed,
-            "chosen_recipe": report.chosen_recipe,
-            "recipes": report.recipes,
-            "calibration": report.calibration,
-            "segments": report.segments.map(|(s, count)| json!({
-                "length": s.length, "batch": s.batch, "count": count
-            })),
-            "diverged": report.diverged.is_some(),
-            "divergence": report.diverged,
-            "model": model_path.display().to_string(),
-            "plot": args.plot.as_ref().map(|p| p.display().to_string()),
-            "data_hash": file.training.data_hash,
-            "warnings": warnings,
-        });
-        metrics_json(&mut v, metrics.as_ref());
-        return out_json(&v);
-    }
+    Ok((model, report))
+}
+
+/// `msgp fit --json`'s object.
+fn summary_json(args: &FitArgs, data: &Dataset, f: &Fitted) -> serde_json::Value {
+    let report = &f.report;
+    let mut v = json!({
+        "command": "fit",
+        "method": f.method.name(),
+        "n_train": f.n_train,
+        "n_test": f.n_test,
+        "trajectories": data.parts.len(),
+        "inputs": data.inputs,
+        "outputs": data.outputs,
+        "history": [f.model.spec.ly, f.model.spec.lu],
+        "history_choice": report.history_choice,
+        // what the model has (a linear-kf model has one idle pseudo-input and no GP)
+        "inducing": f.model.params.pseudo_inputs.nrows(),
+        "seed": args.seed,
+        "train_seconds": report.train_seconds,
+        "iterations_run": report.iterations_run,
+        "best_iteration": report.best_iteration,
+        "full_data_iteration": report.full_data_iteration,
+        "full_data_failed": report.full_data_failed,
+        "chosen_recipe": report.chosen_recipe,
+        "recipes": report.recipes,
+        "calibration": report.calibration,
+        "segments": report.segments.map(|(s, count)| json!({
+            "length": s.length, "batch": s.batch, "count": count
+        })),
+        "diverged": report.diverged.is_some(),
+        "divergence": report.diverged,
+        "model": f.model_path.display().to_string(),
+        "plot": args.plot.as_ref().map(|p| p.display().to_string()),
+        "data_hash": f.file.training.data_hash,
+        "warnings": f.warnings,
+    });
+    metrics_json(&mut v, f.metrics.as_ref());
+    v
+}
+
+/// `msgp fit`'s text.
+fn summary_text(args: &FitArgs, data: &Dataset, f: &Fitted) -> String {
+    let (report, method) = (&f.report, f.method);
     let gp = match method {
         Method::LinearKf => "no GP (linear-Gaussian, Kalman-filter likelihood)".to_string(),
-        _ => format!("{inducing} pseudo-inputs"),
+        _ => format!("{} pseudo-inputs", f.model.params.pseudo_inputs.nrows()),
     };
     let mut text = format!(
-        "{}: {}, {n_train} training and {n_test} test samples; inputs {}; outputs {}\n\
-         history l_y={ly}, l_u={lu}; {gp}; seed {}\n\
+        "{}: {}, {} training and {} test samples; inputs {}; outputs {}\n\
+         history l_y={}, l_u={}; {gp}; seed {}\n\
          training time {:.1} s",
         method.name(),
         trajectories(data.parts.len()),
+        f.n_train,
+        f.n_test,
         data.inputs.join(", "),
         data.outputs.join(", "),
+        f.model.spec.ly,
+        f.model.spec.lu,
         args.seed,
         report.train_seconds,
     );
@@ -234,7 +288,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         text.push_str(&format!(
             " ({} {solver} iterations, {})",
             report.iterations_run,
-            kept(&report)
+            kept(report)
         ));
     }
     text.push('\n');
@@ -249,19 +303,19 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             s.length, s.batch
         ));
     }
-    if let Some(line) = calibrated(&report, &data.outputs) {
+    if let Some(line) = calibrated(report, &data.outputs) {
         text.push_str(&line);
         text.push('\n');
     }
     if let Some(why) = &report.diverged {
         text.push_str(&format!("WARNING: the fitted model diverges: {why}\n"));
     }
-    text.push_str(&metrics_line("test free simulation", metrics.as_ref()));
-    text.push_str(&format!("\nmodel written to {}", model_path.display()));
+    text.push_str(&metrics_line("test free simulation", f.metrics.as_ref()));
+    text.push_str(&format!("\nmodel written to {}", f.model_path.display()));
     if let Some(p) = &args.plot {
         text.push_str(&format!("\nplot written to {}", p.display()));
     }
-    out(&text)
+    text
 }
 
 /// `options` with the history chosen from `train` (`--history auto`), its progress on stderr

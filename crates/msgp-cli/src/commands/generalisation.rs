@@ -101,9 +101,75 @@ fn fit_all(
         .collect()
 }
 
+/// A plot's panel: its title and the simulation it draws.
+type Panel = (String, Simulated);
+
+/// One test of a benchmark: its name, trajectory, whether it is an excitation the model was
+/// not trained on, and whether its input leaves the training input's range.
+type Test = (String, Trajectory, bool, bool);
+
 /// Runs `msgp reproduce generalisation`.
 pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
     let started = Instant::now();
+    let sources = sources(args)?;
+    args.common.check_seeds()?;
+    if let Some(dir) = &args.plots {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the plots' folder {}", dir.display()))?;
+    }
+    let units: Vec<(&Source, u64)> = sources
+        .iter()
+        .flat_map(|s| args.common.seeds.iter().map(move |&seed| (s, seed)))
+        .collect();
+    let (jobs, per_unit) =
+        side_by_side::share(args.common.jobs, Threads::from_env()?.get(), units.len())?;
+    let threads = per_unit.unwrap_or(Threads::from_env()?);
+    // one job shows each fit's progress bar; with more, a line per finished benchmark and seed
+    let quiet = args.common.quiet || jobs > 1;
+    let per_unit_cases = side_by_side::run(units, jobs, |(source, seed)| {
+        let unit = run_unit(args, source, seed, (quiet, threads))?;
+        if jobs > 1 && !args.common.quiet {
+            eprintln!(
+                "{} (seed {seed}): fitted and simulated ({:.0} s)",
+                source.key(),
+                started.elapsed().as_secs_f64()
+            );
+        }
+        Ok(unit)
+    })?;
+    // the plots written, one per benchmark and seed (in the order of the rows)
+    let plots: Vec<String> = per_unit_cases
+        .iter()
+        .filter_map(|(_, p)| p.clone())
+        .collect();
+    let cases: Vec<Case> = per_unit_cases.into_iter().flat_map(|(c, _)| c).collect();
+    let seconds = started.elapsed().as_secs_f64();
+    let markdown = render(args, &cases, &plots, seconds);
+    msgp_reproduce::results::update_section(&args.common.out, "generalisation", &markdown)?;
+    if args.common.json {
+        return out_json(&json!({
+            "command": "reproduce generalisation",
+            "out": args.common.out.display().to_string(),
+            "seconds": seconds,
+            "seeds": args.common.seeds,
+            "plots": plots,
+            "rows": json_rows(&cases),
+        }));
+    }
+    out(&format!(
+        "{}\nwritten to {} in {seconds:.0} s{}",
+        summary(&cases).join("\n"),
+        args.common.out.display(),
+        args.plots.as_ref().map_or(String::new(), |d| format!(
+            "; {} plots in {}",
+            plots.len(),
+            d.display()
+        ))
+    ))
+}
+
+/// The benchmarks `--only` keeps (all by default), each name checked.
+fn sources(args: &GeneralisationArgs) -> anyhow::Result<Vec<Source>> {
     let mut sources: Vec<Source> = SyntheticSystem::all()
         .into_iter()
         .map(Source::Synthetic)
@@ -121,176 +187,157 @@ pub fn run(args: &GeneralisationArgs) -> anyhow::Result<()> {
             );
         }
     }
-    args.common.check_seeds()?;
-    if let Some(dir) = &args.plots {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("cannot create the plots' folder {}", dir.display()))?;
-    }
     sources.retain(|s| args.common.only.is_empty() || args.common.only.contains(&s.key()));
-    let dir = args.common.data_dir();
-    let units: Vec<(&Source, u64)> = sources
-        .iter()
-        .flat_map(|s| args.common.seeds.iter().map(move |&seed| (s, seed)))
-        .collect();
-    let (jobs, per_unit) =
-        side_by_side::share(args.common.jobs, Threads::from_env()?.get(), units.len())?;
-    let threads = per_unit.unwrap_or(Threads::from_env()?);
-    // one job shows each fit's progress bar; with more, a line per finished benchmark and seed
-    let quiet = args.common.quiet || jobs > 1;
-    let per_unit_cases = side_by_side::run(units, jobs, |(source, seed)| {
-        let key = source.key();
-        // (name, trajectory, alternate, beyond the training range)
-        type Test = (String, Trajectory, bool, bool);
-        let (bench, tests): (Benchmark, Vec<Test>) = match source {
-            Source::Synthetic(s) => {
-                let bench = s.generate(seed, NoiseScale::StdDev)?;
-                let mut tests = vec![(
-                    "Table 2 test input".to_string(),
-                    bench.test.clone(),
-                    false,
-                    false,
-                )];
-                for (e, t) in s
-                    .alternate_tests(seed)?
-                    .into_iter()
-                    .chain(s.beyond_tests(seed)?)
-                {
-                    tests.push((e.name().to_string(), t, true, e.beyond_range()));
-                }
-                (bench, tests)
-            }
-            Source::Real(r) => {
-                let bench = r.load_swapped(&dir).with_context(|| {
-                    format!(
-                        "loading the real series {} (set --data-dir or MSGP_DATA_DIR)",
-                        r.name()
-                    )
-                })?;
-                let test = bench.test.clone();
-                (
-                    bench,
-                    vec![("swapped split".to_string(), test, true, false)],
-                )
-            }
-        };
-        let label = format!("{key} (seed {seed})");
-        let models = fit_all(&bench, seed, &label, quiet, threads)?;
-        let level = bench.train.y.column(0).mean();
-        let mut cases = Vec::new();
-        // the plot's rows: each test that both methods simulated
-        let mut drawn: Vec<Vec<(String, Simulated)>> = Vec::new();
-        for (name, traj, alternate, beyond) in tests {
-            let mut metrics = Vec::new();
-            let mut row = Vec::new();
-            for (m, method) in models.iter().zip(METHODS) {
-                // a simulation that fails numerically scores +∞ (a runaway model), and the
-                // table goes on
-                let scored = match m.simulate(&traj) {
-                    Ok(sim) => score(&sim, &traj).map(|metrics| Some((sim, metrics))),
-                    Err(MsgpError::NonFinite(_) | MsgpError::NotPositiveDefinite { .. }) => {
-                        Ok(None)
-                    }
-                    Err(e) => Err(e),
-                }
-                .with_context(|| format!("simulating {} on {key}, {name}", method.name()))?;
-                match scored {
-                    Some((sim, scores)) => {
-                        metrics.push(scores);
-                        let title = format!("{label}, {name}: {}", method.name());
-                        row.push((title, simulated(&name, &traj, sim, scores)));
-                    }
-                    None => metrics.push(Metrics {
-                        rmse: f64::INFINITY,
-                        nll: f64::INFINITY,
-                        coverage_2sigma: 0.0,
-                        steps: traj.len().saturating_sub(m.spec.warmup()),
-                    }),
-                }
-            }
-            if row.len() == METHODS.len() {
-                drawn.push(row);
-            }
-            cases.push(Case {
-                key: key.clone(),
-                test: name,
-                seed,
-                mean_rmse: constant_rmse(&traj, bench.ly.max(bench.lu), level),
-                metrics,
-                alternate,
-                beyond,
-            });
-        }
-        // (a benchmark whose every test failed to simulate has no plot)
-        let mut plot = None;
-        if let (Some(dir), false) = (&args.plots, drawn.is_empty()) {
-            let path = dir.join(format!("{key}-seed{seed}.png"));
-            let rows: Vec<Vec<(String, &Simulated)>> = drawn
-                .iter()
-                .map(|r| r.iter().map(|(t, s)| (t.clone(), s)).collect())
-                .collect();
-            let data = match source {
-                Source::Synthetic(_) => "true output",
-                Source::Real(_) => "measured",
-            };
-            plot_grid(&path, &rows, data)?;
-            plot = Some(path.display().to_string());
-        }
-        if jobs > 1 && !args.common.quiet {
-            eprintln!(
-                "{label}: fitted and simulated ({:.0} s)",
-                started.elapsed().as_secs_f64()
+    Ok(sources)
+}
+
+/// `source`'s training data for `seed` and its tests: a synthetic system's Table 2 test input,
+/// its alternate excitations and those beyond the training range; a real series' swapped split.
+fn tests_of(
+    source: &Source,
+    seed: u64,
+    dir: &std::path::Path,
+) -> anyhow::Result<(Benchmark, Vec<Test>)> {
+    Ok(match source {
+        Source::Synthetic(s) => {
+            let bench = s.generate(seed, NoiseScale::StdDev)?;
+            let own = (
+                "Table 2 test input".to_string(),
+                bench.test.clone(),
+                false,
+                false,
             );
+            let mut tests = vec![own];
+            for (e, t) in s
+                .alternate_tests(seed)?
+                .into_iter()
+                .chain(s.beyond_tests(seed)?)
+            {
+                tests.push((e.name().to_string(), t, true, e.beyond_range()));
+            }
+            (bench, tests)
         }
-        Ok((cases, plot))
-    })?;
-    // the plots written, one per benchmark and seed (in the order of the rows)
-    let plots: Vec<String> = per_unit_cases
-        .iter()
-        .filter_map(|(_, p)| p.clone())
-        .collect();
-    let cases: Vec<Case> = per_unit_cases.into_iter().flat_map(|(c, _)| c).collect();
-    let seconds = started.elapsed().as_secs_f64();
-    let markdown = render(args, &cases, &plots, seconds);
-    msgp_reproduce::results::update_section(&args.common.out, "generalisation", &markdown)?;
-    if args.common.json {
-        let rows: Vec<_> = cases
+        Source::Real(r) => {
+            let bench = r.load_swapped(dir).with_context(|| {
+                format!(
+                    "loading the real series {} (set --data-dir or MSGP_DATA_DIR)",
+                    r.name()
+                )
+            })?;
+            let test = bench.test.clone();
+            (
+                bench,
+                vec![("swapped split".to_string(), test, true, false)],
+            )
+        }
+    })
+}
+
+/// One benchmark and seed: both methods fitted, every test simulated and scored, and the plot
+/// of the tests both simulated (where `--plots` asks for it).
+fn run_unit(
+    args: &GeneralisationArgs,
+    source: &Source,
+    seed: u64,
+    (quiet, threads): (bool, Threads),
+) -> anyhow::Result<(Vec<Case>, Option<String>)> {
+    let key = source.key();
+    let (bench, tests) = tests_of(source, seed, &args.common.data_dir())?;
+    let label = format!("{key} (seed {seed})");
+    let models = fit_all(&bench, seed, &label, quiet, threads)?;
+    let level = bench.train.y.column(0).mean();
+    let mut cases = Vec::new();
+    // the plot's rows: each test that both methods simulated
+    let mut drawn: Vec<Vec<Panel>> = Vec::new();
+    for (name, traj, alternate, beyond) in tests {
+        let (metrics, row) = simulate_both(&models, &traj, (&label, &name))
+            .with_context(|| format!("simulating on {key}, {name}"))?;
+        if row.len() == METHODS.len() {
+            drawn.push(row);
+        }
+        cases.push(Case {
+            key: key.clone(),
+            test: name,
+            seed,
+            mean_rmse: constant_rmse(&traj, bench.ly.max(bench.lu), level),
+            metrics,
+            alternate,
+            beyond,
+        });
+    }
+    // (a benchmark whose every test failed to simulate has no plot)
+    let mut plot = None;
+    if let (Some(dir), false) = (&args.plots, drawn.is_empty()) {
+        let path = dir.join(format!("{key}-seed{seed}.png"));
+        let rows: Vec<Vec<(String, &Simulated)>> = drawn
             .iter()
-            .flat_map(|c| {
-                METHODS.iter().zip(&c.metrics).map(move |(m, x)| {
-                    json!({
-                        "benchmark": c.key,
-                        "test": c.test,
-                        "seed": c.seed,
-                        "method": m.name(),
-                        "rmse": x.rmse,
-                        "nll": x.nll,
-                        "coverage_2sigma": x.coverage_2sigma,
-                        "mean_predictor_rmse": c.mean_rmse,
-                        "alternate": c.alternate,
-                        "beyond_range": c.beyond,
-                    })
+            .map(|r| r.iter().map(|(t, s)| (t.clone(), s)).collect())
+            .collect();
+        let data = match source {
+            Source::Synthetic(_) => "true output",
+            Source::Real(_) => "measured",
+        };
+        plot_grid(&path, &rows, data)?;
+        plot = Some(path.display().to_string());
+    }
+    Ok((cases, plot))
+}
+
+/// Each model's scores on `traj`, the test `name` of the benchmark and seed `label` (a
+/// simulation that fails numerically scores +∞, a runaway model, and the table goes on), and
+/// the plot's row of those that simulated.
+fn simulate_both(
+    models: &[Model],
+    traj: &Trajectory,
+    (label, name): (&str, &str),
+) -> anyhow::Result<(Vec<Metrics>, Vec<Panel>)> {
+    let mut metrics = Vec::new();
+    let mut row = Vec::new();
+    for (m, method) in models.iter().zip(METHODS) {
+        let scored = match m.simulate(traj) {
+            Ok(sim) => score(&sim, traj).map(|metrics| Some((sim, metrics))),
+            Err(MsgpError::NonFinite(_) | MsgpError::NotPositiveDefinite { .. }) => Ok(None),
+            Err(e) => Err(e),
+        }
+        .with_context(|| format!("simulating {}", method.name()))?;
+        match scored {
+            Some((sim, scores)) => {
+                metrics.push(scores);
+                let panel = format!("{label}, {name}: {}", method.name());
+                row.push((panel, simulated(name, traj, sim, scores)));
+            }
+            None => metrics.push(Metrics {
+                rmse: f64::INFINITY,
+                nll: f64::INFINITY,
+                coverage_2sigma: 0.0,
+                steps: traj.len().saturating_sub(m.spec.warmup()),
+            }),
+        }
+    }
+    Ok((metrics, row))
+}
+
+/// `--json`'s rows: one per test and method.
+fn json_rows(cases: &[Case]) -> Vec<serde_json::Value> {
+    cases
+        .iter()
+        .flat_map(|c| {
+            METHODS.iter().zip(&c.metrics).map(move |(m, x)| {
+                json!({
+                    "benchmark": c.key,
+                    "test": c.test,
+                    "seed": c.seed,
+                    "method": m.name(),
+                    "rmse": x.rmse,
+                    "nll": x.nll,
+                    "coverage_2sigma": x.coverage_2sigma,
+                    "mean_predictor_rmse": c.mean_rmse,
+                    "alternate": c.alternate,
+                    "beyond_range": c.beyond,
                 })
             })
-            .collect();
-        return out_json(&json!({
-            "command": "reproduce generalisation",
-            "out": args.common.out.display().to_string(),
-            "seconds": seconds,
-            "seeds": args.common.seeds,
-            "plots": plots,
-            "rows": rows,
-        }));
-    }
-    out(&format!(
-        "{}\nwritten to {} in {seconds:.0} s{}",
-        summary(&cases).join("\n"),
-        args.common.out.display(),
-        args.plots.as_ref().map_or(String::new(), |d| format!(
-            "; {} plots in {}",
-            plots.len(),
-            d.display()
-        ))
-    ))
+        })
+        .collect()
 }
 
 /// The targets over the synthetic systems' alternate excitations, and MSGP against
