@@ -154,12 +154,9 @@ class PolicySearchSettings(TypedDict, total=False):
     solver: Solver
 
 
-class LearnerSettings(TypedDict, total=False):
-    """The loop on a plant or Gymnasium environment (``learn_policy(env=..., settings=...)``)."""
-
+class _LoopSettings(TypedDict, total=False):
     iterations: int
     random_rollouts: int
-    excitation: Excitation
     seed: int
     fit: FitSettings
     search: PolicySearchSettings
@@ -169,6 +166,12 @@ class LearnerSettings(TypedDict, total=False):
     part (MSGP only)."""
     ff_segment: Optional[int]
     warm_start: Optional[int]
+
+
+class LearnerSettings(_LoopSettings, total=False):
+    """The loop on a plant or Gymnasium environment (``learn_policy(env=..., settings=...)``)."""
+
+    excitation: Excitation
     search_from_first: bool
 
 
@@ -181,20 +184,11 @@ class PendulumExcitation(TypedDict, total=False):
     rms: float
 
 
-class PendulumLearnSettings(TypedDict, total=False):
+class PendulumLearnSettings(_LoopSettings, total=False):
     """The loop on the built-in pendulum (``learn_policy(settings=...)`` without ``env``)."""
 
-    iterations: int
-    random_rollouts: int
     excitation: PendulumExcitation
     episode_seconds: float
     policy_horizon_seconds: float
-    seed: int
-    fit: FitSettings
-    search: PolicySearchSettings
     cost_widths: List[float]
-    evaluation_episodes: int
-    prequential_choice: bool
-    ff_segment: Optional[int]
     gain_scale: List[float]
-    warm_start: Optional[int]
