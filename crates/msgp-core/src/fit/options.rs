@@ -53,6 +53,12 @@ pub struct FitOptions {
     pub overrides: Overrides,
 }
 
+/// The default pseudo-input count of a fit on `windows` training windows:
+/// `min(DEFAULT_MAX_INDUCING, windows / 2)`, at least 1.
+fn default_inducing(windows: usize) -> usize {
+    DEFAULT_MAX_INDUCING.min((windows / 2).max(1))
+}
+
 /// More GP inputs (`l_y·d_y + l_u·d_u`) than this make [`FitOptions::history_warning`] say
 /// the fit will be slow: every predicted step moment-matches a Gaussian over the whole window,
 /// whose work grows with the square of its size (Table 1's longest histories have 20).
@@ -85,11 +91,12 @@ impl FitOptions {
         train.iter().map(|t| t.len().saturating_sub(warmup)).sum()
     }
 
-    /// The pseudo-inputs a GP fit of `train` gets: the requested number, or the default.
+    /// The pseudo-inputs a GP fit of `windows` training windows gets: the requested number, or
+    /// the default.
     fn chosen_inducing(&self, windows: usize) -> usize {
         self.overrides
             .inducing
-            .unwrap_or_else(|| DEFAULT_MAX_INDUCING.min((windows / 2).max(1)))
+            .unwrap_or_else(|| default_inducing(windows))
     }
 
     /// A warning when the pseudo-inputs the fit of `train` gets are not what a user would
@@ -183,7 +190,7 @@ impl FitOptions {
     /// solver, the start (the linear-kf start trains the linear recipe alone: it is a linear
     /// prior mean) and the segments of a long log.
     pub fn base(&self, train: &[Trajectory]) -> FitSettings {
-        let inducing = DEFAULT_MAX_INDUCING.min((self.windows(train) / 2).max(1));
+        let inducing = default_inducing(self.windows(train));
         let one_step = OneStepFitSettings {
             inducing,
             ..match self.method {
