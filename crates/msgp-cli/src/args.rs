@@ -96,6 +96,11 @@ pub struct PolicyInitArgs {
     /// The cost's width per output, comma-separated; `none`: the output does not count.
     #[arg(long, value_name = "W,…", value_delimiter = ',')]
     pub widths: Vec<String>,
+    /// PILCO's several widths: the cost is the mean of the saturating costs at the widths
+    /// times each of these scales, comma-separated (e.g. `1,4`: a wide cost's slope far from
+    /// the target, the widths' precision near it).
+    #[arg(long, value_name = "S,…", value_delimiter = ',', default_value = "1")]
+    pub width_scales: Vec<f64>,
     /// Control steps of an episode.
     #[arg(long, value_name = "N")]
     pub episode_steps: usize,

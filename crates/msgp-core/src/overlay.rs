@@ -19,13 +19,30 @@ pub fn merged<T: Serialize + DeserializeOwned>(base: &T, user: &Value, what: &st
 
 /// [`merged`] over defaults already serialised.
 pub fn merged_value<T: DeserializeOwned>(base: &Value, user: &Value, what: &str) -> Result<T> {
+    merged_at(base, user, what, "")
+}
+
+/// [`merged_value`] of settings that sit at the dotted `path` of the argument `what` (the
+/// loop's fit settings at `fit` of its `settings`): messages name their keys from there
+/// (`settings: unknown setting \`fit.x\``, `settings.fit.x: invalid type …`).
+pub fn merged_at<T: DeserializeOwned>(
+    base: &Value,
+    user: &Value,
+    what: &str,
+    path: &str,
+) -> Result<T> {
+    let at = match path {
+        "" => what.to_string(),
+        _ => format!("{what}.{path}"),
+    };
     if !user.is_object() {
         return Err(MsgpError::Overrides(format!(
-            "{what} must be a dict of settings, got {user}"
+            "{at} must be a dict of settings, got {user}"
         )));
     }
     let mut full = base.clone();
-    overlay(&mut full, user, "").map_err(|e| MsgpError::Overrides(format!("{what}: {e}")))?;
+    overlay(&mut full, user, path).map_err(|e| MsgpError::Overrides(format!("{what}: {e}")))?;
+    let what = at;
     serde_json::from_value(full).map_err(|e| {
         // name the culprit: apply the user's settings one at a time
         for (name, single) in singles(user) {
@@ -146,6 +163,23 @@ mod tests {
             .expect_err("refused")
             .to_string();
         assert!(e.starts_with("s.inner.rate: invalid type"), "{e}");
+    }
+
+    #[test]
+    fn settings_at_a_path_are_named_from_there() {
+        let b = serde_json::to_value(base()).expect("value");
+        let e = merged_at::<Outer>(&b, &json!({"inner": {"rat": 2.0}}), "s", "fit")
+            .expect_err("refused");
+        assert_eq!(
+            e.to_string(),
+            "s: unknown setting `fit.inner.rat` (known: rate)"
+        );
+        let e = merged_at::<Outer>(&b, &json!({"inner": {"rate": "x"}}), "s", "fit")
+            .expect_err("refused")
+            .to_string();
+        assert!(e.starts_with("s.fit.inner.rate: invalid type"), "{e}");
+        let e = merged_at::<Outer>(&b, &json!(3), "s", "fit").expect_err("refused");
+        assert!(e.to_string().starts_with("s.fit must be a dict"), "{e}");
     }
 
     #[test]

@@ -231,6 +231,12 @@ pub struct TaskRecord {
     pub target: Vec<f64>,
     /// The cost's width per output; `null`: the output does not count.
     pub widths: Vec<Option<f64>>,
+    /// The widths' scales (PILCO's several widths; absent: `[1.0]`, the widths alone).
+    #[serde(
+        default = "crate::learner::one_width",
+        skip_serializing_if = "crate::learner::is_one_width"
+    )]
+    pub width_scales: Vec<f64>,
     /// Per output: an angle, costed on its unit tip (absent: none is).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub angles: Vec<bool>,
@@ -259,6 +265,7 @@ impl TaskRecord {
                 .iter()
                 .map(|w| w.is_finite().then_some(*w))
                 .collect(),
+            width_scales: cost.scales.clone(),
             angles: if cost.angles.contains(&true) {
                 cost.angles.clone()
             } else {
@@ -300,7 +307,8 @@ impl TaskRecord {
             .map(|w| w.unwrap_or(f64::INFINITY))
             .collect();
         Ok(Task {
-            cost: target_cost(&self.target, &widths, &self.angles())?,
+            cost: target_cost(&self.target, &widths, &self.angles())?
+                .with_scales(&self.width_scales)?,
             episode_steps: self.episode_steps,
             policy_horizon: self.policy_horizon,
             start: match &self.start {
@@ -595,6 +603,7 @@ mod tests {
         file.task = Some(TaskRecord {
             target: vec![0.0; 3],
             widths: vec![Some(1.0); 3],
+            width_scales: vec![1.0],
             angles: Vec::new(),
             episode_steps: 10,
             policy_horizon: 10,

@@ -87,8 +87,7 @@ impl Msgp {
                     .training
                     .settings
                     .get("start")
-                    .and_then(|v| serde_json::from_value(v.clone()).ok())
-                    .unwrap_or_default(),
+                    .and_then(|v| serde_json::from_value(v.clone()).ok()),
                 threads: Threads::default(),
                 segment_length: None,
                 overrides: Overrides {
@@ -655,8 +654,8 @@ impl Msgp {
         {
             s.insert_str(s.len() - 1, &format!(", likelihood='{}'", l.name()));
         }
-        if o.method == Method::Msgp && o.start != MsgpStart::default() {
-            s.insert_str(s.len() - 1, &format!(", start='{}'", start_name(o.start)));
+        if let Some(start) = o.start.filter(|s| *s != MsgpStart::default()) {
+            s.insert_str(s.len() - 1, &format!(", start='{}'", start_name(start)));
         }
         if let Some(f) = &self.fitted {
             let t = &f.file.training;
@@ -692,9 +691,8 @@ impl Msgp {
                     Some(v) => crate::convert::from_json(py, v)?,
                     None => py.None().into_bound(py),
                 };
-                let msgp = o.method == Method::Msgp;
                 let likelihood = o.overrides.likelihood.map(|l| l.name());
-                let start = msgp.then_some(start_name(o.start));
+                let start = o.start.map(start_name);
                 let args = (
                     (o.ly, o.lu),
                     o.overrides.inducing,

@@ -85,22 +85,16 @@ pub fn start_name(s: MsgpStart) -> &'static str {
     }
 }
 
-/// Where an MSGP fit starts, by name (`one-step`, `spread`, `linear-kf`); `None`: the default. Other
-/// methods have their own fits and refuse one.
-fn start(m: Method, name: Option<&str>) -> Result<MsgpStart> {
+/// Where an MSGP fit starts, by name (`one-step`, `spread`, `linear-kf`); `None`: the default
+/// (another method refuses one: [`FitOptions::check`]).
+fn start(name: Option<&str>) -> Result<Option<MsgpStart>> {
     let Some(name) = name else {
-        return Ok(MsgpStart::default());
+        return Ok(None);
     };
-    if m != Method::Msgp {
-        return Err(input(format!(
-            "start={name:?}: where an MSGP fit starts; method {:?} has its own fit",
-            m.name()
-        )));
-    }
     match name {
-        "one-step" => Ok(MsgpStart::OneStep),
-        "linear-kf" => Ok(MsgpStart::LinearKf),
-        "spread" => Ok(MsgpStart::Spread),
+        "one-step" => Ok(Some(MsgpStart::OneStep)),
+        "linear-kf" => Ok(Some(MsgpStart::LinearKf)),
+        "spread" => Ok(Some(MsgpStart::Spread)),
         _ => Err(input(format!(
             "unknown start {name:?}: expected \"one-step\", \"spread\" or \"linear-kf\""
         ))),
@@ -124,14 +118,8 @@ pub fn fit_options(
     let segment_length = segment_length
         .map(|x| count(x, "segment_length"))
         .transpose()?;
-    if segment_length.is_some() && m != Method::Msgp {
-        return Err(input(format!(
-            "segment_length: segments of the trajectory likelihood, an MSGP fit's; \
-             method {method:?} has its own fit"
-        )));
-    }
     let likelihood = self::likelihood(m, likelihood)?;
-    let start = self::start(m, start)?;
+    let start = self::start(start)?;
     let auto_history = history
         .and_then(|h| h.extract::<String>().ok())
         .is_some_and(|h| h == "auto");
@@ -182,7 +170,7 @@ pub fn fit_options(
         },
     };
     // what the method does not have shows now, not at the fit
-    options.overrides.apply(FitSettings::new(m))?;
+    options.check()?;
     Ok((options, auto_history))
 }
 
@@ -315,24 +303,7 @@ where
             settings: Some(fit_user),
             ..Overrides::default()
         };
-        let resolved = by_name.apply(fit(&mut s).clone()).map_err(|e| match e {
-            msgp_core::MsgpError::Overrides(m) => input(under_fit(&m)),
-            e => e.into(),
-        })?;
-        *fit(&mut s) = resolved;
+        *fit(&mut s) = by_name.apply_at(fit(&mut s).clone(), "fit")?;
     }
     Ok(s)
-}
-
-/// A message of the fit's settings by name ([`msgp_core::overlay`]: "settings: unknown setting
-/// `x` …", "settings.x: …") with its key named under `fit`, as the loop's dict holds it.
-fn under_fit(message: &str) -> String {
-    const UNKNOWN: &str = "settings: unknown setting `";
-    if let Some(rest) = message.strip_prefix(UNKNOWN) {
-        return format!("{UNKNOWN}fit.{rest}");
-    }
-    match message.strip_prefix("settings.") {
-        Some(rest) => format!("settings.fit.{rest}"),
-        None => message.to_string(),
-    }
 }

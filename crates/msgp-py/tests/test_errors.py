@@ -229,7 +229,7 @@ def test_the_msgp_start_is_an_argument():
     m.fit(u, y)
     settings = json.loads(m.to_json())["training"]["settings"]
     assert (settings["start"], settings["mean"], settings["alternative"]) == ("linear-kf", "linear", None)
-    with pytest.raises(ValueError, match='start="linear-kf": where an MSGP fit starts; method "gp-narx"'):
+    with pytest.raises(ValueError, match="`start`: where an MSGP fit starts; method gp-narx has none"):
         msgp.Msgp(method="gp-narx", start="linear-kf")
     with pytest.raises(ValueError, match='unknown start "kalman": expected "one-step", "spread" or "linear-kf"'):
         msgp.Msgp(start="kalman")

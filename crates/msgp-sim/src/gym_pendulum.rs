@@ -57,6 +57,7 @@ pub fn pendulum_v1_task() -> TargetTask {
     TargetTask {
         target: vec![1.0, 0.0, 0.0],
         widths: vec![Some(0.5), Some(0.5), None],
+        width_scales: vec![1.0],
         episode_steps: 100,
         policy_horizon: 100,
         policy: PolicyFamily::Rbf { basis: 50 },

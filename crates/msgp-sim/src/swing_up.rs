@@ -81,6 +81,7 @@ pub fn swing_up_task() -> TargetTask {
     TargetTask {
         target: vec![0.0, 0.0, 0.0, 0.0],
         widths: vec![Some(0.5), None, Some(0.5), None],
+        width_scales: vec![1.0],
         episode_steps: EPISODE_STEPS,
         policy_horizon: EPISODE_STEPS,
         policy: PolicyFamily::Rbf { basis: 50 },

@@ -4,15 +4,17 @@
 //! starts near hanging) and the interaction seconds up to the first success.
 //!
 //! `cargo run --release -p msgp-diagnostics --bin swing_up -- [seed] [settings.json]
-//! [task.json] [params.json] [starts=N]`
+//! [task.json] [params.json] [starts=N] [model=NAME]`
 //!
 //! `settings.json` / `task.json` / `params.json`: JSON objects (or files holding them) merged
 //! into the defaults (`LearnerSettings::for_plant`, the swing-up's `TargetTask`, its
 //! `PendulumParams`); `-` keeps them.
-//! `starts=N`: the success test's starts (default 5).
+//! `starts=N`: the success test's starts (default 5). `model=NAME`: the loop's model
+//! (`msgp-filter`, `msgp`, `gp-narx`, `linear-kf`; `with_model` on the settings), default the
+//! preset's.
 use std::ops::ControlFlow;
 
-use msgp_core::learner::{LearnEvent, Learner, LearnerSettings, TargetTask};
+use msgp_core::learner::{LearnEvent, Learner, LearnerSettings, LoopModel, TargetTask, with_model};
 use msgp_core::plant::Plant;
 use msgp_diagnostics::{overridden, seed_and_starts};
 use msgp_sim::swing_up::{
@@ -26,7 +28,11 @@ fn main() {
     let mut plant = SwingUp::new(&params).expect("plant");
     let target: TargetTask = overridden(&swing_up_task(), args.get(2));
     let settings = swing_up_settings(plant.spec(), seed);
-    let settings: LearnerSettings = overridden(&settings, args.get(1));
+    let mut settings: LearnerSettings = overridden(&settings, args.get(1));
+    if let Some(name) = args.iter().find_map(|a| a.strip_prefix("model=")) {
+        let model: LoopModel = name.parse().expect("model");
+        settings = with_model(settings, model).expect("model settings");
+    }
     let task = target.task(plant.spec(), seed).expect("task");
     let mut learner = Learner::new(task, settings).expect("learner");
     let mut success = SwingUpSuccess {
@@ -47,13 +53,21 @@ fn main() {
                 let thetas: Vec<f64> = episode.outputs.iter().map(|y| y[0]).collect();
                 held = !episode.ended_early && held_upright(&thetas, period);
                 let top = thetas.iter().map(|t| t.cos()).fold(-1.0, f64::max);
+                // the largest distance from upright over the hold's last seconds
+                let hold = (msgp_sim::swing_up::HOLD_SECONDS / period).round() as usize;
+                let tau = std::f64::consts::TAU;
+                let off = thetas[thetas.len().saturating_sub(hold)..]
+                    .iter()
+                    .map(|t| (t - tau * (t / tau).round()).abs())
+                    .fold(0.0, f64::max);
                 let reach = episode
                     .outputs
                     .iter()
                     .map(|y| y[2].abs())
                     .fold(0.0, f64::max);
                 println!(
-                    "      episode: {} steps{}, highest cos θ {top:.2}, max |x| {reach:.2}",
+                    "      episode: {} steps{}, highest cos θ {top:.2}, max |x| {reach:.2}, \
+                     farthest from upright over the last {hold} steps {off:.2} rad",
                     episode.outputs.len(),
                     if episode.ended_early {
                         " (rail end)"

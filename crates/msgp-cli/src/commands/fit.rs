@@ -145,31 +145,18 @@ fn parts(args: &FitArgs, data: &Dataset) -> anyhow::Result<(Vec<Part>, Vec<Part>
 }
 
 /// The fit's options from the flags, with history `history`: the same as the Python
-/// `msgp.Msgp` makes of the same choices. MSGP's own choices of the options (its start, its
-/// segments) are refused by another method here; the overrides' by the resolver.
+/// `msgp.Msgp` makes of the same choices; what the method does not have is refused here, named
+/// by its flag ([`FitOptions::check`]).
 fn options(args: &FitArgs, history: HistoryArg) -> anyhow::Result<FitOptions> {
     let method = Method::from(args.method);
-    if let (Some(_), false) = (args.segment_length, method == Method::Msgp) {
-        bail!(
-            "--segment-length: segments of the trajectory likelihood, an MSGP fit's; \
-             --method {} has its own fit",
-            method.name()
-        );
-    }
-    if let (Some(_), false) = (args.start, method == Method::Msgp) {
-        bail!(
-            "--start: where an MSGP fit starts; --method {} has its own fit",
-            method.name()
-        );
-    }
-    Ok(FitOptions {
+    let options = FitOptions {
         method,
         ly: history.ly,
         lu: history.lu,
         seed: args.seed,
         integrators: args.integrating.clone(),
         optimizer: args.optimizer.into(),
-        start: args.start.map_or(MsgpStart::default(), Into::into),
+        start: args.start.map(Into::into),
         threads: Threads::from_env()?,
         segment_length: args.segment_length,
         overrides: Overrides {
@@ -184,7 +171,9 @@ fn options(args: &FitArgs, history: HistoryArg) -> anyhow::Result<FitOptions> {
             },
             settings: None,
         },
-    })
+    };
+    options.check().map_err(flagged)?;
+    Ok(options)
 }
 
 /// The fit of `trajs` under `settings`, its progress on a bar; a diverging model is a
@@ -499,6 +488,8 @@ fn flagged(e: MsgpError) -> anyhow::Error {
             "one_step_objective" => "--one-step",
             "calibrate" => "--no-calibration",
             "blow_up_fallback" => "--no-blow-up-fallback",
+            "start" => "--start",
+            "segment_length" => "--segment-length",
             _ => return e.into(),
         },
         _ => return e.into(),

@@ -56,6 +56,7 @@ fn init(args: &PolicyInitArgs) -> anyhow::Result<()> {
     let target = TargetTask {
         target: args.target.clone(),
         widths,
+        width_scales: args.width_scales.clone(),
         episode_steps: args.episode_steps,
         policy_horizon: args.horizon.unwrap_or(args.episode_steps),
         policy: match args.policy {

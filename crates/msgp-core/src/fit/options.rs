@@ -4,7 +4,7 @@
 //! change ([`super::resolve`]), with the warnings a front end gives before the work starts (a
 //! long history, few pseudo-inputs).
 
-use super::resolve::Overrides;
+use super::resolve::{Overrides, refused};
 use super::segments::{LONG_LOG_WINDOWS, Segments};
 use super::settings::{
     DEFAULT_MAX_INDUCING, FitOptimizer, FitSettings, LINEAR_RECIPE, LinearKfSettings,
@@ -33,16 +33,18 @@ pub struct FitOptions {
     pub integrators: Vec<Integrator>,
     /// Solver of the MSGP loss.
     pub optimizer: FitOptimizer,
-    /// Where the MSGP training starts ([`MsgpStart`]); the linear-kf start is a linear prior
-    /// mean, so it trains the linear recipe alone (a zero `mean` is refused).
-    pub start: MsgpStart,
+    /// Where the MSGP training starts ([`MsgpStart`]; `None`: the default); the linear-kf start
+    /// is a linear prior mean, so it trains the linear recipe alone (a zero `mean` is refused).
+    /// Another method has its own fit and refuses one ([`FitOptions::check`]).
+    pub start: Option<MsgpStart>,
     /// Threads of the fit ([`FitSettings::threads`]); front ends take it from
     /// [`Threads::from_env`].
     pub threads: Threads,
     /// Train MSGP on segments of this many predicted steps ([`super::segments`]), a batch of
     /// [`Segments::DEFAULT`]'s size per Adam step; `Some(0)`: every trajectory whole; `None`:
     /// segments of [`Segments::DEFAULT`] when the training part has more than
-    /// [`LONG_LOG_WINDOWS`] windows, whole trajectories otherwise.
+    /// [`LONG_LOG_WINDOWS`] windows, whole trajectories otherwise. MSGP's alone
+    /// ([`FitOptions::check`]).
     pub segment_length: Option<usize>,
     /// What the user changes of the defaults: iterations, pseudo-inputs (`None`:
     /// `min(100, training windows / 2)`, at least 1, where a trajectory of `T` samples has
@@ -78,7 +80,7 @@ impl FitOptions {
             seed: 0,
             integrators: Vec::new(),
             optimizer: FitOptimizer::default(),
-            start: MsgpStart::default(),
+            start: None,
             threads: Threads::default(),
             segment_length: None,
             overrides: Overrides::default(),
@@ -177,9 +179,32 @@ impl FitOptions {
         })
     }
 
+    /// Refuses, by name, what the method does not have — MSGP's own choices (`start`,
+    /// `segment_length`) by another method, and the [`Overrides`] the resolver refuses — so a
+    /// front end can say so before it reads any data.
+    pub fn check(&self) -> Result<()> {
+        if self.method != Method::Msgp {
+            if self.start.is_some() {
+                return Err(refused("start", "where an MSGP fit starts", self.method));
+            }
+            if self.segment_length.is_some() {
+                return Err(refused(
+                    "segment_length",
+                    "segments of the trajectory likelihood, an MSGP fit's",
+                    self.method,
+                ));
+            }
+        }
+        self.overrides
+            .apply(FitSettings::new(self.method))
+            .map(drop)
+    }
+
     /// The full settings for fitting `train`: the [`FitOptions::base`] with the user's
-    /// [`Overrides`], checked against the data ([`FitSettings::validate`]).
+    /// [`Overrides`], checked ([`FitOptions::check`]) and checked against the data
+    /// ([`FitSettings::validate`]).
     pub fn settings(&self, train: &[Trajectory]) -> Result<FitSettings> {
+        self.check()?;
         let settings = self.overrides.apply(self.base(train))?;
         settings.validate(&train.iter().collect::<Vec<_>>())?;
         Ok(settings)
@@ -198,7 +223,8 @@ impl FitOptions {
                 _ => OneStepFitSettings::default(),
             }
         };
-        let recipes = match self.start {
+        let start = self.start.unwrap_or_default();
+        let recipes = match start {
             MsgpStart::LinearKf => MsgpSettings::default().with_recipe(LINEAR_RECIPE),
             _ => MsgpSettings::default(),
         };
@@ -207,7 +233,7 @@ impl FitOptions {
                 inducing,
                 segments: self.segments(train),
                 optimizer: self.optimizer,
-                start: self.start,
+                start,
                 ..recipes
             }),
             Method::GpNarx => MethodSettings::GpNarx(one_step),

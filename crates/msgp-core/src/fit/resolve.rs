@@ -52,7 +52,7 @@ pub struct Switches {
 }
 
 /// The refusal of `setting` (`what` it is) by method `method`.
-fn refused(setting: &'static str, what: &str, method: Method) -> MsgpError {
+pub(super) fn refused(setting: &'static str, what: &str, method: Method) -> MsgpError {
     MsgpError::InvalidSetting {
         name: setting,
         reason: format!("{what}; method {} has none", method.name()),
@@ -74,6 +74,12 @@ fn msgp<'a>(
 impl Overrides {
     /// `base` with these overrides, each applied once with its one meaning.
     pub fn apply(&self, base: FitSettings) -> Result<FitSettings> {
+        self.apply_at(base, "")
+    }
+
+    /// [`Overrides::apply`] where the settings by name sit at the dotted `path` of the user's
+    /// `settings` (a loop's fit settings at `fit`): their messages name keys from there.
+    pub fn apply_at(&self, base: FitSettings, path: &str) -> Result<FitSettings> {
         let mut s = base;
         if let Some(n) = self.iterations {
             s = s.with_solver_iterations(n);
@@ -98,7 +104,7 @@ impl Overrides {
         }
         self.switches.apply(&mut s)?;
         match &self.settings {
-            Some(user) => by_name(s, user),
+            Some(user) => by_name(s, user, path),
             None => Ok(s),
         }
     }
@@ -202,11 +208,13 @@ fn one_step_objective(s: &mut FitSettings, o: OneStepObjective) -> Result<()> {
     })
 }
 
-/// `s` with the user's settings by name laid over it ([`crate::overlay`]); the threads are
-/// the base's (they are not a recorded setting).
-fn by_name(s: FitSettings, user: &Value) -> Result<FitSettings> {
+/// `s` with the user's settings by name (at `path` of `settings`) laid over it
+/// ([`crate::overlay`]); the threads are the base's (they are not a recorded setting).
+fn by_name(s: FitSettings, user: &Value, path: &str) -> Result<FitSettings> {
     let threads = s.threads;
-    let merged: FitSettings = crate::overlay::merged(&s, user, "settings")?;
+    let base = serde_json::to_value(&s)
+        .map_err(|e| MsgpError::Overrides(format!("cannot describe the fit's defaults: {e}")))?;
+    let merged: FitSettings = crate::overlay::merged_at(&base, user, "settings", path)?;
     Ok(FitSettings { threads, ..merged })
 }
 

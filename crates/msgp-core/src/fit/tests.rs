@@ -23,7 +23,7 @@ fn options(method: Method, inducing: Option<usize>, iterations: Option<usize>) -
         seed: 7,
         integrators: Vec::new(),
         optimizer: FitOptimizer::Adam,
-        start: MsgpStart::OneStep,
+        start: None,
         threads: Threads::default(),
         segment_length: None,
         overrides: Overrides {
@@ -726,6 +726,44 @@ fn options_refuse_bad_input_clearly() {
     assert!(e.to_string().contains("l_y"), "{e}");
 }
 
+/// MSGP's own choices of the options (its start, its segments) are refused by name by another
+/// method before any data are read, and taken by MSGP.
+#[test]
+fn msgp_only_options_are_refused_by_name() {
+    for method in [Method::GpNarx, Method::PilcoNarx, Method::LinearKf] {
+        let start = FitOptions {
+            start: Some(MsgpStart::Spread),
+            ..options(method, None, None)
+        };
+        match start.check() {
+            Err(MsgpError::InvalidSetting { name: "start", .. }) => {}
+            other => panic!("{method:?} took a start: {other:?}"),
+        }
+        let segments = FitOptions {
+            segment_length: Some(30),
+            ..options(method, None, None)
+        };
+        match segments.settings(&[traj(200)]) {
+            Err(MsgpError::InvalidSetting {
+                name: "segment_length",
+                ..
+            }) => {}
+            other => panic!("{method:?} took segments: {other:?}"),
+        }
+    }
+    let msgp = FitOptions {
+        start: Some(MsgpStart::Spread),
+        segment_length: Some(30),
+        ..options(Method::Msgp, None, None)
+    };
+    let s = msgp.settings(&[traj(200)]).expect("MSGP takes both");
+    let m = s.msgp().expect("msgp");
+    assert_eq!(
+        (m.start, m.segments.map(|g| g.length)),
+        (MsgpStart::Spread, Some(30))
+    );
+}
+
 /// The settings serialise flat: the shared keys, `method` and the method's own keys only; an
 /// MSGP record has the keys of format 1.1 (but `refit`) and later ones (but
 /// `choose_final_budget`; both removed 2026-12-07), and every method's record reads back equal.
@@ -1251,7 +1289,7 @@ fn the_protocol_keeps_the_recipe_with_the_better_validation_nll() {
         FitOptions {
             ly: 2,
             lu: 1,
-            start: MsgpStart::LinearKf,
+            start: Some(MsgpStart::LinearKf),
             ..options(Method::Msgp, Some(12), Some(10))
         },
         None,

@@ -30,6 +30,7 @@ pub use report::IterationReport;
 pub use settings::LearnerSettings;
 pub use target::{PolicyFamily, TargetTask};
 pub use task::{StartDistribution, Task, target_cost};
+pub(crate) use task::{is_one_width, one_width};
 
 use std::ops::ControlFlow;
 

@@ -39,6 +39,14 @@ pub struct TargetTask {
     pub target: Vec<f64>,
     /// The cost's width per output; `None`: the output does not count.
     pub widths: Vec<Option<f64>>,
+    /// PILCO's several widths: the cost is the mean of the saturating costs at the widths
+    /// times each scale (`[1.0]`, the default: the widths alone;
+    /// [`crate::policy_search::cost`]).
+    #[serde(
+        default = "super::one_width",
+        skip_serializing_if = "super::is_one_width"
+    )]
+    pub width_scales: Vec<f64>,
     /// Control steps of an episode.
     pub episode_steps: usize,
     /// Control steps of the predicted rollouts the policy is optimised on.
@@ -80,7 +88,8 @@ impl TargetTask {
         let (policy, typical) = self.first_policy(spec, seed)?;
         let free = vec![true; policy.param_len()];
         Ok(Task {
-            cost: target_cost(&self.target, &widths, &spec.angles())?,
+            cost: target_cost(&self.target, &widths, &spec.angles())?
+                .with_scales(&self.width_scales)?,
             episode_steps: self.episode_steps,
             policy_horizon: self.policy_horizon,
             start: match self.separate_starts {

@@ -250,6 +250,16 @@ fn observed_start(episodes: &[Episode], floor: f64) -> (Vec<f64>, Vec<f64>) {
     (mean, var)
 }
 
+/// The widths alone: the default of [`super::TargetTask::width_scales`].
+pub(crate) fn one_width() -> Vec<f64> {
+    vec![1.0]
+}
+
+/// Whether `scales` are the widths alone (left out of records).
+pub(crate) fn is_one_width(scales: &[f64]) -> bool {
+    scales == [1.0]
+}
+
 /// A saturating cost around `target` with `widths` (∞: the output does not count), the
 /// outputs flagged in `angles` costed on their unit tip.
 pub fn target_cost(target: &[f64], widths: &[f64], angles: &[bool]) -> Result<SaturatingCost> {
@@ -341,5 +351,17 @@ mod tests {
             .to_task(each.space.base.clone())
             .expect("task");
         assert_eq!(back.start, each.start);
+        // several widths survive the record, and one is left out of it
+        let several = Task {
+            cost: each.cost.clone().with_scales(&[1.0, 3.0]).expect("scales"),
+            ..each.clone()
+        };
+        let record = TaskRecord::of(&several);
+        let text = serde_json::to_string(&record).expect("json");
+        let read: TaskRecord = serde_json::from_str(&text).expect("reads");
+        let back = read.to_task(several.space.base.clone()).expect("task");
+        assert_eq!(back.cost, several.cost);
+        let one = serde_json::to_string(&TaskRecord::of(&each)).expect("json");
+        assert!(!one.contains("width_scales") && text.contains("\"width_scales\":[1.0,3.0]"));
     }
 }

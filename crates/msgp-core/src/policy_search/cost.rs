@@ -11,6 +11,14 @@
 //! output is an angle). With `z = (φ − φ*) / w ~ N(μ_z, Σ_z)`,
 //! `E[exp(−½|z|²)] = |I + Σ_z|^{-½} exp(−½ μ_zᵀ (I + Σ_z)⁻¹ μ_z)` and
 //! `E[exp(−|z|²)] = |I + 2Σ_z|^{-½} exp(−μ_zᵀ (I + 2Σ_z)⁻¹ μ_z)`.
+//!
+//! PILCO's several widths (`loss_cp.m`'s width vector): with scales `s_1 … s_K` the cost is
+//! the mean of the saturating costs with every width multiplied by `s_k`,
+//! `c = 1 − (1/K) Σ_k exp(−½|z|²/s_k²)`: a wide one gives the cost a slope far from the
+//! target (a pole hanging 2 tip units from upright costs `1 − e^{−8}` at width 0.5, flat to
+//! any search), a narrow one its precision near it. With `r_k = 1/s_k²`, `E[exp(−½ r|z|²)] =
+//! |I + rΣ_z|^{-½} exp(−½ r μ_zᵀ (I + rΣ_z)⁻¹ μ_z)`, and the variance takes the products'
+//! expectations `E[e_a e_b]` at `r_a + r_b`.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -28,6 +36,8 @@ pub struct SaturatingCost {
     pub widths: Vec<f64>,
     /// Per output: it is an angle, costed on its unit tip.
     pub angles: Vec<bool>,
+    /// The widths' scales (see the module docs; `[1.0]`: the widths alone).
+    pub scales: Vec<f64>,
     /// The outputs the cost is given are `shift + scale ∘ y` in original units (a model's
     /// normalised outputs); `None`: given in original units.
     pub units: Option<(DVector<f64>, DVector<f64>)>,
@@ -95,7 +105,23 @@ impl SaturatingCost {
             target,
             widths: widths.to_vec(),
             angles: angles.to_vec(),
+            scales: vec![1.0],
             units: None,
+        })
+    }
+
+    /// The same cost as the mean of its saturating costs at the widths times each of `scales`
+    /// (PILCO's several widths; see the module docs).
+    pub fn with_scales(self, scales: &[f64]) -> Result<Self> {
+        if scales.is_empty() || scales.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+            return Err(MsgpError::InvalidSetting {
+                name: "cost width scales",
+                reason: format!("need one or more positive finite scales, got {scales:?}"),
+            });
+        }
+        Ok(Self {
+            scales: scales.to_vec(),
+            ..self
         })
     }
 
@@ -159,7 +185,13 @@ impl SaturatingCost {
         let q: f64 = (0..features.len())
             .map(|f| (weight[f] * (point.mean[f] - target[f])).powi(2))
             .sum();
-        1.0 - (-0.5 * q).exp()
+        let k = self.scales.len() as f64;
+        1.0 - self
+            .scales
+            .iter()
+            .map(|s| (-0.5 * q / (s * s)).exp())
+            .sum::<f64>()
+            / k
     }
 
     /// The target's features and each feature's weight, in the given units: a plain
@@ -201,18 +233,28 @@ impl SaturatingCost {
         let w = |f: usize| c::<T>(weight[f]);
         let mu = DVector::from_fn(k, |f, _| w(f) * (fm.mean[f] - c::<T>(target[f])));
         let sz = DMatrix::from_fn(k, k, |f, g| w(f) * fm.cov[(f, g)] * w(g));
-        let mut gauss = |scale: f64| -> Result<T> {
-            let m = DMatrix::<T>::identity(k, k) + &sz * c::<T>(scale);
+        // E[exp(−½ r |z|²)]
+        let mut gauss = |r: f64| -> Result<T> {
+            let m = DMatrix::<T>::identity(k, k) + &sz * c::<T>(r);
             let ch = cholesky(&m, jitter, "I + Σ_z")?;
             log.record(ch.jitter);
             let sol = ch.solve_vec(&mu);
-            Ok((-(ch.log_det() + mu.dot(&sol) * c::<T>(scale)) * c::<T>(0.5)).exp())
+            Ok((-(ch.log_det() + mu.dot(&sol) * c::<T>(r)) * c::<T>(0.5)).exp())
         };
-        let e1 = gauss(1.0)?;
-        let e2 = gauss(2.0)?;
+        let r: Vec<f64> = self.scales.iter().map(|s| 1.0 / (s * s)).collect();
+        let inv_k = c::<T>(1.0 / r.len() as f64);
+        let e: Vec<T> = r.iter().map(|&r| gauss(r)).collect::<Result<_>>()?;
+        let mean_e = e.iter().fold(T::zero(), |a, &b| a + b) * inv_k;
+        let mut second = T::zero();
+        for (a, &ra) in r.iter().enumerate() {
+            for (b, &rb) in r.iter().enumerate().skip(a) {
+                let both = gauss(ra + rb)?;
+                second += if a == b { both } else { both * c::<T>(2.0) };
+            }
+        }
         Ok(CostMoments {
-            mean: T::one() - e1,
-            var: e2 - e1 * e1,
+            mean: T::one() - mean_e,
+            var: second * inv_k * inv_k - mean_e * mean_e,
         })
     }
 }
@@ -328,11 +370,70 @@ mod tests {
         assert!((a.mean - b.mean).abs() < 1e-14 && (a.var - b.var).abs() < 1e-14);
     }
 
+    /// Several widths: at a point the cost is the mean of the single-width costs; under a
+    /// Gaussian on plain outputs (where the closed form is exact) mean and variance match a
+    /// Monte Carlo estimate within 4 standard errors, and `[1.0]` is the single width.
+    #[test]
+    fn several_widths_are_the_mean_of_their_costs_and_match_monte_carlo() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let target = DVector::from_vec(vec![0.3, -0.2]);
+        let one = SaturatingCost::with_widths(target.clone(), &[0.5, 0.8]).expect("cost");
+        let two = one.clone().with_scales(&[1.0, 3.0]).expect("scales");
+        let wide = SaturatingCost::with_widths(target, &[1.5, 2.4]).expect("cost");
+        let y = [1.1, 0.4];
+        let mean_of = 0.5 * (one.at(&y) + wide.at(&y));
+        assert!((two.at(&y) - mean_of).abs() < 1e-14);
+        assert_eq!(one.clone().with_scales(&[1.0]).expect("one"), one);
+        assert!(one.clone().with_scales(&[]).is_err() && one.with_scales(&[0.0]).is_err());
+        let m = DVector::from_vec(vec![0.9, 0.1]);
+        let s = DMatrix::from_row_slice(2, 2, &[0.25, 0.06, 0.06, 0.16]);
+        let e = two
+            .moments(&m, &s, &JitterPolicy::default(), &mut JitterLog::default())
+            .expect("moments");
+        let l = s.clone().cholesky().expect("spd").l();
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(7);
+        let n = 200_000;
+        let draws: Vec<f64> = (0..n)
+            .map(|_| {
+                let z = DVector::from_fn(2, |_, _| StandardNormal.sample(&mut rng));
+                let y = &m + &l * z;
+                two.at(y.as_slice())
+            })
+            .collect();
+        let mc_mean = draws.iter().sum::<f64>() / n as f64;
+        let mc_var = draws.iter().map(|c| (c - mc_mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+        let se = (mc_var / n as f64).sqrt();
+        assert!(
+            (e.mean - mc_mean).abs() < 4.0 * se,
+            "{} vs {mc_mean} ± {se}",
+            e.mean
+        );
+        // the variance's standard error, from the fourth moment
+        let m4 = draws.iter().map(|c| (c - mc_mean).powi(4)).sum::<f64>() / n as f64;
+        let se_var = ((m4 - mc_var * mc_var) / n as f64).sqrt();
+        assert!(
+            (e.var - mc_var).abs() < 4.0 * se_var,
+            "{} vs {mc_var} ± {se_var}",
+            e.var
+        );
+        assert!(
+            e.var > 20.0 * se_var,
+            "a variance the test can tell: {}",
+            e.var
+        );
+    }
+
     /// The expected tip cost's gradient in the mean and covariance (duals, as the adjoint
-    /// sweep takes it) against central finite differences.
+    /// sweep takes it) against central finite differences, with one width and with two.
     #[test]
     fn the_tip_cost_gradient_matches_finite_differences() {
-        let cost = pole();
+        for cost in [pole(), pole().with_scales(&[1.0, 2.5]).expect("scales")] {
+            tip_cost_gradient(&cost);
+        }
+    }
+
+    fn tip_cost_gradient(cost: &SaturatingCost) {
         let m = DVector::from_vec(vec![0.9, 0.3]);
         let s = DMatrix::from_row_slice(2, 2, &[0.3, 0.05, 0.05, 0.02]);
         let jp = JitterPolicy::default();

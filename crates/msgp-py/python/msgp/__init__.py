@@ -48,8 +48,8 @@ def learn_policy(
     """PILCO on a plant. With ``env`` (a Gymnasium environment with a ``Box`` action space):
     the loop on that environment, returning a ``msgp.gym.LearnResult`` (``.policy``,
     ``.iterations``, ``.episodes``); ``task`` takes ``target``, ``widths``, ``episode_steps``,
-    ``policy_horizon``, ``policy``, ``separate_starts``, ``angles`` and ``period`` (see
-    ``msgp.gym``).
+    ``policy_horizon``, ``policy``, ``separate_starts``, ``width_scales``, ``angles`` and
+    ``period`` (see ``msgp.gym``).
     Without: the built-in simulated pendulum with the ``method``'s model ("msgp", "gp-narx",
     "pilco-narx", "linear-kf"; ``likelihood`` and ``params`` as for the pendulum), returning
     one report per iteration (8 by default)."""

@@ -198,6 +198,7 @@ def _task_of(env, target, widths, options, iterations):
         "widths": list(given(widths, "widths", [])),
         "episode_steps": steps,
         "policy_horizon": given(options["policy_horizon"], "policy_horizon", steps),
+        "width_scales": list(given(options["width_scales"], "width_scales", [1.0])),
         "policy": given(options["policy"], "policy", {"kind": "rbf", "basis": 30}),
     }
     starts = given(options["separate_starts"], "separate_starts", None)
@@ -227,6 +228,7 @@ def learn_policy(
     policy_horizon=None,
     policy=None,
     separate_starts=None,
+    width_scales=None,
     angles=None,
     period=None,
     settings=None,
@@ -235,7 +237,9 @@ def learn_policy(
     """PILCO on ``env`` (see the module docs). ``policy``: ``{"kind": "rbf", "basis": N}`` or
     ``{"kind": "linear"}``; ``separate_starts=k``: the search's rollouts start from each of
     the latest ``k`` episodes' first observations (for episodes that start anywhere), by
-    default from one Gaussian over them; ``angles``: indices of observation entries that are
+    default from one Gaussian over them; ``width_scales``: PILCO's several widths, the cost
+    the mean of the saturating costs at the widths times each scale (``[1, 4]``: a wide
+    cost's slope far from the target, the widths' precision near it); ``angles``: indices of observation entries that are
     angles (radians), costed on a unit pole's tip (``plant_spec``); ``settings`` overrides the loop's defaults
     (``msgp_core::learner::LearnerSettings``; a known task's own settings first);
     ``progress`` is called with each iteration's report."""
@@ -245,6 +249,7 @@ def learn_policy(
         "policy_horizon": policy_horizon,
         "policy": policy,
         "separate_starts": separate_starts,
+        "width_scales": width_scales,
     }
     task, iterations, preset = _task_of(env, target, widths, options, iterations)
     overrides = _merged(preset, dict(settings or {}))
