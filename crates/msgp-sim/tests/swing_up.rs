@@ -18,20 +18,23 @@ fn hanging_cost(plant: &mut SwingUp, cost: &msgp_core::policy_search::Saturating
         .sum()
 }
 
-/// Eight iterations at seed 0 (measured: the episodes' cost goes 49.0, 47.3, 44.5, 45.2, 40.8,
-/// 44.3, 43.7, 40.0 against the hanging pole's 50.0; iterations 2–8 search on the GP model;
-/// before the warm starts grew their pseudo-inputs, 49.0, 47.5, 48.7, 47.6, 45.5, 46.5, 37.7,
-/// 34.7). Required: an episode at least 15 % cheaper than hanging, and at least six of the
-/// seven searches after the first on the GP model by the prequential choice (not by the
-/// fallback from a failed linear search). A loop that does not learn to swing stays above 45.
+/// Eight iterations at seed 0 (measured: the episodes' cost goes 38.9, 33.4, 34.9, 28.5, 34.1,
+/// 31.1, 31.6, 30.3 against the hanging pole's 39.7 under the task's two widths; iterations 2–8
+/// search on the GP model). Required: an episode at least 15 % cheaper than hanging, and at
+/// least six of the seven searches after the first on the GP model by the prequential choice
+/// (not by the fallback from a failed linear search). A loop whose search does not leave
+/// hanging stays at 38.9–39.7 (with one width of 0.5 the search on a confident model never
+/// moved: `docs/experiments/2026-12-07-the-swing-ups-cost-was-flat-several-widths.md`).
 #[test]
 fn eight_iterations_swing_the_pole_and_search_on_the_gp() {
     let mut plant = SwingUp::new(&swing_up_params()).expect("plant");
     let task = swing_up_task().task(plant.spec(), 0).expect("task");
     let hanging = hanging_cost(&mut plant, &task.cost);
+    // per step 1 − ½ (e^{−8} + e^{−8/9}): the tip 2 from upright at widths 0.5 and 1.5
+    let per_step = 1.0 - 0.5 * ((-8.0f64).exp() + (-8.0f64 / 9.0).exp());
     assert!(
-        hanging > 49.5,
-        "the hanging pole costs about 1 per step: {hanging}"
+        (hanging - 50.0 * per_step).abs() < 0.3,
+        "the hanging pole costs {per_step:.3} per step: {hanging}"
     );
     let mut settings = swing_up_settings(plant.spec(), 0);
     settings.iterations = 8;
