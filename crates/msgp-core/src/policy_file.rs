@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::error::{MsgpError, Result};
-use crate::learner::{LearnerSettings, StartDistribution, Task, target_cost};
+use crate::learner::{LearnerSettings, StartDistribution, Task, stated_cost};
 use crate::model_file::{parse_version, rows_of as rows, write_atomically};
 use crate::plant::PlantSpec;
 use crate::policy::{CommandBounds, PidPolicy, Policy, RbfPolicy, StateFeedback};
@@ -301,14 +301,13 @@ impl TaskRecord {
 
     /// The task with `policy` as its searched policy.
     pub fn to_task(&self, policy: Policy) -> Result<Task> {
-        let widths: Vec<f64> = self
-            .widths
-            .iter()
-            .map(|w| w.unwrap_or(f64::INFINITY))
-            .collect();
         Ok(Task {
-            cost: target_cost(&self.target, &widths, &self.angles())?
-                .with_scales(&self.width_scales)?,
+            cost: stated_cost(
+                &self.target,
+                &self.widths,
+                &self.angles(),
+                &self.width_scales,
+            )?,
             episode_steps: self.episode_steps,
             policy_horizon: self.policy_horizon,
             start: match &self.start {

@@ -29,7 +29,7 @@ pub use loop_model::{LoopModel, with_model};
 pub use report::IterationReport;
 pub use settings::LearnerSettings;
 pub use target::{PolicyFamily, TargetTask};
-pub use task::{StartDistribution, Task, target_cost};
+pub use task::{StartDistribution, Task, stated_cost, target_cost};
 pub(crate) use task::{is_one_width, one_width};
 
 use std::ops::ControlFlow;

@@ -8,7 +8,7 @@ use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
-use super::task::{StartDistribution, Task, target_cost};
+use super::task::{StartDistribution, Task, stated_cost};
 use crate::error::{MsgpError, Result};
 use crate::numeric::seed::derive;
 use crate::plant::PlantSpec;
@@ -80,16 +80,15 @@ impl TargetTask {
                 ),
             });
         }
-        let widths: Vec<f64> = self
-            .widths
-            .iter()
-            .map(|w| w.unwrap_or(f64::INFINITY))
-            .collect();
         let (policy, typical) = self.first_policy(spec, seed)?;
         let free = vec![true; policy.param_len()];
         Ok(Task {
-            cost: target_cost(&self.target, &widths, &spec.angles())?
-                .with_scales(&self.width_scales)?,
+            cost: stated_cost(
+                &self.target,
+                &self.widths,
+                &spec.angles(),
+                &self.width_scales,
+            )?,
             episode_steps: self.episode_steps,
             policy_horizon: self.policy_horizon,
             start: match self.separate_starts {

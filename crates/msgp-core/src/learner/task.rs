@@ -260,6 +260,18 @@ pub(crate) fn is_one_width(scales: &[f64]) -> bool {
     scales == [1.0]
 }
 
+/// A task's cost as a task states it ([`super::TargetTask`], a policy file's task record):
+/// `widths` per output (`None`: it does not count), `angles`, the widths' `scales`.
+pub fn stated_cost(
+    target: &[f64],
+    widths: &[Option<f64>],
+    angles: &[bool],
+    scales: &[f64],
+) -> Result<SaturatingCost> {
+    let widths: Vec<f64> = widths.iter().map(|w| w.unwrap_or(f64::INFINITY)).collect();
+    target_cost(target, &widths, angles)?.with_scales(scales)
+}
+
 /// A saturating cost around `target` with `widths` (∞: the output does not count), the
 /// outputs flagged in `angles` costed on their unit tip.
 pub fn target_cost(target: &[f64], widths: &[f64], angles: &[bool]) -> Result<SaturatingCost> {
