@@ -274,7 +274,7 @@ fn bench_loop_iteration(c: &mut Criterion) {
         .expect("previous iteration");
         let linear = step.linear.expect("the linear competitor");
         choice
-            .score(&step.model, &linear, &data[7..])
+            .score(&step.model, &linear, None, &data[7..])
             .expect("held-out scores");
         let previous = step.model;
         group.bench_function(format!("fit_and_search_{}_8_episodes", tier.name()), |b| {

@@ -123,6 +123,11 @@ pub struct PolicyInitArgs {
     /// The model's window `l_y,l_u`.
     #[arg(long, value_name = "LY,LU", value_delimiter = ',', num_args = 2)]
     pub history: Option<Vec<usize>>,
+    /// Also fit the MSGP model's one-step start (GP-NARX) every iteration, and search on it
+    /// while the MSGP model's closed-loop free runs of the episodes it had not seen are, in
+    /// total, no better than that start's.
+    #[arg(long)]
+    pub one_step_guard: bool,
     /// Seed of the first policy's draw and of the loop's fits and searches.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,

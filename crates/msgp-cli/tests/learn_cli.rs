@@ -714,6 +714,31 @@ fn policy_init_starts_a_loop_that_improve_continues() {
     assert_eq!(file["task"]["angles"], serde_json::json!([true, false]));
     assert_eq!(file["settings"]["random_rollouts"], 1);
     assert_eq!(file["iteration"], 0);
+    assert!(
+        file["settings"].get("one_step_guard").is_none(),
+        "off unless asked"
+    );
+    let guarded = [
+        "policy",
+        "init",
+        "--plant",
+        "plant.json",
+        "--episode-steps",
+        "40",
+        "--target",
+        "0,0.5",
+        "--widths",
+        "0.5,none",
+        "--one-step-guard",
+        "--out",
+        "guarded.json",
+    ];
+    let o = run(&dir, &guarded);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let guarded: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("guarded.json")).expect("file"))
+            .expect("JSON");
+    assert_eq!(guarded["settings"]["one_step_guard"], true);
     let o = run(
         &dir,
         &[

@@ -6,12 +6,16 @@
 use std::ops::ControlFlow;
 
 use msgp_core::MsgpError;
-use msgp_core::fit::{FitSettings, LinearKfSettings, MethodSettings, OneStepFitSettings};
+use msgp_core::fit::{
+    FitOptimizer, FitSettings, LinearKfSettings, MethodSettings, MsgpSettings, MsgpStart,
+    OneStepFitSettings,
+};
 use msgp_core::gp::MeanFunction;
 use msgp_core::learner::{
-    Actor, ExcitationConfig, LearnEvent, Learner, LearnerSettings, Multisine, StartDistribution,
-    Task, run_episode, target_cost,
+    Actor, ExcitationConfig, LearnEvent, Learner, LearnerSettings, Multisine, SearchModel,
+    StartDistribution, Task, run_episode, target_cost,
 };
+use msgp_core::loss::Likelihood;
 use msgp_core::plant::{CommandSpec, OutputSpec, Plant, PlantSpec, PlantStep};
 use msgp_core::policy::{CommandBounds, Policy, RbfPolicy, StateFeedback};
 use msgp_core::policy_search::{PolicySearchSettings, SearchSpace};
@@ -174,6 +178,7 @@ fn settings(method: MethodSettings, iterations: usize) -> LearnerSettings {
         ff_segment: None,
         warm_start: None,
         search_from_first: false,
+        one_step_guard: false,
     }
 }
 
@@ -188,6 +193,23 @@ fn gp_narx() -> MethodSettings {
         iterations: 100,
         ..OneStepFitSettings::default()
     })
+}
+
+/// A small MSGP fit on the filter likelihood from its one-step start, as the loop's default.
+fn msgp() -> MethodSettings {
+    MsgpSettings {
+        inducing: 15,
+        iterations: 40,
+        optimizer: FitOptimizer::Lbfgs,
+        likelihood: Likelihood::Filter,
+        validation_fraction: 0.0,
+        noise_floor: 1e-4,
+        mean: MeanFunction::Linear,
+        start: MsgpStart::OneStep,
+        alternative: None,
+        ..MsgpSettings::default()
+    }
+    .into()
 }
 
 fn never(_: LearnEvent<'_>) -> ControlFlow<()> {
@@ -430,4 +452,63 @@ fn a_truncated_episode_is_not_costed_as_a_failure() {
     assert!((ep.cost(&cost, 0, 4) - (measured + 2.0)).abs() < 1e-15);
     ep.truncated = true;
     assert!((ep.cost(&cost, 0, 4) - 2.0 * measured).abs() < 1e-15);
+}
+
+/// The one-step guard: every iteration scores the MSGP model against the linear model (their
+/// filters) and against the MSGP fit's one-step start (their closed-loop free runs) on the
+/// episode it ran, and each search runs on the model those scores name (the linear model
+/// until the MSGP model has beaten it in total; then the MSGP model only where it also beat
+/// its one-step start on the latest episode). A learner rebuilt from the
+/// episodes replays the same scores and continues to the same policy.
+#[test]
+fn the_one_step_guard_searches_on_the_model_its_scores_name() {
+    let mut guarded = settings(msgp(), 4);
+    guarded.prequential_choice = true;
+    guarded.one_step_guard = true;
+    let without_choice = LearnerSettings {
+        prequential_choice: false,
+        ..guarded.clone()
+    };
+    let err = Learner::new(task(rbf(), 1.2), without_choice).expect_err("refused");
+    assert!(err.to_string().contains("one_step_guard"), "{err}");
+
+    let mut learner = Learner::new(task(rbf(), 1.2), guarded.clone()).expect("valid");
+    learner
+        .run(&mut Lag::new(true), None, &mut never)
+        .expect("runs");
+    let (mut linear, mut one_step, mut scored) = (0.0, None, 0);
+    for r in learner.reports() {
+        let expected = if !(scored > 0 && linear < 0.0) {
+            SearchModel::Linear
+        } else if one_step.is_some_and(|d: f64| d >= 0.0) {
+            SearchModel::OneStep
+        } else {
+            SearchModel::Gp
+        };
+        assert_eq!(r.search_model, Some(expected), "iteration {}", r.iteration);
+        let h = r.held_out.expect("scored");
+        let free = h.rollout.expect("the one-step model scored");
+        let finite = [h.gp_nll, h.linear_nll, free.gp, free.one_step];
+        assert!(finite.iter().all(|v| v.is_finite()), "{h:?}");
+        eprintln!(
+            "iteration {}: {:?}, held out {h:?}",
+            r.iteration, r.search_model
+        );
+        linear += h.gp_nll - h.linear_nll;
+        one_step = Some(free.gp - free.one_step);
+        scored += 1;
+    }
+
+    let mut rebuilt = Learner::from_episodes(
+        task(rbf(), 1.2),
+        guarded,
+        learner.episodes().to_vec(),
+        &mut never,
+    )
+    .expect("replays");
+    let next = |l: &mut Learner| {
+        let step = l.improve(&mut never).expect("improves");
+        (step.search_model, step.searched.expect("searched").policy)
+    };
+    assert_eq!(next(&mut rebuilt), next(&mut learner));
 }

@@ -12,7 +12,7 @@ use std::path::PathBuf;
 
 use msgp_core::MsgpError as CoreError;
 use msgp_core::learner::{
-    Episode, IterationReport, LearnEvent, Learner, LearnerSettings, SearchModel, TargetTask,
+    Episode, IterationReport, LearnEvent, Learner, LearnerSettings, TargetTask,
 };
 use msgp_core::numeric::parallel::Threads;
 use msgp_core::plant::{Plant, PlantSpec, PlantStep};
@@ -199,9 +199,11 @@ fn policy_file(learner: &Learner, spec: &PlantSpec) -> PolicyFile {
     file.prediction = last.map(|r| Prediction {
         cost: r.predicted_cost,
         cost_std: r.predicted_cost_std,
-        model: match r.search_model {
-            Some(SearchModel::Linear) => "linear-kf".into(),
-            _ => learner.settings().method().name().into(),
+        model: {
+            let method = learner.settings().method();
+            r.search_model
+                .map_or(method.name(), |m| m.name(method))
+                .into()
         },
     });
     file

@@ -80,7 +80,7 @@ fn main() {
                 println!(
                     "it {:2} model {:?} fit {:.1}s search {:.1}s predicted {:.1} actual {:.1} \
                      held {held} success {:?} interaction {:.0}s failure {:?} \
-                     linear search failure {:?} held-out nll gp/linear {:?}",
+                     linear search failure {:?} held-out nll gp/linear {:?} free run gp/one-step {:?}",
                     r.iteration,
                     r.search_model,
                     r.fit_seconds,
@@ -94,6 +94,9 @@ fn main() {
                     r.held_out
                         .as_ref()
                         .map(|h| (h.gp_nll.round(), h.linear_nll.round())),
+                    r.held_out
+                        .and_then(|h| h.rollout)
+                        .map(|f| (f.gp.round(), f.one_step.round())),
                 );
                 if r.success == Some(true) && first.is_none() {
                     first = Some((r.iteration, r.interaction_seconds));

@@ -67,10 +67,17 @@ pub fn progress_line(r: &IterationReport, started: Instant) -> String {
             match m {
                 SearchModel::Gp => "GP",
                 SearchModel::Linear => "linear",
+                SearchModel::OneStep => "one-step",
             },
             h.gp_nll,
             h.linear_nll
         ));
+        if let Some(r) = h.rollout {
+            notes.push_str(&format!(
+                "; its closed-loop free run: GP {:.1}, one-step {:.1} nats",
+                r.gp, r.one_step
+            ));
+        }
     }
     let line = format!(
         "iteration {:>2}: predicted cost {:7.2} ± {:5.2} (2σ), actual {:7.2}, interaction {:5.1} s, stable {:<3} gains [{:.3}, {:.3}, {:.3}, {:.2}, {:.3}]  [fit {:.0} s, search {:.0} s, total {:.0} s]",

@@ -9,9 +9,7 @@ use std::path::Path;
 
 use anyhow::{Context, bail};
 use msgp_core::data::dataset::{Dataset, Part, Selection};
-use msgp_core::learner::{
-    Episode, LearnEvent, Learner, LearnerSettings, PolicyFamily, SearchModel, TargetTask,
-};
+use msgp_core::learner::{Episode, LearnEvent, Learner, LearnerSettings, PolicyFamily, TargetTask};
 use msgp_core::model::Model;
 use msgp_core::model_file::{FitRecord, ModelFile};
 use msgp_core::plant::PlantSpec;
@@ -69,6 +67,7 @@ fn init(args: &PolicyInitArgs) -> anyhow::Result<()> {
     let mut settings = LearnerSettings::for_plant(&plant);
     settings.seed = args.seed;
     settings.random_rollouts = args.random_episodes;
+    settings.one_step_guard = args.one_step_guard;
     if let Some([ly, lu]) = args.history.as_deref() {
         settings.fit.ly = *ly;
         settings.fit.lu = *lu;
@@ -274,10 +273,11 @@ fn improve(args: &ImproveArgs) -> anyhow::Result<()> {
             let steps = &found.steps[..scored.min(found.steps.len())];
             let cost: f64 = steps.iter().map(|(m, _)| m).sum();
             let var: f64 = steps.iter().map(|(_, v)| v).sum();
-            let model = match step.search_model {
-                Some(SearchModel::Linear) => "linear-kf".to_string(),
-                _ => step.model.method.name().to_string(),
-            };
+            let method = step.model.method;
+            let model = step
+                .search_model
+                .map_or(method.name(), |m| m.name(method))
+                .to_string();
             (
                 found.policy.clone(),
                 Some(Prediction {

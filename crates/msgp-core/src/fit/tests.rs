@@ -4,8 +4,9 @@ use super::*;
 use crate::gp::integrator::Structure;
 use crate::gp::{MeanFunction, PreparedGp};
 use crate::loss::{Complexity, Likelihood};
-use crate::model::Method;
+use crate::model::{Method, Rollout};
 use crate::numeric::parallel::Threads;
+use crate::policy::{LinearPolicy, PolicySpec};
 use crate::rollout::{Control, rollout};
 use nalgebra::DMatrix;
 
@@ -1483,6 +1484,77 @@ fn the_filter_nll_in_original_units_sums_the_filtered_predictive_densities() {
     // covariance; a wrong Jacobian would be off by `steps · ln 1024` ≈ 530
     assert!(
         (nll_other - expected).abs() <= 1e-6 * expected.abs(),
+        "{nll_other} against {expected}"
+    );
+}
+
+/// `Model::rollout_nll` in original units: on measured inputs it sums the Gaussian densities
+/// of the paper's moment-matching simulation (`Rollout::MomentMatchingIndependent`, the
+/// rollout the loss trains on); in closed loop under a constant policy `u = b` (given in
+/// original units) it scores the same as on a trajectory whose inputs are `b`; outputs in
+/// other units score the same up to the Jacobian `steps · ln 1024`.
+#[test]
+fn the_rollout_nll_in_original_units_sums_the_simulations_densities() {
+    let settings = FitSettings {
+        ly: 2,
+        lu: 1,
+        method: MsgpSettings {
+            inducing: 8,
+            iterations: 20,
+            validation_fraction: 0.0,
+            ..MsgpSettings::default()
+        }
+        .into(),
+        ..FitSettings::default()
+    };
+    let train = first_order(0.3);
+    let (model, _) = fit(std::slice::from_ref(&train), &settings, &mut |_| {}).expect("fit");
+    let nll_by_hand = |t: &Trajectory| -> (f64, usize) {
+        let f = model
+            .simulate_as(t, Rollout::MomentMatchingIndependent)
+            .expect("simulates");
+        let n = f.mean.nrows();
+        let sum = (0..n)
+            .map(|i| {
+                let (r, v) = (t.y[(f.start + i, 0)] - f.mean[(i, 0)], f.var[(i, 0)]);
+                0.5 * ((2.0 * std::f64::consts::PI * v).ln() + r * r / v)
+            })
+            .sum();
+        (sum, n)
+    };
+    let close = |a: f64, b: f64, tol: f64| (a - b).abs() <= tol * b.abs().max(1.0);
+    let test = first_order(0.3);
+    let (nll, steps) = model.rollout_nll(&test, None).expect("rolls out");
+    let (by_hand, n) = nll_by_hand(&test);
+    assert_eq!(steps, n);
+    assert!(close(nll, by_hand, 1e-10), "{nll} against {by_hand}");
+
+    // u = 0.4 in closed loop against the same inputs given
+    let b = 0.4;
+    let constant = PolicySpec::Linear(
+        LinearPolicy::new(DMatrix::zeros(1, 1), nalgebra::DVector::from_element(1, b))
+            .expect("shapes"),
+    );
+    // the first window keeps its measured inputs; the policy chooses every later one
+    let mut held = test.clone();
+    let w = model.spec.warmup();
+    held.u.rows_mut(w, test.len() - w).fill(b);
+    let (closed, _) = model
+        .rollout_nll(&test, Some(&constant))
+        .expect("closed loop");
+    let (given, _) = nll_by_hand(&held);
+    assert!(close(closed, given, 1e-10), "{closed} against {given}");
+    assert!((closed - nll).abs() > 1.0, "the policy's inputs matter");
+
+    let mut scaled = model.clone();
+    scaled.normalizer.y_std[0] *= 1024.0;
+    scaled.normalizer.y_mean[0] = scaled.normalizer.y_mean[0] * 1024.0 + 5.0;
+    let other_units =
+        Trajectory::new(test.u.clone(), test.y.map(|v| v * 1024.0 + 5.0)).expect("finite");
+    let (nll_other, _) = scaled.rollout_nll(&other_units, None).expect("rolls out");
+    let expected = nll + steps as f64 * 1024f64.ln();
+    assert!(
+        close(nll_other, expected, 1e-6),
         "{nll_other} against {expected}"
     );
 }

@@ -47,6 +47,8 @@ pub struct FitAndSearch {
     pub fit_report: FitReport,
     /// Under the prequential choice, the linear competitor fitted on the same data.
     pub linear: Option<Model>,
+    /// Under the one-step guard, the MSGP fit's one-step start fitted on the same data.
+    pub one_step: Option<Model>,
     /// Under the prequential choice, the model the search ran on.
     pub search_model: Option<SearchModel>,
     /// Under the prequential choice, why the linear competitor's fit failed numerically (the
@@ -109,16 +111,22 @@ pub fn fit_and_search(
     // a linear competitor that cannot be fitted cannot be searched either: the GP model is
     // the only model of this iteration
     let mut linear_failure = None;
-    let (linear, search_model) = match choice {
-        Some(c) => match c.fit(training, it) {
-            Ok(l) => (Some(l), Some(c.search_model())),
-            Err(e) if numerical(&e) => {
-                linear_failure = Some(e.to_string());
-                (None, Some(SearchModel::Gp))
+    let (linear, one_step, search_model) = match choice {
+        Some(c) => {
+            let one_step = c.fit_one_step(training, it)?;
+            match c.fit(training, it) {
+                Ok(l) => {
+                    let search_model = c.search_model(one_step.is_some());
+                    (Some(l), one_step, Some(search_model))
+                }
+                Err(e) if numerical(&e) => {
+                    linear_failure = Some(e.to_string());
+                    (None, one_step, Some(SearchModel::Gp))
+                }
+                Err(e) => return Err(e),
             }
-            Err(e) => return Err(e),
-        },
-        None => (None, None),
+        }
+        None => (None, None, None),
     };
     let fit_seconds = clock.elapsed().as_secs_f64();
     if observe(LearnEvent::SearchStarted { iteration: it }).is_break() {
@@ -128,6 +136,7 @@ pub fn fit_and_search(
         model,
         fit_report,
         linear,
+        one_step,
         search_model,
         linear_fit_failure: linear_failure,
         linear_search_failure: None,

@@ -100,10 +100,12 @@ pub fn with_model(mut settings: LearnerSettings, model: LoopModel) -> Result<Lea
                 .one_step_start()
                 .ok_or_else(|| msgp_only(model.name()))?;
             settings.prequential_choice = false;
+            settings.one_step_guard = false;
         }
         LoopModel::LinearKf => {
             settings.fit.method = LinearKfSettings::default().into();
             settings.prequential_choice = false;
+            settings.one_step_guard = false;
         }
     }
     settings.validate()?;

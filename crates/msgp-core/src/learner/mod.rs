@@ -21,7 +21,7 @@ pub mod settings;
 pub mod target;
 pub mod task;
 
-pub use choice::{HeldOut, ModelChoice, SearchModel};
+pub use choice::{HeldOut, ModelChoice, RolloutNll, SearchModel};
 pub use episode::{Actor, Episode, run_episode, segments};
 pub use excitation::{ExcitationConfig, Multisine};
 pub use improve::{FitAndSearch, fit_and_search, training_entries};
@@ -181,15 +181,19 @@ impl Learner {
             it,
             observe,
         )?;
-        let linear = match self.choice.as_mut() {
-            Some(c) => Some(c.fit(&self.training, it)?),
-            None => None,
+        let (linear, one_step) = match self.choice.as_mut() {
+            Some(c) => (
+                Some(c.fit(&self.training, it)?),
+                c.fit_one_step(&self.training, it)?,
+            ),
+            None => (None, None),
         };
         let method = self.settings.method();
         if let (Some(c), Some(l)) = (self.choice.as_mut(), &linear)
             && model.method == method
         {
-            c.score(&model, l, &training_entries(ep, &self.settings)?)?;
+            let entries = training_entries(ep, &self.settings)?;
+            c.score(&model, l, one_step.as_ref(), &entries)?;
         }
         if self.settings.warm_start.is_some() {
             self.previous = (model.method == method).then_some(model);
@@ -349,7 +353,7 @@ impl Learner {
         // one-step fallback model is not the loop's model and is not scored)
         let held_out = match (self.choice.as_mut(), &step.linear) {
             (Some(c), Some(l)) if step.model.method == self.settings.method() => {
-                Some(c.score(&step.model, l, &entries)?)
+                Some(c.score(&step.model, l, step.one_step.as_ref(), &entries)?)
             }
             _ => None,
         };

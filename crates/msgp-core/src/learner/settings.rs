@@ -49,6 +49,12 @@ pub struct LearnerSettings {
     /// from any swing-up). The better of the two is kept.
     #[serde(default)]
     pub search_from_first: bool,
+    /// Under the prequential choice, also fit the MSGP model's one-step start (GP-NARX on the
+    /// same data) every iteration, and search on it instead of the MSGP model while the MSGP
+    /// model's held-out predictions have not beaten it in total ([`super::choice`]): the
+    /// trajectory training is kept only where it predicts episodes it had not seen better.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub one_step_guard: bool,
 }
 
 impl LearnerSettings {
@@ -117,6 +123,7 @@ impl LearnerSettings {
             ff_segment: None,
             warm_start: Some(40),
             search_from_first: true,
+            one_step_guard: false,
         }
     }
 
@@ -133,6 +140,12 @@ impl LearnerSettings {
                 name: "prequential_choice",
                 reason: "the choice between a GP model and its linear part needs an MSGP model"
                     .into(),
+            });
+        }
+        if self.one_step_guard && !self.prequential_choice {
+            return Err(MsgpError::InvalidSetting {
+                name: "one_step_guard",
+                reason: "the guard is part of the prequential choice; turn that on too".into(),
             });
         }
         if self.iterations > 0 && self.random_rollouts == 0 {

@@ -9,10 +9,13 @@ use crate::data::Trajectory;
 use crate::data::dataset::Part;
 use crate::error::{MsgpError, Result};
 use crate::gp::{GpConfig, GpParams, PreparedGp};
+use crate::loss::{Complexity, msgp_loss};
 use crate::narx::NarxSpec;
 use crate::numeric::linalg::JitterLog;
+use crate::policy::PolicySpec;
 use crate::rollout::{
-    Control, FunctionDraws, sample_free_runs, simulate, simulate_correlated, simulate_mean_feedback,
+    Control, Episode, Excitation, FunctionDraws, sample_free_runs, simulate, simulate_correlated,
+    simulate_mean_feedback,
 };
 
 mod metrics;
@@ -305,6 +308,40 @@ impl Model {
         let f = crate::loss::filter_nll(&gp, &self.spec, &norm, &mut log)?;
         let jacobian: f64 = self.normalizer.y_std.iter().map(|s| s.ln()).sum();
         Ok((f.nll + f.steps as f64 * jacobian, f.steps))
+    }
+
+    /// The free-run likelihood of `traj` under this model in original units: the episode
+    /// rolled out by moment matching from its first window, in closed loop under `policy`
+    /// (original units) when it ran one — the rollout a policy search predicts — and on its
+    /// measured inputs otherwise, each output scored against the prediction, `Σ_t −log
+    /// N(y_t; μ_t, Σ_t)` over `t ≥ max(l_y, l_u)` (the paper's loss, eq. 4, without its
+    /// complexity term), with the normaliser's Jacobian as [`filter_nll`](Self::filter_nll);
+    /// and the number of scored steps.
+    pub fn rollout_nll(
+        &self,
+        traj: &Trajectory,
+        policy: Option<&PolicySpec>,
+    ) -> Result<(f64, usize)> {
+        traj.check(&self.spec)?;
+        let excitation = match policy {
+            Some(p) => Excitation::Feedback(Box::new(p.normalized(&self.normalizer)?)),
+            None => Excitation::FeedForward,
+        };
+        let episode = Episode {
+            traj: self.normalizer.apply(traj),
+            excitation,
+        };
+        let mut log = JitterLog::default();
+        let loss = msgp_loss(
+            &self.params,
+            &self.config,
+            &self.spec,
+            std::slice::from_ref(&episode),
+            Complexity::None,
+            &mut log,
+        )?;
+        let jacobian: f64 = self.normalizer.y_std.iter().map(|s| s.ln()).sum();
+        Ok((loss.nll + loss.steps as f64 * jacobian, loss.steps))
     }
 
     /// [`filtered`](Self::filtered) predictions of every part, with their metrics.

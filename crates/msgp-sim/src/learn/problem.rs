@@ -119,6 +119,7 @@ pub fn learner_settings(
         ff_segment: s.ff_segment,
         warm_start: s.warm_start,
         search_from_first: false,
+        one_step_guard: false,
     })
 }
 

@@ -117,7 +117,6 @@ fn write_policy_files(
     settings: &LearnSettings,
     params: &PendulumParams,
 ) -> Result<(), SimError> {
-    use msgp_core::learner::SearchModel;
     use msgp_core::policy::Policy;
     use msgp_core::policy_file::{PolicyFile, Prediction, TaskRecord};
 
@@ -146,10 +145,10 @@ fn write_policy_files(
         f.prediction = Some(Prediction {
             cost: r.predicted_cost,
             cost_std: r.predicted_cost_std,
-            model: match r.search_model {
-                Some(SearchModel::Linear) => "linear-kf".into(),
-                _ => settings.method().name().into(),
-            },
+            model: r
+                .search_model
+                .map_or(settings.method().name(), |m| m.name(settings.method()))
+                .into(),
         });
         f.write(&dir.join(format!("{:02}.json", r.iteration)))?;
     }
