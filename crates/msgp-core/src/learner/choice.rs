@@ -185,16 +185,18 @@ impl ModelChoice {
             }
             .into(),
         };
+        // seeded by the loop, as the gp-narx loop's fits and the linear competitor's
         let one_step = match settings.one_step_guard {
-            true => Some(
-                settings
+            true => Some(FitSettings {
+                seed: settings.seed,
+                ..settings
                     .fit
                     .one_step_start()
                     .ok_or(MsgpError::InvalidSetting {
                         name: "one_step_guard",
                         reason: "the guard compares an MSGP fit with its one-step start".into(),
-                    })?,
-            ),
+                    })?
+            }),
             false => None,
         };
         Ok(Self {
@@ -231,7 +233,7 @@ impl ModelChoice {
     }
 
     /// Under the one-step guard, the one-step model of `training` for iteration `it` (seeded
-    /// as the GP model's fit); `None` without the guard, or when that fit fails numerically
+    /// as the `gp-narx` loop's fit of that iteration: the same model on the same data); `None` without the guard, or when that fit fails numerically
     /// (no competitor this iteration).
     pub fn fit_one_step(&self, training: &[TrainingEpisode], it: usize) -> Result<Option<Model>> {
         let Some(settings) = &self.one_step else {
