@@ -689,7 +689,7 @@ fn policy_init_starts_a_loop_that_improve_continues() {
         (a, y) = (0.9 * a + 0.1 * y, 0.8 * y + 0.2 * u);
     }
     std::fs::write(dir.join("ep00.csv"), csv).expect("episode");
-    let init = |extra: &[&str]| -> Output {
+    let init = |out: &str, extra: &[&str]| -> Output {
         let base = [
             "policy",
             "init",
@@ -700,15 +700,17 @@ fn policy_init_starts_a_loop_that_improve_continues() {
             "--basis",
             "10",
             "--out",
-            "p00.json",
+            out,
         ];
         run(&dir, &[&base[..], extra].concat())
     };
-    let o = init(&["--target", "0,0.5", "--widths", "0.5,none"]);
+    let json_file = |f: &str| -> Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join(f)).expect("file")).expect("JSON")
+    };
+    let task = ["--target", "0,0.5", "--widths", "0.5,none"];
+    let o = init("p00.json", &task);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let file: Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("p00.json")).expect("file"))
-            .expect("JSON");
+    let file = json_file("p00.json");
     assert_eq!(file["policy"]["kind"], "rbf");
     assert_eq!(file["task"]["widths"], serde_json::json!([0.5, null]));
     assert_eq!(file["task"]["angles"], serde_json::json!([true, false]));
@@ -718,27 +720,12 @@ fn policy_init_starts_a_loop_that_improve_continues() {
         file["settings"].get("one_step_guard").is_none(),
         "off unless asked"
     );
-    let guarded = [
-        "policy",
-        "init",
-        "--plant",
-        "plant.json",
-        "--episode-steps",
-        "40",
-        "--target",
-        "0,0.5",
-        "--widths",
-        "0.5,none",
-        "--one-step-guard",
-        "--out",
-        "guarded.json",
-    ];
-    let o = run(&dir, &guarded);
+    let o = init("guarded.json", &[&task[..], &["--one-step-guard"]].concat());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let guarded: Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("guarded.json")).expect("file"))
-            .expect("JSON");
-    assert_eq!(guarded["settings"]["one_step_guard"], true);
+    assert_eq!(
+        json_file("guarded.json")["settings"]["one_step_guard"],
+        true
+    );
     let o = run(
         &dir,
         &[
@@ -770,11 +757,7 @@ fn policy_init_starts_a_loop_that_improve_continues() {
     let o = improve("shuffled.csv", "p01-named.json");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(!String::from_utf8_lossy(&o.stderr).contains("warning"));
-    let policy = |f: &str| -> Value {
-        let v: Value = serde_json::from_str(&std::fs::read_to_string(dir.join(f)).expect("policy"))
-            .expect("JSON");
-        v["policy"].clone()
-    };
+    let policy = |f: &str| -> Value { json_file(f)["policy"].clone() };
     assert_eq!(policy("p01.json"), policy("p01-named.json"));
     // a log that names none of them, with fewer default columns than the plant has signals,
     // is refused with the names it lacks
@@ -800,14 +783,14 @@ fn policy_init_starts_a_loop_that_improve_continues() {
     );
     assert_eq!(policy("p01.json"), policy("p01-position.json"));
     // bad input: a width that is no number, a target of the wrong size, a missing plant
-    let o = init(&["--target", "0,0.5", "--widths", "0.5,wide"]);
+    let o = init("p00.json", &["--target", "0,0.5", "--widths", "0.5,wide"]);
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("entry 1 is \"wide\""));
-    let o = init(&["--target", "0", "--widths", "0.5,none"]);
+    let o = init("p00.json", &["--target", "0", "--widths", "0.5,none"]);
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("2 outputs"));
     std::fs::remove_file(dir.join("plant.json")).expect("remove");
-    let o = init(&["--target", "0,0.5", "--widths", "0.5,none"]);
+    let o = init("p00.json", &task);
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("plant.json"));
 }

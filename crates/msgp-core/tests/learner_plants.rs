@@ -6,16 +6,12 @@
 use std::ops::ControlFlow;
 
 use msgp_core::MsgpError;
-use msgp_core::fit::{
-    FitOptimizer, FitSettings, LinearKfSettings, MethodSettings, MsgpSettings, MsgpStart,
-    OneStepFitSettings,
-};
+use msgp_core::fit::{FitSettings, LinearKfSettings, MethodSettings, OneStepFitSettings};
 use msgp_core::gp::MeanFunction;
 use msgp_core::learner::{
     Actor, ExcitationConfig, LearnEvent, Learner, LearnerSettings, Multisine, SearchModel,
     StartDistribution, Task, run_episode, target_cost,
 };
-use msgp_core::loss::Likelihood;
 use msgp_core::plant::{CommandSpec, OutputSpec, Plant, PlantSpec, PlantStep};
 use msgp_core::policy::{CommandBounds, Policy, RbfPolicy, StateFeedback};
 use msgp_core::policy_search::{PolicySearchSettings, SearchSpace};
@@ -195,21 +191,13 @@ fn gp_narx() -> MethodSettings {
     })
 }
 
-/// A small MSGP fit on the filter likelihood from its one-step start, as the loop's default.
+/// The loop's default MSGP fit (the filter likelihood from the one-step start), smaller.
 fn msgp() -> MethodSettings {
-    MsgpSettings {
-        inducing: 15,
-        iterations: 40,
-        optimizer: FitOptimizer::Lbfgs,
-        likelihood: Likelihood::Filter,
-        validation_fraction: 0.0,
-        noise_floor: 1e-4,
-        mean: MeanFunction::Linear,
-        start: MsgpStart::OneStep,
-        alternative: None,
-        ..MsgpSettings::default()
-    }
-    .into()
+    let defaults = LearnerSettings::for_plant(&Lag::new(true).spec);
+    let mut m = defaults.fit.msgp().expect("the loop fits MSGP").clone();
+    m.inducing = 15;
+    m.iterations = 40;
+    m.into()
 }
 
 fn never(_: LearnEvent<'_>) -> ControlFlow<()> {

@@ -1438,13 +1438,9 @@ fn the_final_training_is_the_recipe_trained_alone_on_all_the_data() {
     }
 }
 
-/// `Model::filter_nll` in original units: for one output the joint density factors into the
-/// one-step predictive densities that `Model::filtered` returns (summed here by hand), and the
-/// same model and data in other units (outputs × 1024, offset by 5) score the same up to the
-/// Jacobian `steps · ln 1024`, so models with different normalisers compare on one scale.
-#[test]
-fn the_filter_nll_in_original_units_sums_the_filtered_predictive_densities() {
-    let train = first_order(0.3);
+/// A small MSGP model (8 pseudo-inputs, 20 iterations, history (2, 1)) of `first_order(0.3)`
+/// on `likelihood`, for the tests of its scores in original units.
+fn small_model(likelihood: Likelihood) -> Model {
     let settings = FitSettings {
         ly: 2,
         lu: 1,
@@ -1452,38 +1448,64 @@ fn the_filter_nll_in_original_units_sums_the_filtered_predictive_densities() {
             inducing: 8,
             iterations: 20,
             validation_fraction: 0.0,
-            likelihood: Likelihood::Filter,
+            likelihood,
             ..MsgpSettings::default()
         }
         .into(),
         ..FitSettings::default()
     };
-    let (model, _) = fit(std::slice::from_ref(&train), &settings, &mut |_| {}).expect("fit");
-    let test = first_order(0.25);
-    let (nll, steps) = model.filter_nll(&test).expect("filter");
-    let f = model.filtered(&test).expect("filtered");
-    assert_eq!(steps, f.mean.nrows());
-    let by_hand: f64 = (0..steps)
+    let train = first_order(0.3);
+    fit(std::slice::from_ref(&train), &settings, &mut |_| {})
+        .expect("fit")
+        .0
+}
+
+/// `Σ_t −log N(y_t; μ_t, σ²_t)` of one output's predictions `p` of `traj`, summed by hand,
+/// and the number of steps.
+fn gaussian_nll_by_hand(traj: &Trajectory, p: &crate::model::Simulation) -> (f64, usize) {
+    let n = p.mean.nrows();
+    let sum = (0..n)
         .map(|i| {
-            let (r, v) = (test.y[(f.start + i, 0)] - f.mean[(i, 0)], f.var[(i, 0)]);
+            let (r, v) = (traj.y[(p.start + i, 0)] - p.mean[(i, 0)], p.var[(i, 0)]);
             0.5 * ((2.0 * std::f64::consts::PI * v).ln() + r * r / v)
         })
         .sum();
-    assert!(
-        (nll - by_hand).abs() <= 1e-10 * by_hand.abs().max(1.0),
-        "{nll} against {by_hand}"
-    );
+    (sum, n)
+}
+
+/// `model` and `traj` with the output in other units (× 1024, offset by 5): a score in
+/// original units moves by the Jacobian `steps · ln 1024` and nothing else.
+fn in_other_units(model: &Model, traj: &Trajectory) -> (Model, Trajectory) {
     let mut scaled = model.clone();
     scaled.normalizer.y_std[0] *= 1024.0;
     scaled.normalizer.y_mean[0] = scaled.normalizer.y_mean[0] * 1024.0 + 5.0;
-    let y = test.y.map(|v| v * 1024.0 + 5.0);
-    let other_units = Trajectory::new(test.u.clone(), y).expect("finite");
+    let y = traj.y.map(|v| v * 1024.0 + 5.0);
+    (scaled, Trajectory::new(traj.u.clone(), y).expect("finite"))
+}
+
+fn close(a: f64, b: f64, tol: f64) -> bool {
+    (a - b).abs() <= tol * b.abs().max(1.0)
+}
+
+/// `Model::filter_nll` in original units: for one output the joint density factors into the
+/// one-step predictive densities that `Model::filtered` returns (summed here by hand), and the
+/// same model and data in other units score the same up to the Jacobian, so models with
+/// different normalisers compare on one scale.
+#[test]
+fn the_filter_nll_in_original_units_sums_the_filtered_predictive_densities() {
+    let model = small_model(Likelihood::Filter);
+    let test = first_order(0.25);
+    let (nll, steps) = model.filter_nll(&test).expect("filter");
+    let (by_hand, n) = gaussian_nll_by_hand(&test, &model.filtered(&test).expect("filtered"));
+    assert_eq!(steps, n);
+    assert!(close(nll, by_hand, 1e-10), "{nll} against {by_hand}");
+    let (scaled, other_units) = in_other_units(&model, &test);
     let (nll_other, _) = scaled.filter_nll(&other_units).expect("filter");
     let expected = nll + steps as f64 * 1024f64.ln();
     // the offset's rounding (1e-16) passes through a filter with a near-singular window
     // covariance; a wrong Jacobian would be off by `steps · ln 1024` ≈ 530
     assert!(
-        (nll_other - expected).abs() <= 1e-6 * expected.abs(),
+        close(nll_other, expected, 1e-6),
         "{nll_other} against {expected}"
     );
 }
@@ -1491,66 +1513,36 @@ fn the_filter_nll_in_original_units_sums_the_filtered_predictive_densities() {
 /// `Model::rollout_nll` in original units: on measured inputs it sums the Gaussian densities
 /// of the paper's moment-matching simulation (`Rollout::MomentMatchingIndependent`, the
 /// rollout the loss trains on); in closed loop under a constant policy `u = b` (given in
-/// original units) it scores the same as on a trajectory whose inputs are `b`; outputs in
-/// other units score the same up to the Jacobian `steps · ln 1024`.
+/// original units) it scores the same as on a trajectory whose later inputs are `b`; outputs
+/// in other units score the same up to the Jacobian.
 #[test]
 fn the_rollout_nll_in_original_units_sums_the_simulations_densities() {
-    let settings = FitSettings {
-        ly: 2,
-        lu: 1,
-        method: MsgpSettings {
-            inducing: 8,
-            iterations: 20,
-            validation_fraction: 0.0,
-            ..MsgpSettings::default()
-        }
-        .into(),
-        ..FitSettings::default()
+    let model = small_model(Likelihood::FreeRun);
+    let by_hand = |t: &Trajectory| {
+        let p = model.simulate_as(t, Rollout::MomentMatchingIndependent);
+        gaussian_nll_by_hand(t, &p.expect("simulates"))
     };
-    let train = first_order(0.3);
-    let (model, _) = fit(std::slice::from_ref(&train), &settings, &mut |_| {}).expect("fit");
-    let nll_by_hand = |t: &Trajectory| -> (f64, usize) {
-        let f = model
-            .simulate_as(t, Rollout::MomentMatchingIndependent)
-            .expect("simulates");
-        let n = f.mean.nrows();
-        let sum = (0..n)
-            .map(|i| {
-                let (r, v) = (t.y[(f.start + i, 0)] - f.mean[(i, 0)], f.var[(i, 0)]);
-                0.5 * ((2.0 * std::f64::consts::PI * v).ln() + r * r / v)
-            })
-            .sum();
-        (sum, n)
-    };
-    let close = |a: f64, b: f64, tol: f64| (a - b).abs() <= tol * b.abs().max(1.0);
     let test = first_order(0.3);
     let (nll, steps) = model.rollout_nll(&test, None).expect("rolls out");
-    let (by_hand, n) = nll_by_hand(&test);
+    let (expected, n) = by_hand(&test);
     assert_eq!(steps, n);
-    assert!(close(nll, by_hand, 1e-10), "{nll} against {by_hand}");
+    assert!(close(nll, expected, 1e-10), "{nll} against {expected}");
 
-    // u = 0.4 in closed loop against the same inputs given
+    // u = 0.4 in closed loop against the same inputs given; the first window keeps its
+    // measured inputs, the policy chooses every later one
     let b = 0.4;
-    let constant = PolicySpec::Linear(
-        LinearPolicy::new(DMatrix::zeros(1, 1), nalgebra::DVector::from_element(1, b))
-            .expect("shapes"),
-    );
-    // the first window keeps its measured inputs; the policy chooses every later one
+    let offset = nalgebra::DVector::from_element(1, b);
+    let constant =
+        PolicySpec::Linear(LinearPolicy::new(DMatrix::zeros(1, 1), offset).expect("shapes"));
     let mut held = test.clone();
     let w = model.spec.warmup();
     held.u.rows_mut(w, test.len() - w).fill(b);
-    let (closed, _) = model
-        .rollout_nll(&test, Some(&constant))
-        .expect("closed loop");
-    let (given, _) = nll_by_hand(&held);
+    let (closed, _) = model.rollout_nll(&test, Some(&constant)).expect("closed");
+    let (given, _) = by_hand(&held);
     assert!(close(closed, given, 1e-10), "{closed} against {given}");
     assert!((closed - nll).abs() > 1.0, "the policy's inputs matter");
 
-    let mut scaled = model.clone();
-    scaled.normalizer.y_std[0] *= 1024.0;
-    scaled.normalizer.y_mean[0] = scaled.normalizer.y_mean[0] * 1024.0 + 5.0;
-    let other_units =
-        Trajectory::new(test.u.clone(), test.y.map(|v| v * 1024.0 + 5.0)).expect("finite");
+    let (scaled, other_units) = in_other_units(&model, &test);
     let (nll_other, _) = scaled.rollout_nll(&other_units, None).expect("rolls out");
     let expected = nll + steps as f64 * 1024f64.ln();
     assert!(
