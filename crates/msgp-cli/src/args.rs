@@ -124,8 +124,8 @@ pub struct PolicyInitArgs {
     #[arg(long, value_name = "LY,LU", value_delimiter = ',', num_args = 2)]
     pub history: Option<Vec<usize>>,
     /// Also fit the MSGP model's one-step start (GP-NARX) every iteration, and search on it
-    /// while the MSGP model's closed-loop free runs of the episodes it had not seen are, in
-    /// total, no better than that start's.
+    /// whenever the MSGP model's closed-loop free run of the latest episode, which neither had
+    /// seen, was no better than that start's.
     #[arg(long)]
     pub one_step_guard: bool,
     /// Seed of the first policy's draw and of the loop's fits and searches.

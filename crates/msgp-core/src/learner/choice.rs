@@ -232,9 +232,10 @@ impl ModelChoice {
         fitted.map(|(m, _)| m)
     }
 
-    /// Under the one-step guard, the one-step model of `training` for iteration `it` (seeded
-    /// as the `gp-narx` loop's fit of that iteration: the same model on the same data); `None` without the guard, or when that fit fails numerically
-    /// (no competitor this iteration).
+    /// Under the one-step guard, the one-step model of `training` for iteration `it`, seeded
+    /// as the `gp-narx` loop's fit of that iteration (the same model on the same data);
+    /// `None` without the guard, or when that fit fails numerically (no competitor this
+    /// iteration).
     pub fn fit_one_step(&self, training: &[TrainingEpisode], it: usize) -> Result<Option<Model>> {
         let Some(settings) = &self.one_step else {
             return Ok(None);

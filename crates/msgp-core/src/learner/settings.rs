@@ -50,9 +50,10 @@ pub struct LearnerSettings {
     #[serde(default)]
     pub search_from_first: bool,
     /// Under the prequential choice, also fit the MSGP model's one-step start (GP-NARX on the
-    /// same data) every iteration, and search on it instead of the MSGP model while the MSGP
-    /// model's held-out predictions have not beaten it in total ([`super::choice`]): the
-    /// trajectory training is kept only where it predicts episodes it had not seen better.
+    /// same data) every iteration, and search on it instead of the MSGP model whenever the
+    /// MSGP model's closed-loop free run of the latest episode, which neither had seen, was
+    /// no better ([`super::choice`]): the trajectory training is kept only where it predicts
+    /// better what the search predicts.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub one_step_guard: bool,
 }
