@@ -86,5 +86,16 @@ pub enum MsgpError {
     },
 }
 
+impl MsgpError {
+    /// A numerical failure (a non-finite value, a matrix not positive definite: the model
+    /// cannot be fitted or rolled out there), as opposed to a setting or data error.
+    pub fn is_numerical(&self) -> bool {
+        matches!(
+            self,
+            MsgpError::NonFinite(_) | MsgpError::NotPositiveDefinite { .. }
+        )
+    }
+}
+
 /// Result alias for msgp-core.
 pub type Result<T> = std::result::Result<T, MsgpError>;

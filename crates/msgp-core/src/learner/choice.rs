@@ -115,11 +115,8 @@ fn difference(a: f64, b: f64) -> f64 {
 /// model predicts the episode impossible).
 fn held_out(score: Result<(f64, usize)>) -> Result<(f64, usize)> {
     match score {
-        Ok(v) => Ok(v),
-        Err(MsgpError::NonFinite(_) | MsgpError::NotPositiveDefinite { .. }) => {
-            Ok((f64::INFINITY, 0))
-        }
-        Err(e) => Err(e),
+        Err(e) if e.is_numerical() => Ok((f64::INFINITY, 0)),
+        other => other,
     }
 }
 
@@ -246,7 +243,7 @@ impl ModelChoice {
         };
         match fit_episodes(training, &seeded, &mut |_| {}) {
             Ok((model, _)) => Ok(Some(model)),
-            Err(MsgpError::NonFinite(_) | MsgpError::NotPositiveDefinite { .. }) => Ok(None),
+            Err(e) if e.is_numerical() => Ok(None),
             Err(e) => Err(e),
         }
     }

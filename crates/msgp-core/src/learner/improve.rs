@@ -76,15 +76,6 @@ impl FitAndSearch {
     }
 }
 
-/// A numerical failure (the model cannot be fitted or rolled out there), as opposed to a
-/// setting or data error.
-fn numerical(e: &MsgpError) -> bool {
-    matches!(
-        e,
-        MsgpError::NonFinite(_) | MsgpError::NotPositiveDefinite { .. }
-    )
-}
-
 /// Iteration `it`'s fit of `settings` on `training` (seeded by the iteration; continuing
 /// `previous` for [`LearnerSettings::warm_start`] solver iterations when given and the method
 /// continues), then the search from `policy` on it within the trust region. `episodes` are the
@@ -113,13 +104,17 @@ pub fn fit_and_search(
     let mut linear_failure = None;
     let (linear, one_step, search_model) = match choice {
         Some(c) => {
-            let one_step = c.fit_one_step(training, it)?;
+            // a one-step fallback model needs no one-step competitor (it is one)
+            let one_step = match model.method == settings.method() {
+                true => c.fit_one_step(training, it)?,
+                false => None,
+            };
             match c.fit(training, it) {
                 Ok(l) => {
                     let search_model = c.search_model(one_step.is_some());
                     (Some(l), one_step, Some(search_model))
                 }
-                Err(e) if numerical(&e) => {
+                Err(e) if e.is_numerical() => {
                     linear_failure = Some(e.to_string());
                     (None, one_step, Some(SearchModel::Gp))
                 }
@@ -172,7 +167,7 @@ pub fn fit_and_search(
     // iteration searches on the GP model instead, and says so
     if step.search_model == Some(SearchModel::Linear)
         && let Err(e) = &searched
-        && numerical(e)
+        && e.is_numerical()
     {
         step.linear_search_failure = Some(e.to_string());
         step.search_model = Some(SearchModel::Gp);
@@ -181,7 +176,7 @@ pub fn fit_and_search(
     step.search_seconds = clock.elapsed().as_secs_f64();
     step.searched = match searched {
         Err(MsgpError::Stopped { .. }) => return Err(MsgpError::Stopped { iteration: it }),
-        Err(e) if !numerical(&e) => return Err(e),
+        Err(e) if !e.is_numerical() => return Err(e),
         other => other,
     };
     Ok(step)
@@ -225,7 +220,7 @@ pub(super) fn fit(
         Ok(fitted) => Ok(fitted),
         // the MSGP start (the one-step model rolled out over every episode) can already fail
         // numerically; the iteration then runs on that one-step model
-        Err(e) if numerical(&e) && method == Method::Msgp => {
+        Err(e) if e.is_numerical() && method == Method::Msgp => {
             let Some(one_step) = seeded.one_step_start() else {
                 return Err(e);
             };

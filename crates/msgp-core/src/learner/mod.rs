@@ -181,14 +181,17 @@ impl Learner {
             it,
             observe,
         )?;
+        let method = self.settings.method();
         let (linear, one_step) = match self.choice.as_mut() {
             Some(c) => (
                 Some(c.fit(&self.training, it)?),
-                c.fit_one_step(&self.training, it)?,
+                match model.method == method {
+                    true => c.fit_one_step(&self.training, it)?,
+                    false => None,
+                },
             ),
             None => (None, None),
         };
-        let method = self.settings.method();
         if let (Some(c), Some(l)) = (self.choice.as_mut(), &linear)
             && model.method == method
         {
