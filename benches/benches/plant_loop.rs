@@ -7,6 +7,10 @@
 //! timed iteration is the eighth (8 policy episodes and the random one), the middle of the
 //! preset's 14. The target: ≤ 10 s alone on the 2-core machine.
 //!
+//! Beside it, the search's unit of work on the same model: the adjoint gradient of every start's
+//! closed-loop rollout at the running policy (an L-BFGS iteration is one of these, plus its
+//! line search's evaluations).
+//!
 //! The arm swing-up's iteration (`msgp_sim::swing_up`) is timed the same way at its eighth.
 
 use std::hint::black_box;
@@ -57,6 +61,26 @@ fn bench_plant_loop(c: &mut Criterion) {
             )
         })
     });
+    // the search's unit of work: the adjoint gradient of the mean expected cost over the
+    // problems (one 100-step closed-loop rollout from each of the latest episodes' starts), at
+    // the running policy, on the model the eighth iteration searched
+    let mut next = learner.clone();
+    let step = next
+        .improve(&mut |_| ControlFlow::Continue(()))
+        .expect("iteration");
+    let problems = next.task().problems(step.searched_model(), next.episodes());
+    let space = &next.task().space;
+    let x = space.start();
+    group.bench_function(
+        format!("pendulum_v1_search_gradient_{}_starts", problems.len()),
+        |b| {
+            b.iter(|| {
+                for problem in &problems {
+                    black_box(problem.gradient(space, &x).expect("gradient"));
+                }
+            })
+        },
+    );
     let mut arm = SwingUp::new(&swing_up_params()).expect("plant");
     let settings = swing_up_settings(arm.spec(), 0);
     let learner = learner_after(&mut arm, &swing_up_task(), settings, 7);
