@@ -8,8 +8,8 @@
 //! preset's 14. The target: ≤ 10 s alone on the 2-core machine.
 //!
 //! Beside it, the search's unit of work on the same model: the adjoint gradient of every start's
-//! closed-loop rollout at the running policy (an L-BFGS iteration is one of these, plus its
-//! line search's evaluations).
+//! closed-loop rollout at the task's first policy, one of the search's two starts (an L-BFGS
+//! iteration is one of these, plus its line search's evaluations).
 //!
 //! The arm swing-up's iteration (`msgp_sim::swing_up`) is timed the same way at its eighth.
 
@@ -63,7 +63,7 @@ fn bench_plant_loop(c: &mut Criterion) {
     });
     // the search's unit of work: the adjoint gradient of the mean expected cost over the
     // problems (one 100-step closed-loop rollout from each of the latest episodes' starts), at
-    // the running policy, on the model the eighth iteration searched
+    // the task's first policy, on the model the eighth iteration searched
     let mut next = learner.clone();
     let step = next
         .improve(&mut |_| ControlFlow::Continue(()))
