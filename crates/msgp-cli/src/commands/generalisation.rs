@@ -12,7 +12,6 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use msgp_core::data::real::RealSeries;
 use msgp_core::data::{Benchmark, NoiseScale, SyntheticSystem, Trajectory};
-use msgp_core::error::MsgpError;
 use msgp_core::fit::{FitProgress, FitSettings, fit};
 use msgp_core::model::{Method, Metrics, Model, Simulated, score};
 use msgp_core::numeric::parallel::Threads;
@@ -296,7 +295,7 @@ fn simulate_both(
     for (m, method) in models.iter().zip(METHODS) {
         let scored = match m.simulate(traj) {
             Ok(sim) => score(&sim, traj).map(|metrics| Some((sim, metrics))),
-            Err(MsgpError::NonFinite(_) | MsgpError::NotPositiveDefinite { .. }) => Ok(None),
+            Err(e) if e.is_numerical() => Ok(None),
             Err(e) => Err(e),
         }
         .with_context(|| format!("simulating {}", method.name()))?;

@@ -256,9 +256,7 @@ impl Objective for KalmanObjective<'_> {
         });
         match evaluated {
             // a failed trial point: the line search steps back from it
-            Err(MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_)) => {
-                Ok((f64::NAN, vec![0.0; x.len()]))
-            }
+            Err(e) if e.is_numerical() => Ok((f64::NAN, vec![0.0; x.len()])),
             other => other,
         }
     }

@@ -386,9 +386,7 @@ impl Objective for Scaled<'_, '_> {
         let x = self.unscaled(z);
         match mean_gradient(self.problems, self.space, &x, &self.active) {
             Ok((v, g)) => Ok((v, g.iter().zip(self.scale).map(|(d, s)| d * s).collect())),
-            Err(MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_)) => {
-                Ok((f64::NAN, vec![0.0; z.len()]))
-            }
+            Err(e) if e.is_numerical() => Ok((f64::NAN, vec![0.0; z.len()])),
             Err(e) => Err(e),
         }
     }

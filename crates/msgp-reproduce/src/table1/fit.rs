@@ -78,7 +78,7 @@ pub fn fit_unit_simulated(
     // the moment-matching simulation is scored and held against the test outputs; a simulation
     // that fails numerically is a diverged cell (scored +∞), not the end of the table
     let failed = |e: MsgpError| match e {
-        MsgpError::NonFinite(_) | MsgpError::NotPositiveDefinite { .. } => Ok(Metrics {
+        e if e.is_numerical() => Ok(Metrics {
             rmse: f64::INFINITY,
             nll: f64::INFINITY,
             coverage_2sigma: 0.0,

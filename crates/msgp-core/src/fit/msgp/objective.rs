@@ -92,7 +92,7 @@ impl Objective for MsgpObjective<'_> {
     fn value_and_gradient(&mut self, x: &[f64]) -> Result<(f64, Vec<f64>)> {
         let params = GpParams::from_flat(self.shape, x)?;
         match self.per_step(&params) {
-            Err(e @ (MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_))) => {
+            Err(e) if e.is_numerical() => {
                 self.failure = Some(e);
                 Ok((f64::NAN, vec![0.0; x.len()]))
             }

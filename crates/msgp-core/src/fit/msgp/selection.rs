@@ -187,7 +187,7 @@ impl Walk {
                     });
                     (validation.is_finite().then_some(*validation), None)
                 }
-                Err(MsgpError::NotPositiveDefinite { .. } | MsgpError::NonFinite(_)) => {
+                Err(e) if e.is_numerical() => {
                     self.failed.push(k);
                     (None, run.trained.as_ref().err().map(ToString::to_string))
                 }
