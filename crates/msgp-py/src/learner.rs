@@ -12,7 +12,8 @@ use std::path::PathBuf;
 
 use msgp_core::MsgpError as CoreError;
 use msgp_core::learner::{
-    Episode, IterationReport, LearnEvent, Learner, LearnerSettings, TargetTask,
+    Episode, IterationReport, LearnEvent, Learner, LearnerSettings, LoopModel, TargetTask,
+    with_model,
 };
 use msgp_core::numeric::parallel::Threads;
 use msgp_core::plant::{Plant, PlantSpec, PlantStep};
@@ -242,16 +243,20 @@ fn report_dict<'py>(py: Python<'py>, r: &IterationReport) -> PyResult<Bound<'py,
 
 /// The PILCO loop on `plant` (see the module docs): `spec` describes its signals (as
 /// `msgp_core::plant::PlantSpec` serialises), `task` is the target form
-/// (`msgp_core::learner::TargetTask`), `settings` overrides the loop's defaults on this plant.
-/// Returns `{"iterations", "episodes", "policy", "settings"}`.
+/// (`msgp_core::learner::TargetTask`), `settings` overrides the loop's defaults on this plant,
+/// and `model` (a `msgp_core::learner::LoopModel` name: "msgp-filter", "msgp", "gp-narx",
+/// "linear-kf"), when given, then replaces their model as `msgp reproduce plant-task --models`
+/// does. Returns `{"iterations", "episodes", "policy", "settings"}`.
 #[pyfunction]
-#[pyo3(signature = (plant, spec, task, *, settings = None, seed = 0, progress = None))]
+#[pyo3(signature = (plant, spec, task, *, settings = None, model = None, seed = 0, progress = None))]
+#[allow(clippy::too_many_arguments)]
 pub fn learn_on_plant<'py>(
     py: Python<'py>,
     plant: &Bound<'py, PyAny>,
     spec: &Bound<'py, PyAny>,
     task: &Bound<'py, PyAny>,
     settings: Option<&Bound<'py, PyAny>>,
+    model: Option<&str>,
     seed: i128,
     progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
@@ -266,6 +271,12 @@ pub fn learn_on_plant<'py>(
         ..LearnerSettings::for_plant(&spec)
     };
     let mut s = loop_settings(&defaults, settings, |s| &mut s.fit)?;
+    if let Some(name) = model {
+        let model: LoopModel = name
+            .parse()
+            .map_err(|e: String| input(format!("model: {e}")))?;
+        s = with_model(s, model).map_err(Error::from)?;
+    }
     s.seed = seed;
     let threads = Threads::from_env().map_err(Error::Core)?;
     s.fit.threads = threads;

@@ -141,6 +141,33 @@ def test_bad_environments_get_clear_errors():
         msgp.learn_policy(env=Faulty("none"), angles=[2], **TARGET)
 
 
+def test_method_and_likelihood_choose_the_loop_model():
+    # as `msgp reproduce plant-task --models` derives them from the preset: the settings the
+    # run reports say which model was fitted, and only MSGP keeps the prequential choice
+    fitted = {}
+    for method, likelihood in [("gp-narx", None), ("linear-kf", None), ("msgp", "free-run")]:
+        result = msgp.learn_policy(
+            env=Faulty("none"), method=method, likelihood=likelihood, **TARGET
+        )
+        fit = result.settings["fit"]
+        fitted[method] = (fit["method"], fit.get("likelihood"), result.settings["prequential_choice"])
+    assert fitted == {
+        "gp-narx": ("GpNarx", None, False),
+        "linear-kf": ("LinearKf", None, False),
+        "msgp": ("Msgp", "free-run", True),
+    }
+    default = msgp.learn_policy(env=Faulty("none"), **TARGET).settings["fit"]
+    assert (default["method"], default["likelihood"]) == ("Msgp", "filter")
+    with pytest.raises(msgp.InvalidInputError, match="unknown likelihood 'exact'"):
+        msgp.learn_policy(env=Faulty("none"), likelihood="exact", **TARGET)
+    with pytest.raises(msgp.InvalidInputError, match="method 'gp-narx' has its own"):
+        msgp.learn_policy(env=Faulty("none"), method="gp-narx", likelihood="filter", **TARGET)
+    with pytest.raises(msgp.InvalidInputError, match="unknown method 'pilco-narx'"):
+        msgp.learn_policy(env=Faulty("none"), method="pilco-narx", **TARGET)
+    with pytest.raises(msgp.InvalidInputError, match="params belong to the built-in"):
+        msgp.learn_policy(env=Faulty("none"), params={"lag": 0.0}, **TARGET)
+
+
 def test_a_time_limit_truncates_without_costing_a_failure():
     # the environment's own limit (10 steps) ends every episode before the task's 20: each
     # is truncated, not failed, and the loop runs on

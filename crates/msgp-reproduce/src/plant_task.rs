@@ -29,7 +29,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{ReproduceError, Result};
 use crate::figure4::Unit;
 use crate::plot::{SignalPanel, plot_cost_bands, plot_score_bands, plot_signals};
-use crate::results::Provenance;
+use crate::results::{Provenance, machine, today};
 
 /// The task's score of every iteration's policy, kept as the loop's success test runs.
 struct Scores {
@@ -71,6 +71,11 @@ pub struct TaskRun {
     pub last_policy: Option<PolicyRecord>,
     /// Wall-clock seconds.
     pub seconds: f64,
+    /// When and where the run was made (`YYYY-MM-DD, <machine>`): a reused record keeps its
+    /// own, so a section collected from records of several days says which (empty: a record
+    /// written before runs kept it).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub made: String,
 }
 
 impl TaskRun {
@@ -241,6 +246,7 @@ pub fn run_unit(
         error: outcome.err().map(|e| e.to_string()),
         last_policy: Some(PolicyRecord::from(learner.policy())),
         seconds: clock.elapsed().as_secs_f64(),
+        made: format!("{}, {}", today(), machine()),
     };
     std::fs::create_dir_all(&plan.dir).map_err(|source| ReproduceError::Io {
         action: "cannot create",
@@ -433,6 +439,7 @@ fn render(
         "{} · {} · {:.0} s of learning runs, summed · {}\n",
         provenance.command, provenance.machine, provenance.seconds, provenance.date
     );
+    let _ = writeln!(s, "{}\n", made_line(runs));
     let (settings, period) = layout;
     let iterations = settings.iterations;
     let _ = writeln!(
@@ -479,6 +486,28 @@ fn render(
         plan.dir.display()
     );
     s
+}
+
+/// When and where the runs were made, with how many of each (a section may collect records
+/// of earlier days, which `msgp reproduce` reuses while the settings are the same).
+fn made_line(runs: &[TaskRun]) -> String {
+    let mut made: Vec<(&str, usize)> = Vec::new();
+    for r in runs {
+        let key = if r.made.is_empty() {
+            "not recorded"
+        } else {
+            r.made.as_str()
+        };
+        match made.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, n)) => *n += 1,
+            None => made.push((key, 1)),
+        }
+    }
+    let parts: Vec<String> = made
+        .iter()
+        .map(|(k, n)| format!("{k} ({n} of {})", runs.len()))
+        .collect();
+    format!("Runs made: {}.", parts.join("; "))
 }
 
 /// The table's row of `model` over its runs `of` (seeds in order).
@@ -570,6 +599,7 @@ mod tests {
             error: None,
             last_policy: None,
             seconds: 1.0,
+            made: String::new(),
         };
         assert_eq!(run.gp_searches(), (2, 3));
         assert_eq!(run.first_success().map(|r| r.iteration), Some(3));
@@ -581,5 +611,43 @@ mod tests {
         assert_eq!(run.gp_searches(), (3, 3));
         run.unit.model = LoopModel::LinearKf;
         assert_eq!(run.gp_searches(), (0, 3));
+    }
+
+    #[test]
+    fn the_section_says_when_and_where_its_runs_were_made() {
+        let run = |made: &str| TaskRun {
+            task: PlantTask::SwingUp,
+            unit: Unit {
+                model: LoopModel::GpNarx,
+                seed: 0,
+            },
+            settings: PlantTask::SwingUp
+                .settings(LoopModel::GpNarx, 0)
+                .expect("preset"),
+            target: swing_up_task(),
+            iterations: Vec::new(),
+            scores: Vec::new(),
+            error: None,
+            last_policy: None,
+            seconds: 1.0,
+            made: made.into(),
+        };
+        let runs = [
+            run("2026-12-06, 2 CPUs (A)"),
+            run(""),
+            run("2026-12-07, 2 CPUs (B)"),
+            run("2026-12-06, 2 CPUs (A)"),
+        ];
+        assert_eq!(
+            made_line(&runs),
+            "Runs made: 2026-12-06, 2 CPUs (A) (2 of 4); not recorded (1 of 4); \
+             2026-12-07, 2 CPUs (B) (1 of 4)."
+        );
+        // a record without the field (written before runs kept it) still reads
+        let mut json = serde_json::to_value(run("")).expect("serialise");
+        assert!(json.get("made").is_none());
+        json["made"] = "2026-12-07, 2 CPUs (B)".into();
+        let back: TaskRun = serde_json::from_value(json).expect("read back");
+        assert_eq!(back.made, "2026-12-07, 2 CPUs (B)");
     }
 }

@@ -49,21 +49,23 @@ def learn_policy(
     the loop on that environment, returning a ``msgp.gym.LearnResult`` (``.policy``,
     ``.iterations``, ``.episodes``); ``task`` takes ``target``, ``widths``, ``episode_steps``,
     ``policy_horizon``, ``policy``, ``separate_starts``, ``width_scales``, ``angles`` and
-    ``period`` (see ``msgp.gym``).
+    ``period`` (see ``msgp.gym``); ``method`` ("msgp", "gp-narx", "linear-kf") and, for
+    "msgp", ``likelihood`` ("filter", the default, or "free-run") choose the loop's model.
     Without: the built-in simulated pendulum with the ``method``'s model ("msgp", "gp-narx",
     "pilco-narx", "linear-kf"; ``likelihood`` and ``params`` as for the pendulum), returning
     one report per iteration (8 by default)."""
     if env is not None:
-        if method != "msgp" or likelihood is not None or params is not None:
+        if params is not None:
             raise InvalidInputError(
-                "learn_policy(env=...): method, likelihood and params belong to the built-in "
-                "pendulum; the environment's loop takes its model settings in settings=..."
+                "learn_policy(env=...): params belong to the built-in pendulum; the "
+                "environment's loop takes its model settings in settings=..."
             )
         return _gym.learn_policy(
             env,
             seed=seed,
             iterations=iterations,
             settings=settings,
+            model=_loop_model(method, likelihood),
             progress=progress,
             **task,
         )
@@ -81,6 +83,29 @@ def learn_policy(
         settings=settings,
         progress=progress,
     )
+
+
+def _loop_model(method, likelihood):
+    """The loop model (``msgp_core::learner::LoopModel``'s name) of ``learn_policy(env=...)``'s
+    ``method`` and ``likelihood``; ``None`` keeps the settings' own (MSGP, filter likelihood)."""
+    if method == "msgp":
+        names = {None: None, "filter": "msgp-filter", "free-run": "msgp"}
+        if likelihood not in names:
+            raise InvalidInputError(
+                f'unknown likelihood {likelihood!r}: expected "filter" or "free-run"'
+            )
+        return names[likelihood]
+    if likelihood is not None:
+        raise InvalidInputError(
+            f"likelihood={likelihood!r}: the likelihood of an MSGP fit; method {method!r} has "
+            "its own"
+        )
+    if method not in ("gp-narx", "linear-kf"):
+        raise InvalidInputError(
+            f'learn_policy(env=...): unknown method {method!r}: expected "msgp", "gp-narx" '
+            'or "linear-kf"'
+        )
+    return method
 
 
 def __getattr__(name):

@@ -232,6 +232,7 @@ def learn_policy(
     angles=None,
     period=None,
     settings=None,
+    model=None,
     progress=None,
 ):
     """PILCO on ``env`` (see the module docs). ``policy``: ``{"kind": "rbf", "basis": N}`` or
@@ -242,7 +243,10 @@ def learn_policy(
     cost's slope far from the target, the widths' precision near it); ``angles``: indices of observation entries that are
     angles (radians), costed on a unit pole's tip (``plant_spec``); ``settings`` overrides the loop's defaults
     (``msgp_core::learner::LearnerSettings``; a known task's own settings first);
-    ``progress`` is called with each iteration's report."""
+    ``model`` then replaces their model: ``"msgp-filter"`` (the default's), ``"msgp"`` (the
+    free-run likelihood), ``"gp-narx"`` (one-step, standard PILCO) or ``"linear-kf"``, as
+    ``msgp reproduce plant-task --models`` names them; ``progress`` is called with each
+    iteration's report."""
     spec = plant_spec(env, period, angles or ())
     options = {
         "episode_steps": episode_steps,
@@ -257,7 +261,13 @@ def learn_policy(
     plant = _GymPlant(env)
     try:
         raw = _msgp.learn_on_plant(
-            plant, spec, task, settings=overrides, seed=seed, progress=progress
+            plant,
+            spec,
+            task,
+            settings=overrides,
+            model=model,
+            seed=seed,
+            progress=progress,
         )
     except BaseException as err:
         partial = getattr(err, "partial", None)
