@@ -15,6 +15,7 @@ use msgp_core::learner::{
     Episode, IterationReport, LearnEvent, Learner, LearnerSettings, LoopModel, TargetTask,
     with_model,
 };
+use msgp_core::model::Method;
 use msgp_core::numeric::parallel::Threads;
 use msgp_core::plant::{Plant, PlantSpec, PlantStep};
 use msgp_core::policy::Policy;
@@ -24,8 +25,7 @@ use pyo3::types::{PyDict, PyList};
 
 use crate::convert::{array1, array2, matrix, to_json, to_python};
 use crate::error::{Error, Result, callable, detached, input, with_python};
-use crate::options::loop_settings;
-use crate::options::uint;
+use crate::options::{self, loop_settings, uint};
 
 /// A Python object as the loop's plant; the first exception it raised is kept.
 struct PyPlant {
@@ -241,14 +241,34 @@ fn report_dict<'py>(py: Python<'py>, r: &IterationReport) -> PyResult<Bound<'py,
     Ok(d)
 }
 
+/// The loop model of a `method` ("msgp", "gp-narx", "linear-kf") and, for "msgp", a
+/// `likelihood` ("filter" or "free-run"), derived from the plant's settings as `msgp reproduce
+/// plant-task --models` derives it; `None` (MSGP without a likelihood) keeps the settings' own.
+fn loop_model(method: &str, likelihood: Option<&str>) -> Result<Option<LoopModel>> {
+    let m = options::method(method)?;
+    let l = options::likelihood(m, likelihood)?;
+    if m == Method::Msgp && l.is_none() {
+        return Ok(None);
+    }
+    LoopModel::ALL
+        .into_iter()
+        .find(|lm| lm.model() == (m, l))
+        .map(Some)
+        .ok_or_else(|| {
+            input(format!(
+                "method {method:?} is not a model of the learning loop (its models: \"msgp\", \
+                 \"gp-narx\", \"linear-kf\")"
+            ))
+        })
+}
+
 /// The PILCO loop on `plant` (see the module docs): `spec` describes its signals (as
 /// `msgp_core::plant::PlantSpec` serialises), `task` is the target form
 /// (`msgp_core::learner::TargetTask`), `settings` overrides the loop's defaults on this plant,
-/// and `model` (a `msgp_core::learner::LoopModel` name: "msgp-filter", "msgp", "gp-narx",
-/// "linear-kf"), when given, then replaces their model as `msgp reproduce plant-task --models`
-/// does. Returns `{"iterations", "episodes", "policy", "settings"}`.
+/// and `method` / `likelihood` then choose the loop's model ([`loop_model`]). Returns
+/// `{"iterations", "episodes", "policy", "settings"}`.
 #[pyfunction]
-#[pyo3(signature = (plant, spec, task, *, settings = None, model = None, seed = 0, progress = None))]
+#[pyo3(signature = (plant, spec, task, *, settings = None, method = "msgp", likelihood = None, seed = 0, progress = None))]
 #[allow(clippy::too_many_arguments)]
 pub fn learn_on_plant<'py>(
     py: Python<'py>,
@@ -256,7 +276,8 @@ pub fn learn_on_plant<'py>(
     spec: &Bound<'py, PyAny>,
     task: &Bound<'py, PyAny>,
     settings: Option<&Bound<'py, PyAny>>,
-    model: Option<&str>,
+    method: &str,
+    likelihood: Option<&str>,
     seed: i128,
     progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
@@ -271,10 +292,7 @@ pub fn learn_on_plant<'py>(
         ..LearnerSettings::for_plant(&spec)
     };
     let mut s = loop_settings(&defaults, settings, |s| &mut s.fit)?;
-    if let Some(name) = model {
-        let model: LoopModel = name
-            .parse()
-            .map_err(|e: String| input(format!("model: {e}")))?;
+    if let Some(model) = loop_model(method, likelihood)? {
         s = with_model(s, model).map_err(Error::from)?;
     }
     s.seed = seed;

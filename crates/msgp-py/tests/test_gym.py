@@ -158,12 +158,14 @@ def test_method_and_likelihood_choose_the_loop_model():
     }
     default = msgp.learn_policy(env=Faulty("none"), **TARGET).settings["fit"]
     assert (default["method"], default["likelihood"]) == ("Msgp", "filter")
-    with pytest.raises(msgp.InvalidInputError, match="unknown likelihood 'exact'"):
+    with pytest.raises(msgp.InvalidInputError, match='unknown likelihood "exact"'):
         msgp.learn_policy(env=Faulty("none"), likelihood="exact", **TARGET)
-    with pytest.raises(msgp.InvalidInputError, match="method 'gp-narx' has its own"):
+    with pytest.raises(msgp.InvalidInputError, match='method "gp-narx" has its own'):
         msgp.learn_policy(env=Faulty("none"), method="gp-narx", likelihood="filter", **TARGET)
-    with pytest.raises(msgp.InvalidInputError, match="unknown method 'pilco-narx'"):
+    with pytest.raises(msgp.InvalidInputError, match='"pilco-narx" is not a model of the learning loop'):
         msgp.learn_policy(env=Faulty("none"), method="pilco-narx", **TARGET)
+    with pytest.raises(msgp.InvalidInputError, match='unknown method "bogus"'):
+        msgp.learn_policy(env=Faulty("none"), method="bogus", **TARGET)
     with pytest.raises(msgp.InvalidInputError, match="params belong to the built-in"):
         msgp.learn_policy(env=Faulty("none"), params={"lag": 0.0}, **TARGET)
 

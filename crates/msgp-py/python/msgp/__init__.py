@@ -65,7 +65,8 @@ def learn_policy(
             seed=seed,
             iterations=iterations,
             settings=settings,
-            model=_loop_model(method, likelihood),
+            method=method,
+            likelihood=likelihood,
             progress=progress,
             **task,
         )
@@ -83,29 +84,6 @@ def learn_policy(
         settings=settings,
         progress=progress,
     )
-
-
-def _loop_model(method, likelihood):
-    """The loop model (``msgp_core::learner::LoopModel``'s name) of ``learn_policy(env=...)``'s
-    ``method`` and ``likelihood``; ``None`` keeps the settings' own (MSGP, filter likelihood)."""
-    if method == "msgp":
-        names = {None: None, "filter": "msgp-filter", "free-run": "msgp"}
-        if likelihood not in names:
-            raise InvalidInputError(
-                f'unknown likelihood {likelihood!r}: expected "filter" or "free-run"'
-            )
-        return names[likelihood]
-    if likelihood is not None:
-        raise InvalidInputError(
-            f"likelihood={likelihood!r}: the likelihood of an MSGP fit; method {method!r} has "
-            "its own"
-        )
-    if method not in ("gp-narx", "linear-kf"):
-        raise InvalidInputError(
-            f'learn_policy(env=...): unknown method {method!r}: expected "msgp", "gp-narx" '
-            'or "linear-kf"'
-        )
-    return method
 
 
 def __getattr__(name):

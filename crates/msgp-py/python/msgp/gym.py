@@ -232,7 +232,8 @@ def learn_policy(
     angles=None,
     period=None,
     settings=None,
-    model=None,
+    method="msgp",
+    likelihood=None,
     progress=None,
 ):
     """PILCO on ``env`` (see the module docs). ``policy``: ``{"kind": "rbf", "basis": N}`` or
@@ -243,10 +244,10 @@ def learn_policy(
     cost's slope far from the target, the widths' precision near it); ``angles``: indices of observation entries that are
     angles (radians), costed on a unit pole's tip (``plant_spec``); ``settings`` overrides the loop's defaults
     (``msgp_core::learner::LearnerSettings``; a known task's own settings first);
-    ``model`` then replaces their model: ``"msgp-filter"`` (the default's), ``"msgp"`` (the
-    free-run likelihood), ``"gp-narx"`` (one-step, standard PILCO) or ``"linear-kf"``, as
-    ``msgp reproduce plant-task --models`` names them; ``progress`` is called with each
-    iteration's report."""
+    ``method`` (``"msgp"``, ``"gp-narx"``: one-step, standard PILCO; ``"linear-kf"``) and, for
+    ``"msgp"``, ``likelihood`` (``"filter"``, the default's, or ``"free-run"``) then choose the
+    model, derived from those settings as ``msgp reproduce plant-task --models`` derives it;
+    ``progress`` is called with each iteration's report."""
     spec = plant_spec(env, period, angles or ())
     options = {
         "episode_steps": episode_steps,
@@ -265,7 +266,8 @@ def learn_policy(
             spec,
             task,
             settings=overrides,
-            model=model,
+            method=method,
+            likelihood=likelihood,
             seed=seed,
             progress=progress,
         )
