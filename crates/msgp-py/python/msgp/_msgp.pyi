@@ -256,12 +256,16 @@ def learn_on_plant(
     task: Dict[str, Any],
     *,
     settings: Optional[LearnerSettings] = None,
+    method: str = "msgp",
+    likelihood: Optional[str] = None,
     seed: int = 0,
     progress: Optional[Callable[[Dict[str, Any]], Any]] = None,
 ) -> Dict[str, Any]:
     """The PILCO loop on `plant` (an object with `reset(seed) -> obs` and
     `step(command) -> (obs, terminated, truncated)`), its signals described by `spec`, the
-    task in the target form; `msgp.learn_policy(env=...)` builds on it. Returns {"iterations", "episodes",
+    task in the target form; `method` ("msgp", "gp-narx", "linear-kf") and, for "msgp",
+    `likelihood` ("filter" or "free-run") choose the loop's model, derived from `settings`;
+    `msgp.learn_policy(env=...)` builds on it. Returns {"iterations", "episodes",
     "policy", "settings"}; an exception of the plant or of `progress`, or Ctrl-C, is raised as
     it was with the run so far in its `partial` attribute."""
 
