@@ -265,7 +265,7 @@ fn loop_model(method: &str, likelihood: Option<&str>) -> Result<Option<LoopModel
 /// The PILCO loop on `plant` (see the module docs): `spec` describes its signals (as
 /// `msgp_core::plant::PlantSpec` serialises), `task` is the target form
 /// (`msgp_core::learner::TargetTask`), `settings` overrides the loop's defaults on this plant,
-/// and `method` / `likelihood` then choose the loop's model ([`loop_model`]). Returns
+/// and `method` / `likelihood` then choose the loop's model (`loop_model`). Returns
 /// `{"iterations", "episodes", "policy", "settings"}`.
 #[pyfunction]
 #[pyo3(signature = (plant, spec, task, *, settings = None, method = "msgp", likelihood = None, seed = 0, progress = None))]
